@@ -1,0 +1,209 @@
+//! Wald's binned SAH split (Wald 2007): centroids are binned along each axis into K bins over the
+//! node's centroid bounds, and the K - 1 planes between bins are evaluated with the SAH.
+
+use crate::build::{Aabb, Costs, NodeBounds, Primitives, Split, Splitter};
+use glam::Vec3A;
+use std::cell::RefCell;
+
+/// Nodes with more primitives than this bin in parallel chunks.
+const PARALLEL_BINNING: usize = 1 << 16;
+
+#[derive(Clone, Copy)]
+struct Bin {
+    bounds: Aabb,
+    count: u32,
+}
+
+const EMPTY_BIN: Bin = Bin {
+    bounds: Aabb::EMPTY,
+    count: 0,
+};
+
+thread_local! {
+    /// Reused bin storage: a fresh allocation per node would cost more than the binning of the
+    /// millions of small nodes near the leaves.
+    static SCRATCH: RefCell<Vec<Bin>> = const { RefCell::new(Vec::new()) };
+}
+
+pub struct BinnedSah<'a> {
+    pub prims: &'a Primitives,
+    pub bins: usize,
+    pub costs: Costs,
+}
+
+/// The bin of centroid component `c`; the same arithmetic decides binning and partitioning, so the
+/// children's boxes assembled from bins are exact.
+#[inline(always)]
+fn bin_index(c: Vec3A, lo: Vec3A, scale: Vec3A, last: usize) -> [usize; 3] {
+    let f = ((c - lo) * scale).to_array();
+    // `as` saturates: NaN and negatives land in bin 0.
+    [
+        (f[0] as usize).min(last),
+        (f[1] as usize).min(last),
+        (f[2] as usize).min(last),
+    ]
+}
+
+impl BinnedSah<'_> {
+    fn bin_into(&self, prims: &[u32], lo: Vec3A, scale: Vec3A, bins: &mut [Bin]) {
+        let k = self.bins;
+        for &p in prims {
+            let b = bin_index(self.prims.centroids[p as usize], lo, scale, k - 1);
+            let pb = &self.prims.bounds[p as usize];
+            for axis in 0..3 {
+                let bin = &mut bins[axis * k + b[axis]];
+                bin.bounds.grow(pb);
+                bin.count += 1;
+            }
+        }
+    }
+
+    fn bin_parallel(&self, prims: &[u32], lo: Vec3A, scale: Vec3A, bins: &mut [Bin]) {
+        use rayon::prelude::*;
+        let k = self.bins;
+        let merged = prims
+            .par_chunks(PARALLEL_BINNING / 4)
+            .fold(
+                || vec![EMPTY_BIN; 3 * k],
+                |mut acc, chunk| {
+                    self.bin_into(chunk, lo, scale, &mut acc);
+                    acc
+                },
+            )
+            .reduce(
+                || vec![EMPTY_BIN; 3 * k],
+                |mut a, b| {
+                    for (x, y) in a.iter_mut().zip(&b) {
+                        x.bounds.grow(&y.bounds);
+                        x.count += y.count;
+                    }
+                    a
+                },
+            );
+        bins.copy_from_slice(&merged);
+    }
+
+    fn split_with(
+        &self,
+        prims: &mut [u32],
+        nb: &NodeBounds,
+        may_leaf: bool,
+        bins: &mut [Bin],
+    ) -> Option<Split> {
+        let n = prims.len();
+        let k = self.bins;
+        let lo = nb.centroids.min;
+        let ext = nb.centroids.extent();
+        if ext.max_element() <= 0.0 {
+            return None;
+        }
+        // Axes without extent get scale 0: everything in bin 0, so they offer no plane.
+        let scale = Vec3A::select(
+            ext.cmpgt(Vec3A::ZERO),
+            Vec3A::splat(k as f32) / ext,
+            Vec3A::ZERO,
+        );
+        bins.fill(EMPTY_BIN);
+        if n > PARALLEL_BINNING {
+            self.bin_parallel(prims, lo, scale, bins);
+        } else {
+            self.bin_into(prims, lo, scale, bins);
+        }
+
+        let parent_area = nb.aabb.half_area();
+        let mut best: Option<(f64, usize, usize)> = None; // (cost, axis, plane)
+        let mut right_area = [0f64; 256];
+        let mut right_area_vec;
+        let right_area: &mut [f64] = if k <= 256 {
+            &mut right_area[..k]
+        } else {
+            right_area_vec = vec![0f64; k];
+            &mut right_area_vec
+        };
+        for axis in 0..3 {
+            let ab = &bins[axis * k..axis * k + k];
+            let mut acc = Aabb::EMPTY;
+            for i in (1..k).rev() {
+                acc.grow(&ab[i].bounds);
+                right_area[i] = acc.half_area();
+            }
+            let mut left = Aabb::EMPTY;
+            let mut left_n = 0usize;
+            for plane in 1..k {
+                left.grow(&ab[plane - 1].bounds);
+                left_n += ab[plane - 1].count as usize;
+                let right_n = n - left_n;
+                if left_n == 0 || right_n == 0 {
+                    continue;
+                }
+                let cost = self.costs.split_cost(
+                    parent_area,
+                    left.half_area(),
+                    left_n,
+                    right_area[plane],
+                    right_n,
+                );
+                if best.is_none_or(|(c, _, _)| cost < c) {
+                    best = Some((cost, axis, plane));
+                }
+            }
+        }
+        let (cost, axis, plane) = best?;
+        if may_leaf && cost >= self.costs.leaf_cost(n) {
+            return None;
+        }
+        let ab = &bins[axis * k..axis * k + k];
+        let mut left = NodeBounds {
+            aabb: Aabb::EMPTY,
+            centroids: Aabb::EMPTY,
+        };
+        let mut right = left;
+        for b in &ab[..plane] {
+            left.aabb.grow(&b.bounds);
+        }
+        for b in &ab[plane..] {
+            right.aabb.grow(&b.bounds);
+        }
+
+        // In-place partition by bin, gathering the children's centroid bounds on the way.
+        let goes_left =
+            |p: u32| bin_index(self.prims.centroids[p as usize], lo, scale, k - 1)[axis] < plane;
+        let (mut i, mut j) = (0usize, n);
+        while i < j {
+            let p = prims[i];
+            if goes_left(p) {
+                left.centroids.grow_point(self.prims.centroids[p as usize]);
+                i += 1;
+            } else {
+                j -= 1;
+                right.centroids.grow_point(self.prims.centroids[p as usize]);
+                prims.swap(i, j);
+            }
+        }
+        debug_assert!(i > 0 && i < n);
+        Some(Split {
+            mid: i,
+            left,
+            right,
+        })
+    }
+}
+
+impl Splitter for BinnedSah<'_> {
+    fn split(&self, prims: &mut [u32], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
+        SCRATCH.with(|s| {
+            // A nested use (rayon may steal work inside `bin_parallel`) gets its own buffer.
+            let mut own;
+            let mut guard = s.try_borrow_mut();
+            let bins: &mut Vec<Bin> = match guard.as_deref_mut() {
+                Ok(b) => b,
+                Err(_) => {
+                    own = Vec::new();
+                    &mut own
+                }
+            };
+            bins.resize(3 * self.bins, EMPTY_BIN);
+            self.split_with(prims, nb, may_leaf, &mut bins[..3 * self.bins])
+        })
+    }
+}

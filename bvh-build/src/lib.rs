@@ -1,0 +1,33 @@
+//! Scene import and the SAH builders.
+//!
+//! - [`import`]: OBJ (tobj) and glTF/GLB (gltf) into a [`Scene`], and scene descriptions (TOML)
+//!   that place several meshes, generated shapes, cameras and lights.
+//! - [`build`]: the top-down builder shared by [`binned`] (Wald's binned SAH) and [`sweep`]
+//!   (full-sweep SAH, the quality reference).
+//! - [`compile()`]: a [`Scene`] into a validated [`bvh_format::SceneFile`].
+
+pub mod binned;
+pub mod build;
+mod compile;
+pub mod scene;
+pub mod sweep;
+
+pub use compile::{Layouts, MAX_BINS, build_tree, check_params, compile};
+pub use scene::Scene;
+
+use thiserror::Error;
+
+/// What can go wrong between reading a scene and holding a valid file. One sentence each.
+#[derive(Debug, Error)]
+pub enum BuildError {
+    #[error("the scene has no triangles")]
+    Empty,
+    #[error("the scene has {0} triangles, more than the format can hold")]
+    TooLarge(usize),
+    #[error("triangle {triangle} has a coordinate that is not a finite number")]
+    NonFinite { triangle: usize },
+    #[error("invalid build parameters: {0}")]
+    Params(String),
+    #[error("the compiled scene failed validation: {0}")]
+    Invalid(bvh_format::FormatError),
+}

@@ -1,0 +1,47 @@
+//! The in-memory scene that importers produce and the compiler consumes.
+
+use bvh_format::{Camera, Light, Material, SceneSettings};
+use glam::Vec3;
+
+/// Triangles in input order (the order tracers report in their `prim` AOV), with everything the
+/// file keeps about them.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// Vertex positions of each triangle, world space.
+    pub positions: Vec<[Vec3; 3]>,
+    /// Shading normal at each vertex of each triangle, unit length, world space.
+    pub normals: Vec<[Vec3; 3]>,
+    /// Material of each triangle: an index into `materials`.
+    pub material_ids: Vec<u32>,
+    pub materials: Vec<Material>,
+    /// One name per material.
+    pub material_names: Vec<String>,
+    pub cameras: Vec<Camera>,
+    pub lights: Vec<Light>,
+    pub settings: SceneSettings,
+}
+
+impl Scene {
+    pub fn triangle_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Bounds of all vertices; `None` for an empty scene.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let mut it = self.positions.iter().flatten();
+        let first = *it.next()?;
+        Some(it.fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p))))
+    }
+
+    /// Appends another scene's triangles and materials (cameras, lights and settings of `other`
+    /// are ignored).
+    pub fn append(&mut self, other: Scene) {
+        let base = self.materials.len() as u32;
+        self.positions.extend(other.positions);
+        self.normals.extend(other.normals);
+        self.material_ids
+            .extend(other.material_ids.into_iter().map(|m| m + base));
+        self.materials.extend(other.materials);
+        self.material_names.extend(other.material_names);
+    }
+}

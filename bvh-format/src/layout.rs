@@ -1,0 +1,138 @@
+//! The byte layout: the fixed header, the section table and the section kinds.
+//! `FORMAT.md` beside this crate documents the same layout for readers in other languages.
+
+use crate::types::{Camera, Light, Material, Node, Triangle, TriangleNormals};
+use bytemuck::{Pod, Zeroable};
+
+pub const MAGIC: [u8; 8] = *b"BVHSCENE";
+pub const VERSION: u32 = 1;
+/// Every section starts at a multiple of this.
+pub const ALIGN: u64 = 16;
+
+/// Header flag: the child-pair layout is present.
+pub const FLAG_CHILD_PAIR: u32 = 1;
+/// Header flag: the escape-pointer layout is present.
+pub const FLAG_ESCAPE: u32 = 2;
+
+/// The fixed header at offset 0, 144 bytes, little-endian.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Header {
+    pub magic: [u8; 8],
+    pub version: u32,
+    pub header_size: u32,
+    pub flags: u32,
+    pub section_count: u32,
+    pub triangle_count: u32,
+    pub node_count: u32,
+    pub leaf_count: u32,
+    pub max_depth: u32,
+    pub material_count: u32,
+    pub camera_count: u32,
+    pub light_count: u32,
+    pub max_indirections: u32,
+    pub strategy: u32,
+    pub bins: u32,
+    pub max_leaf_size: u32,
+    pub traversal_cost: f32,
+    pub intersection_cost: f32,
+    pub sah_cost: f32,
+    pub bounds_min: [f32; 3],
+    pub _pad0: u32,
+    pub bounds_max: [f32; 3],
+    pub _pad1: u32,
+    pub ambient: [f32; 3],
+    pub _pad2: u32,
+    pub background: [f32; 3],
+    /// CRC-32 of the header (with this field zero) followed by the section table.
+    pub header_crc: u32,
+}
+
+pub const HEADER_SIZE: usize = std::mem::size_of::<Header>();
+
+/// One entry of the section table that follows the header, 32 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct SectionEntry {
+    pub kind: u32,
+    pub element_size: u32,
+    pub count: u64,
+    pub offset: u64,
+    /// CRC-32 of the section's bytes.
+    pub crc: u32,
+    pub _reserved: u32,
+}
+
+pub const SECTION_ENTRY_SIZE: usize = std::mem::size_of::<SectionEntry>();
+
+/// The kinds of section, with their numeric tags in the section table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum SectionKind {
+    Triangles = 1,
+    Normals = 2,
+    MaterialIds = 3,
+    Materials = 4,
+    MaterialNames = 5,
+    InputIndex = 6,
+    NodesChildPair = 7,
+    NodesEscape = 8,
+    Cameras = 9,
+    Lights = 10,
+}
+
+impl SectionKind {
+    pub const ALL: [SectionKind; 10] = [
+        SectionKind::Triangles,
+        SectionKind::Normals,
+        SectionKind::MaterialIds,
+        SectionKind::Materials,
+        SectionKind::MaterialNames,
+        SectionKind::InputIndex,
+        SectionKind::NodesChildPair,
+        SectionKind::NodesEscape,
+        SectionKind::Cameras,
+        SectionKind::Lights,
+    ];
+
+    pub fn from_u32(v: u32) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| *k as u32 == v)
+    }
+
+    /// Bytes per element.
+    pub fn element_size(self) -> u32 {
+        (match self {
+            SectionKind::Triangles => std::mem::size_of::<Triangle>(),
+            SectionKind::Normals => std::mem::size_of::<TriangleNormals>(),
+            SectionKind::MaterialIds | SectionKind::InputIndex => 4,
+            SectionKind::Materials => std::mem::size_of::<Material>(),
+            SectionKind::MaterialNames => 1,
+            SectionKind::NodesChildPair | SectionKind::NodesEscape => std::mem::size_of::<Node>(),
+            SectionKind::Cameras => std::mem::size_of::<Camera>(),
+            SectionKind::Lights => std::mem::size_of::<Light>(),
+        }) as u32
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            SectionKind::Triangles => "triangles",
+            SectionKind::Normals => "normals",
+            SectionKind::MaterialIds => "material ids",
+            SectionKind::Materials => "materials",
+            SectionKind::MaterialNames => "material names",
+            SectionKind::InputIndex => "input index",
+            SectionKind::NodesChildPair => "child-pair nodes",
+            SectionKind::NodesEscape => "escape-pointer nodes",
+            SectionKind::Cameras => "cameras",
+            SectionKind::Lights => "lights",
+        }
+    }
+}
+
+impl std::fmt::Display for SectionKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+const _: () = assert!(HEADER_SIZE == 144);
+const _: () = assert!(SECTION_ENTRY_SIZE == 32);

@@ -1,0 +1,352 @@
+//! The reader and validator. Order of checks: header and section table (sizes, alignment,
+//! overlaps, checksums), then the contents of every section, then the trees. Nothing is returned
+//! until all of them pass.
+
+use crate::SceneFile;
+use crate::error::{FileError, FormatError, LayoutKind};
+use crate::layout::{
+    ALIGN, FLAG_CHILD_PAIR, FLAG_ESCAPE, HEADER_SIZE, Header, MAGIC, SECTION_ENTRY_SIZE,
+    SectionEntry, SectionKind, VERSION,
+};
+use crate::tree::{self, Tree};
+use crate::types::{BuildParams, SceneSettings, Strategy};
+use bytemuck::Pod;
+
+/// Reads and validates a scene file held in memory.
+pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
+    let len = bytes.len() as u64;
+    if bytes.len() < HEADER_SIZE {
+        return Err(FormatError::Truncated {
+            what: "the header",
+            needed: HEADER_SIZE as u64,
+            len,
+        });
+    }
+    let header: Header = bytemuck::pod_read_unaligned(&bytes[..HEADER_SIZE]);
+    if header.magic != MAGIC {
+        return Err(FormatError::BadMagic);
+    }
+    if header.version != VERSION {
+        return Err(FormatError::UnsupportedVersion {
+            found: header.version,
+            supported: VERSION,
+        });
+    }
+    if header.header_size as usize != HEADER_SIZE {
+        return Err(FormatError::BadHeader("its size field is wrong"));
+    }
+    let table_len = header.section_count as u64 * SECTION_ENTRY_SIZE as u64;
+    let table_end = HEADER_SIZE as u64 + table_len;
+    if table_end > len {
+        return Err(FormatError::Truncated {
+            what: "the section table",
+            needed: table_end,
+            len,
+        });
+    }
+    let table_bytes = &bytes[HEADER_SIZE..table_end as usize];
+    if crate::write::header_crc(&header, table_bytes) != header.header_crc {
+        return Err(FormatError::HeaderChecksum);
+    }
+
+    let mut found: Vec<(SectionKind, SectionEntry)> = Vec::new();
+    for chunk in table_bytes.chunks_exact(SECTION_ENTRY_SIZE) {
+        let e: SectionEntry = bytemuck::pod_read_unaligned(chunk);
+        let kind = SectionKind::from_u32(e.kind).ok_or(FormatError::UnknownSection(e.kind))?;
+        if found.iter().any(|(k, _)| *k == kind) {
+            return Err(FormatError::DuplicateSection(kind));
+        }
+        if e.element_size != kind.element_size() {
+            return Err(FormatError::ElementSize {
+                section: kind,
+                expected: kind.element_size(),
+                found: e.element_size,
+            });
+        }
+        if e.offset % ALIGN != 0 {
+            return Err(FormatError::SectionMisaligned {
+                section: kind,
+                offset: e.offset,
+            });
+        }
+        let size = e.count.checked_mul(e.element_size as u64);
+        let end = size.and_then(|s| e.offset.checked_add(s));
+        match (size, end) {
+            (Some(_), Some(end)) if end <= len && e.offset >= table_end => {}
+            (Some(s), Some(end)) if end > len => {
+                return Err(FormatError::SectionOutOfBounds {
+                    section: kind,
+                    offset: e.offset,
+                    size: s,
+                    file_len: len,
+                });
+            }
+            (Some(_), Some(_)) => {
+                return Err(FormatError::BadHeader(
+                    "a section overlaps the section table",
+                ));
+            }
+            _ => {
+                return Err(FormatError::SectionOutOfBounds {
+                    section: kind,
+                    offset: e.offset,
+                    size: u64::MAX,
+                    file_len: len,
+                });
+            }
+        }
+        found.push((kind, e));
+    }
+    let range = |e: &SectionEntry| e.offset..e.offset + e.count * e.element_size as u64;
+    for (i, (ka, a)) in found.iter().enumerate() {
+        for (kb, b) in &found[i + 1..] {
+            let (ra, rb) = (range(a), range(b));
+            if !ra.is_empty() && !rb.is_empty() && ra.start < rb.end && rb.start < ra.end {
+                return Err(FormatError::SectionOverlap { a: *ka, b: *kb });
+            }
+        }
+    }
+
+    let section = |kind: SectionKind| -> Result<Option<&[u8]>, FormatError> {
+        let Some((_, e)) = found.iter().find(|(k, _)| *k == kind) else {
+            return Ok(None);
+        };
+        let r = range(e);
+        let data = &bytes[r.start as usize..r.end as usize];
+        if crc32fast::hash(data) != e.crc {
+            return Err(FormatError::Checksum { section: kind });
+        }
+        Ok(Some(data))
+    };
+    let required = |kind| section(kind)?.ok_or(FormatError::MissingSection(kind));
+    fn pod<T: Pod>(data: &[u8]) -> Vec<T> {
+        bytemuck::pod_collect_to_vec(data)
+    }
+
+    if header.flags & !(FLAG_CHILD_PAIR | FLAG_ESCAPE) != 0 || header.flags == 0 {
+        return Err(FormatError::NoLayout(header.flags));
+    }
+    let layout = |flag, kind| -> Result<Option<Vec<crate::Node>>, FormatError> {
+        match (header.flags & flag != 0, section(kind)?) {
+            (true, Some(d)) => Ok(Some(pod(d))),
+            (true, None) => Err(FormatError::MissingSection(kind)),
+            (false, Some(_)) => Err(FormatError::BadHeader(
+                "a node section is present that the flags do not announce",
+            )),
+            (false, None) => Ok(None),
+        }
+    };
+    let names = std::str::from_utf8(required(SectionKind::MaterialNames)?)
+        .map_err(|_| FormatError::BadNames)?;
+    let strategy = Strategy::from_u32(header.strategy)
+        .ok_or(FormatError::BadHeader("its builder strategy is unknown"))?;
+
+    let scene = SceneFile {
+        build: BuildParams {
+            strategy,
+            bins: header.bins,
+            traversal_cost: header.traversal_cost,
+            intersection_cost: header.intersection_cost,
+            max_leaf_size: header.max_leaf_size,
+        },
+        settings: SceneSettings {
+            ambient: header.ambient,
+            background: header.background,
+            max_indirections: header.max_indirections,
+        },
+        triangles: pod(required(SectionKind::Triangles)?),
+        normals: pod(required(SectionKind::Normals)?),
+        material_ids: pod(required(SectionKind::MaterialIds)?),
+        materials: pod(required(SectionKind::Materials)?),
+        material_names: names.split('\0').map(str::to_owned).collect(),
+        input_index: pod(required(SectionKind::InputIndex)?),
+        child_pair: layout(FLAG_CHILD_PAIR, SectionKind::NodesChildPair)?,
+        escape: layout(FLAG_ESCAPE, SectionKind::NodesEscape)?,
+        cameras: pod(required(SectionKind::Cameras)?),
+        lights: pod(required(SectionKind::Lights)?),
+    };
+    validate_scene(&scene, Some(&header))?;
+    Ok(scene)
+}
+
+/// Reads and validates a scene file from disk.
+pub fn read_file(path: &std::path::Path) -> Result<SceneFile, FileError> {
+    let p = || path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|source| FileError::Read { path: p(), source })?;
+    read(&bytes).map_err(|source| FileError::Invalid { path: p(), source })
+}
+
+fn all_finite(values: &[f32]) -> Option<usize> {
+    values.iter().position(|v| !v.is_finite())
+}
+
+fn check_finite<T: Pod>(section: SectionKind, items: &[T]) -> Result<(), FormatError> {
+    let floats: &[f32] = bytemuck::cast_slice(items);
+    let per = std::mem::size_of::<T>() / 4;
+    match all_finite(floats) {
+        Some(i) => Err(FormatError::NonFinite {
+            section,
+            index: (i / per) as u64,
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Checks the contents of a scene; with a header, also that the header agrees with them.
+pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(), FormatError> {
+    let n = s.triangles.len() as u64;
+    if n == 0 {
+        return Err(FormatError::Empty);
+    }
+    if n > u32::MAX as u64 - 1 {
+        return Err(FormatError::BadHeader(
+            "it counts more triangles than the format allows",
+        ));
+    }
+    let count = |section, expected: u64, found: usize| {
+        if found as u64 != expected {
+            Err(FormatError::CountMismatch {
+                section,
+                expected,
+                found: found as u64,
+            })
+        } else {
+            Ok(())
+        }
+    };
+    if let Some(h) = header {
+        count(
+            SectionKind::Triangles,
+            h.triangle_count as u64,
+            s.triangles.len(),
+        )?;
+        count(
+            SectionKind::Materials,
+            h.material_count as u64,
+            s.materials.len(),
+        )?;
+        count(SectionKind::Cameras, h.camera_count as u64, s.cameras.len())?;
+        count(SectionKind::Lights, h.light_count as u64, s.lights.len())?;
+    }
+    count(SectionKind::Normals, n, s.normals.len())?;
+    count(SectionKind::MaterialIds, n, s.material_ids.len())?;
+    count(SectionKind::InputIndex, n, s.input_index.len())?;
+    if s.material_names.len() != s.materials.len() {
+        return Err(FormatError::BadNames);
+    }
+
+    check_finite(SectionKind::Triangles, &s.triangles)?;
+    check_finite(SectionKind::Normals, &s.normals)?;
+    check_finite(SectionKind::Lights, &s.lights)?;
+    check_finite(SectionKind::Materials, &s.materials)?;
+    for (i, c) in s.cameras.iter().enumerate() {
+        let f = [c.eye, c.at, c.up].concat();
+        if all_finite(&f).is_some() || !c.fov_deg.is_finite() {
+            return Err(FormatError::NonFinite {
+                section: SectionKind::Cameras,
+                index: i as u64,
+            });
+        }
+        if c.name().is_none() {
+            return Err(FormatError::BadCameraName(i as u32));
+        }
+    }
+    let settings = [s.settings.ambient, s.settings.background].concat();
+    if all_finite(&settings).is_some()
+        || !s.build.traversal_cost.is_finite()
+        || !s.build.intersection_cost.is_finite()
+    {
+        return Err(FormatError::BadHeader("it holds a non-finite setting"));
+    }
+
+    let m = s.materials.len() as u64;
+    for (i, &id) in s.material_ids.iter().enumerate() {
+        if id as u64 >= m {
+            return Err(FormatError::IndexOutOfRange {
+                section: SectionKind::MaterialIds,
+                index: i as u64,
+                value: id as u64,
+                limit: m,
+            });
+        }
+    }
+    for (i, mat) in s.materials.iter().enumerate() {
+        let bad = |reason| {
+            Err(FormatError::BadMaterial {
+                index: i as u32,
+                reason,
+            })
+        };
+        let colours = [mat.kd, mat.ks].concat();
+        if colours.iter().any(|&v| v < 0.0) || mat.shininess < 0.0 {
+            return bad("a colour or the shininess is negative");
+        }
+        if !(0.0..=1.0).contains(&mat.kr) || !(0.0..=1.0).contains(&mat.kt) {
+            return bad("its reflection or transmission weight is outside 0 to 1");
+        }
+        if mat.kr > 0.0 && mat.kt > 0.0 {
+            return bad("it is both reflective and refractive");
+        }
+        if mat.kt > 0.0 && mat.ior <= 0.0 {
+            return bad("it is refractive with a non-positive index of refraction");
+        }
+    }
+    let mut seen = vec![false; n as usize];
+    for (i, &src) in s.input_index.iter().enumerate() {
+        if src as u64 >= n {
+            return Err(FormatError::IndexOutOfRange {
+                section: SectionKind::InputIndex,
+                index: i as u64,
+                value: src as u64,
+                limit: n,
+            });
+        }
+        if std::mem::replace(&mut seen[src as usize], true) {
+            return Err(FormatError::PermutationRepeats(src));
+        }
+    }
+
+    if s.child_pair.is_none() && s.escape.is_none() {
+        return Err(FormatError::NoLayout(0));
+    }
+    let trees = [
+        s.child_pair.as_deref().map(Tree::child_pair),
+        s.escape.as_deref().map(Tree::escape),
+    ];
+    for t in trees.into_iter().flatten() {
+        tree::check_shape(t, n as u32)?;
+        if let Some(h) = header {
+            if t.nodes.len() as u64 != h.node_count as u64 {
+                let section = match t.layout {
+                    LayoutKind::ChildPair => SectionKind::NodesChildPair,
+                    LayoutKind::Escape => SectionKind::NodesEscape,
+                };
+                return Err(FormatError::CountMismatch {
+                    section,
+                    expected: h.node_count as u64,
+                    found: t.nodes.len() as u64,
+                });
+            }
+            // The tracers size their stacks from the header's depth: it must be the truth.
+            let st = tree::stats(t, s.build.traversal_cost, s.build.intersection_cost);
+            if st.max_depth != h.max_depth {
+                return Err(FormatError::DepthMismatch {
+                    layout: t.layout,
+                    header: h.max_depth,
+                    actual: st.max_depth,
+                });
+            }
+            if st.leaf_count != h.leaf_count {
+                return Err(FormatError::LeafCountMismatch {
+                    layout: t.layout,
+                    header: h.leaf_count,
+                    actual: st.leaf_count,
+                });
+            }
+        }
+    }
+    if let (Some(cp), Some(esc)) = (&s.child_pair, &s.escape) {
+        tree::check_same_tree(cp, esc)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,504 @@
+//! Walking, checking and measuring the two node layouts.
+//!
+//! Both layouts hold the same binary tree. In the child-pair layout the root is node 0 and an inner
+//! node's children are `index` and `index + 1`. In the escape-pointer layout the nodes are in
+//! depth-first order (left subtree first): an inner node's left child is the next node, and its
+//! `index` is the first node after its subtree; after a leaf the next node is simply the next one.
+
+use crate::error::{FormatError, LayoutKind};
+use crate::types::Node;
+
+/// A read-only view of one layout, enough to walk the tree top-down.
+#[derive(Clone, Copy)]
+pub struct Tree<'a> {
+    pub nodes: &'a [Node],
+    pub layout: LayoutKind,
+}
+
+impl<'a> Tree<'a> {
+    pub fn child_pair(nodes: &'a [Node]) -> Self {
+        Self {
+            nodes,
+            layout: LayoutKind::ChildPair,
+        }
+    }
+    pub fn escape(nodes: &'a [Node]) -> Self {
+        Self {
+            nodes,
+            layout: LayoutKind::Escape,
+        }
+    }
+
+    /// The children of inner node `i`. Only meaningful on a validated tree.
+    pub fn children(&self, i: usize) -> (usize, usize) {
+        let n = &self.nodes[i];
+        match self.layout {
+            LayoutKind::ChildPair => (n.index as usize, n.index as usize + 1),
+            LayoutKind::Escape => (i + 1, self.subtree_end(i + 1)),
+        }
+    }
+
+    /// Escape layout only: the first node after the subtree rooted at `i`.
+    fn subtree_end(&self, i: usize) -> usize {
+        let n = &self.nodes[i];
+        if n.is_leaf() { i + 1 } else { n.index as usize }
+    }
+
+    /// Visits every node depth-first, left child first, with its depth (the root has depth 0).
+    /// Uses an explicit stack, so a deep tree cannot overflow the thread's stack.
+    pub fn for_each_depth_first(&self, mut f: impl FnMut(usize, u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = vec![(0usize, 0u32)];
+        while let Some((i, depth)) = stack.pop() {
+            f(i, depth);
+            if !self.nodes[i].is_leaf() {
+                let (l, r) = self.children(i);
+                stack.push((r, depth + 1));
+                stack.push((l, depth + 1));
+            }
+        }
+    }
+}
+
+/// Measurements of a tree, as `bvhc info` prints them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TreeStats {
+    pub node_count: u32,
+    pub leaf_count: u32,
+    /// Depth of the deepest node; the root has depth 0. A traversal stack that holds one entry per
+    /// level below the root needs at most this many entries.
+    pub max_depth: u32,
+    pub mean_leaf_depth: f64,
+    /// `leaf_sizes[k]` is the number of leaves with `k` triangles.
+    pub leaf_sizes: Vec<u32>,
+    /// The SAH cost of the finished tree, normalised by the root's surface area:
+    /// `sum(inner) Ct * A(n) / A(root) + sum(leaves) Ci * count * A(l) / A(root)`.
+    pub sah_cost: f64,
+}
+
+/// Half the surface area of a box, in f64 so that huge scenes do not overflow.
+pub fn half_area(min: [f32; 3], max: [f32; 3]) -> f64 {
+    let d = [
+        (max[0] as f64 - min[0] as f64).max(0.0),
+        (max[1] as f64 - min[1] as f64).max(0.0),
+        (max[2] as f64 - min[2] as f64).max(0.0),
+    ];
+    d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+}
+
+/// Depth, leaf statistics and SAH cost of a tree that has passed [`check_shape`].
+pub fn stats(tree: Tree<'_>, traversal_cost: f32, intersection_cost: f32) -> TreeStats {
+    let root_area = tree
+        .nodes
+        .first()
+        .map(|r| half_area(r.min, r.max))
+        .unwrap_or(0.0);
+    // A flat or point-sized scene has zero area; then every node counts fully.
+    let norm = if root_area > 0.0 && root_area.is_finite() {
+        1.0 / root_area
+    } else {
+        0.0
+    };
+    let mut s = TreeStats {
+        node_count: tree.nodes.len() as u32,
+        leaf_count: 0,
+        max_depth: 0,
+        mean_leaf_depth: 0.0,
+        leaf_sizes: Vec::new(),
+        sah_cost: 0.0,
+    };
+    let mut depth_sum = 0f64;
+    let mut cost = 0f64;
+    tree.for_each_depth_first(|i, depth| {
+        let n = &tree.nodes[i];
+        let rel = if norm > 0.0 {
+            half_area(n.min, n.max) * norm
+        } else {
+            1.0
+        };
+        s.max_depth = s.max_depth.max(depth);
+        if n.is_leaf() {
+            s.leaf_count += 1;
+            depth_sum += depth as f64;
+            let c = n.count as usize;
+            if s.leaf_sizes.len() <= c {
+                s.leaf_sizes.resize(c + 1, 0);
+            }
+            s.leaf_sizes[c] += 1;
+            cost += intersection_cost as f64 * n.count as f64 * rel;
+        } else {
+            cost += traversal_cost as f64 * rel;
+        }
+    });
+    s.mean_leaf_depth = if s.leaf_count > 0 {
+        depth_sum / s.leaf_count as f64
+    } else {
+        0.0
+    };
+    s.sah_cost = cost;
+    s
+}
+
+/// The escape-pointer layout of a child-pair tree: the same nodes in depth-first order.
+pub fn escape_from_child_pair(nodes: &[Node]) -> Vec<Node> {
+    let tree = Tree::child_pair(nodes);
+    let mut out: Vec<Node> = Vec::with_capacity(nodes.len());
+    // Indices into `out` of inner nodes whose subtree is still open, with the child-pair index of
+    // their right child: when the walk reaches that child, the left subtree has ended.
+    let mut open: Vec<usize> = Vec::new();
+    tree.for_each_depth_first(|i, depth| {
+        // Close every open subtree that is not an ancestor of `i`: with depth-first order the
+        // ancestors are exactly the first `depth` entries of `open`.
+        while open.len() > depth as usize {
+            let j = open.pop().expect("open is longer than depth");
+            out[j].index = out.len() as u32;
+        }
+        let mut n = nodes[i];
+        if !n.is_leaf() {
+            open.push(out.len());
+            n.index = 0;
+        }
+        out.push(n);
+    });
+    while let Some(j) = open.pop() {
+        out[j].index = out.len() as u32;
+    }
+    out
+}
+
+fn check_bounds(layout: LayoutKind, nodes: &[Node]) -> Result<(), FormatError> {
+    for (i, n) in nodes.iter().enumerate() {
+        if n.min.iter().chain(n.max.iter()).any(|v| !v.is_finite()) {
+            let section = match layout {
+                LayoutKind::ChildPair => crate::SectionKind::NodesChildPair,
+                LayoutKind::Escape => crate::SectionKind::NodesEscape,
+            };
+            return Err(FormatError::NonFinite {
+                section,
+                index: i as u64,
+            });
+        }
+        if (0..3).any(|k| n.min[k] > n.max[k]) {
+            return Err(FormatError::InvertedBounds {
+                layout,
+                node: i as u32,
+            });
+        }
+    }
+    Ok(())
+}
+
+fn inside(child: &Node, parent: &Node) -> bool {
+    (0..3).all(|k| child.min[k] >= parent.min[k] && child.max[k] <= parent.max[k])
+}
+
+/// Checks that `nodes` form one binary tree in the given layout whose leaves reference every one
+/// of `triangle_count` triangles exactly once, with finite bounds that nest. Runs in linear time and
+/// memory and never recurses, so a hostile file cannot exhaust the stack.
+pub fn check_shape(tree: Tree<'_>, triangle_count: u32) -> Result<(), FormatError> {
+    let nodes = tree.nodes;
+    let layout = tree.layout;
+    let len = nodes.len();
+    if len == 0 {
+        return Err(FormatError::TreeShape {
+            layout,
+            node: 0,
+            reason: "the layout has no nodes",
+        });
+    }
+    if len > u32::MAX as usize {
+        return Err(FormatError::TreeShape {
+            layout,
+            node: 0,
+            reason: "too many nodes",
+        });
+    }
+    check_bounds(layout, nodes)?;
+    let shape = |node: usize, reason| FormatError::TreeShape {
+        layout,
+        node: node as u32,
+        reason,
+    };
+
+    // Leaves first: ranges in bounds.
+    for (i, n) in nodes.iter().enumerate() {
+        if n.is_leaf() && (n.index as u64 + n.count as u64) > triangle_count as u64 {
+            return Err(shape(
+                i,
+                "its triangle range reaches past the last triangle",
+            ));
+        }
+    }
+
+    match layout {
+        LayoutKind::ChildPair => {
+            // Every node reached exactly once from the root; children come after their parent,
+            // which rules out cycles.
+            let mut seen = vec![false; len];
+            let mut stack = vec![0usize];
+            seen[0] = true;
+            let mut reached = 1usize;
+            while let Some(i) = stack.pop() {
+                let n = &nodes[i];
+                if n.is_leaf() {
+                    continue;
+                }
+                let l = n.index as usize;
+                if l <= i {
+                    return Err(shape(i, "its children do not come after it"));
+                }
+                if l + 1 >= len {
+                    return Err(shape(i, "its child index is past the last node"));
+                }
+                for c in [l, l + 1] {
+                    if seen[c] {
+                        return Err(shape(i, "a child is shared with another node"));
+                    }
+                    if !inside(&nodes[c], n) {
+                        return Err(FormatError::ChildOutsideParent {
+                            layout,
+                            node: c as u32,
+                        });
+                    }
+                    seen[c] = true;
+                    reached += 1;
+                    stack.push(c);
+                }
+            }
+            if reached != len {
+                let orphan = seen.iter().position(|s| !s).unwrap_or(0);
+                return Err(shape(orphan, "it cannot be reached from the root"));
+            }
+        }
+        LayoutKind::Escape => {
+            let end = |j: usize| {
+                if nodes[j].is_leaf() {
+                    j + 1
+                } else {
+                    nodes[j].index as usize
+                }
+            };
+            if let Some((i, n)) = nodes
+                .iter()
+                .enumerate()
+                .find(|(i, n)| !n.is_leaf() && n.index as usize <= *i)
+            {
+                return Err(FormatError::EscapeBackwards {
+                    node: i as u32,
+                    escape: n.index,
+                });
+            }
+            for (i, n) in nodes.iter().enumerate() {
+                if n.is_leaf() {
+                    continue;
+                }
+                let e = n.index as usize;
+                if e > len {
+                    return Err(shape(i, "its escape index is past the end of the layout"));
+                }
+                if e < i + 3 {
+                    return Err(shape(i, "its subtree is too small to hold two children"));
+                }
+                // The left child spans [i+1, r); the right child must span exactly [r, e).
+                let r = end(i + 1);
+                if r <= i + 1 || r >= e {
+                    return Err(shape(
+                        i,
+                        "its left subtree does not end inside its own subtree",
+                    ));
+                }
+                if end(r) != e {
+                    return Err(shape(
+                        i,
+                        "its right subtree does not end at its escape index",
+                    ));
+                }
+                for c in [i + 1, r] {
+                    if !inside(&nodes[c], n) {
+                        return Err(FormatError::ChildOutsideParent {
+                            layout,
+                            node: c as u32,
+                        });
+                    }
+                }
+            }
+            if end(0) != len {
+                return Err(shape(
+                    0,
+                    "the root's subtree does not span the whole layout",
+                ));
+            }
+        }
+    }
+
+    // Coverage: with the shape known to be a tree, every leaf is reached exactly once.
+    let mut covered = vec![0u8; triangle_count as usize];
+    for n in nodes.iter().filter(|n| n.is_leaf()) {
+        for t in n.index..n.index + n.count {
+            let c = &mut covered[t as usize];
+            *c = c.saturating_add(1);
+            if *c > 1 {
+                return Err(FormatError::LeafCoverage {
+                    layout,
+                    triangle: t,
+                    times: *c as u32,
+                });
+            }
+        }
+    }
+    if let Some(t) = covered.iter().position(|&c| c == 0) {
+        return Err(FormatError::LeafCoverage {
+            layout,
+            triangle: t as u32,
+            times: 0,
+        });
+    }
+    Ok(())
+}
+
+/// Checks that an escape-pointer layout is the depth-first order of a child-pair layout (both
+/// already shape-checked).
+pub fn check_same_tree(child_pair: &[Node], escape: &[Node]) -> Result<(), FormatError> {
+    if child_pair.len() != escape.len() {
+        return Err(FormatError::LayoutsDiffer(0));
+    }
+    let mut k = 0usize;
+    let mut diff = None;
+    Tree::child_pair(child_pair).for_each_depth_first(|i, _| {
+        if diff.is_none() {
+            let a = &child_pair[i];
+            let b = &escape[k];
+            if a.min != b.min
+                || a.max != b.max
+                || a.count != b.count
+                || (a.is_leaf() && a.index != b.index)
+            {
+                diff = Some(k as u32);
+            }
+        }
+        k += 1;
+    });
+    match diff {
+        Some(k) => Err(FormatError::LayoutsDiffer(k)),
+        None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn leaf(lo: f32, hi: f32, first: u32, count: u32) -> Node {
+        Node {
+            min: [lo, 0.0, 0.0],
+            count,
+            max: [hi, 1.0, 1.0],
+            index: first,
+        }
+    }
+    fn inner(lo: f32, hi: f32, index: u32) -> Node {
+        Node {
+            min: [lo, 0.0, 0.0],
+            count: 0,
+            max: [hi, 1.0, 1.0],
+            index,
+        }
+    }
+
+    /// root -> (A, B); A -> (t0, t1); B is a leaf with t2..t4.
+    fn sample() -> Vec<Node> {
+        vec![
+            inner(0.0, 4.0, 1),
+            inner(0.0, 2.0, 3),
+            leaf(2.0, 4.0, 2, 3),
+            leaf(0.0, 1.0, 0, 1),
+            leaf(1.0, 2.0, 1, 1),
+        ]
+    }
+
+    #[test]
+    fn escape_layout_is_depth_first_with_subtree_ends() {
+        let cp = sample();
+        check_shape(Tree::child_pair(&cp), 5).unwrap();
+        let esc = escape_from_child_pair(&cp);
+        let order: Vec<(u32, u32)> = esc.iter().map(|n| (n.count, n.index)).collect();
+        assert_eq!(order, vec![(0, 5), (0, 4), (1, 0), (1, 1), (3, 2)]);
+        check_shape(Tree::escape(&esc), 5).unwrap();
+        check_same_tree(&cp, &esc).unwrap();
+        let a = stats(Tree::child_pair(&cp), 1.0, 1.0);
+        let b = stats(Tree::escape(&esc), 1.0, 1.0);
+        assert_eq!(a, b);
+        assert_eq!(a.max_depth, 2);
+        assert_eq!(a.leaf_count, 3);
+        assert_eq!(a.leaf_sizes, vec![0, 2, 0, 1]);
+    }
+
+    #[test]
+    fn sah_cost_matches_hand_computation() {
+        let cp = sample();
+        // Half areas: root 4*1+1+4 = 9; A 2+1+2 = 5; B 5; leaves of width 1: 3 each.
+        let s = stats(Tree::child_pair(&cp), 1.0, 2.0);
+        let expect = (9.0 + 5.0) / 9.0 + 2.0 * (3.0 * 5.0 + 1.0 * 3.0 + 1.0 * 3.0) / 9.0;
+        assert!(
+            (s.sah_cost - expect).abs() < 1e-12,
+            "{} vs {}",
+            s.sah_cost,
+            expect
+        );
+    }
+
+    #[test]
+    fn shape_errors_are_detected() {
+        let mut cp = sample();
+        cp[1].index = 0; // child before parent
+        assert!(matches!(
+            check_shape(Tree::child_pair(&cp), 5),
+            Err(FormatError::TreeShape { .. })
+        ));
+        let mut cp = sample();
+        cp[2].count = 2; // triangle 4 uncovered
+        assert!(matches!(
+            check_shape(Tree::child_pair(&cp), 5),
+            Err(FormatError::LeafCoverage { times: 0, .. })
+        ));
+        let mut cp = sample();
+        cp[4].index = 0; // triangle 0 twice
+        assert!(matches!(
+            check_shape(Tree::child_pair(&cp), 5),
+            Err(FormatError::LeafCoverage { times: 2, .. })
+        ));
+        let mut cp = sample();
+        cp[3].max[0] = 9.0; // leaf sticks out of its parent
+        assert!(matches!(
+            check_shape(Tree::child_pair(&cp), 5),
+            Err(FormatError::ChildOutsideParent { .. })
+        ));
+        let mut esc = escape_from_child_pair(&sample());
+        esc[1].index = 0;
+        assert!(matches!(
+            check_shape(Tree::escape(&esc), 5),
+            Err(FormatError::EscapeBackwards { node: 1, .. })
+        ));
+        let mut esc = escape_from_child_pair(&sample());
+        esc[1].index = 5;
+        assert!(check_shape(Tree::escape(&esc), 5).is_err());
+        let mut esc = escape_from_child_pair(&sample());
+        esc[2].min[1] = f32::NAN;
+        assert!(matches!(
+            check_shape(Tree::escape(&esc), 5),
+            Err(FormatError::NonFinite { .. })
+        ));
+    }
+
+    #[test]
+    fn single_leaf_tree_is_valid() {
+        let cp = vec![leaf(0.0, 1.0, 0, 3)];
+        check_shape(Tree::child_pair(&cp), 3).unwrap();
+        let esc = escape_from_child_pair(&cp);
+        assert_eq!(esc, cp);
+        check_shape(Tree::escape(&esc), 3).unwrap();
+        assert_eq!(stats(Tree::escape(&esc), 1.0, 1.0).max_depth, 0);
+    }
+}

@@ -1,0 +1,173 @@
+//! The writer: header, section table, then each section at a 16-byte aligned offset.
+
+use crate::SceneFile;
+use crate::error::{FileError, FormatError};
+use crate::layout::{
+    ALIGN, FLAG_CHILD_PAIR, FLAG_ESCAPE, HEADER_SIZE, Header, MAGIC, SECTION_ENTRY_SIZE,
+    SectionEntry, SectionKind, VERSION,
+};
+
+fn align_up(v: u64) -> u64 {
+    v.div_ceil(ALIGN) * ALIGN
+}
+
+/// Material names joined by NUL bytes (names themselves hold none; the writer drops any).
+pub(crate) fn encode_names(names: &[String]) -> Vec<u8> {
+    let mut out = Vec::new();
+    for (i, n) in names.iter().enumerate() {
+        if i > 0 {
+            out.push(0);
+        }
+        out.extend(n.bytes().filter(|&b| b != 0));
+    }
+    out
+}
+
+/// Serialises a scene. The scene is validated first, so the writer never produces a file that the
+/// reader would reject.
+pub fn write(scene: &SceneFile) -> Result<Vec<u8>, FormatError> {
+    scene.validate()?;
+    let stats = scene.stats();
+    let names = encode_names(&scene.material_names);
+
+    let mut sections: Vec<(SectionKind, u64, &[u8])> = vec![
+        (
+            SectionKind::Triangles,
+            scene.triangles.len() as u64,
+            bytemuck::cast_slice(&scene.triangles),
+        ),
+        (
+            SectionKind::Normals,
+            scene.normals.len() as u64,
+            bytemuck::cast_slice(&scene.normals),
+        ),
+        (
+            SectionKind::MaterialIds,
+            scene.material_ids.len() as u64,
+            bytemuck::cast_slice(&scene.material_ids),
+        ),
+        (
+            SectionKind::Materials,
+            scene.materials.len() as u64,
+            bytemuck::cast_slice(&scene.materials),
+        ),
+        (SectionKind::MaterialNames, names.len() as u64, &names),
+        (
+            SectionKind::InputIndex,
+            scene.input_index.len() as u64,
+            bytemuck::cast_slice(&scene.input_index),
+        ),
+    ];
+    let mut flags = 0;
+    if let Some(n) = &scene.child_pair {
+        flags |= FLAG_CHILD_PAIR;
+        sections.push((
+            SectionKind::NodesChildPair,
+            n.len() as u64,
+            bytemuck::cast_slice(n),
+        ));
+    }
+    if let Some(n) = &scene.escape {
+        flags |= FLAG_ESCAPE;
+        sections.push((
+            SectionKind::NodesEscape,
+            n.len() as u64,
+            bytemuck::cast_slice(n),
+        ));
+    }
+    sections.push((
+        SectionKind::Cameras,
+        scene.cameras.len() as u64,
+        bytemuck::cast_slice(&scene.cameras),
+    ));
+    sections.push((
+        SectionKind::Lights,
+        scene.lights.len() as u64,
+        bytemuck::cast_slice(&scene.lights),
+    ));
+
+    let table_end = (HEADER_SIZE + SECTION_ENTRY_SIZE * sections.len()) as u64;
+    let mut offset = align_up(table_end);
+    let mut table = Vec::with_capacity(sections.len());
+    for (kind, count, bytes) in &sections {
+        table.push(SectionEntry {
+            kind: *kind as u32,
+            element_size: kind.element_size(),
+            count: *count,
+            offset,
+            crc: crc32fast::hash(bytes),
+            _reserved: 0,
+        });
+        offset = align_up(offset + bytes.len() as u64);
+    }
+
+    let (bounds_min, bounds_max) = scene.bounds();
+    let mut header = Header {
+        magic: MAGIC,
+        version: VERSION,
+        header_size: HEADER_SIZE as u32,
+        flags,
+        section_count: sections.len() as u32,
+        triangle_count: scene.triangles.len() as u32,
+        node_count: stats.node_count,
+        leaf_count: stats.leaf_count,
+        max_depth: stats.max_depth,
+        material_count: scene.materials.len() as u32,
+        camera_count: scene.cameras.len() as u32,
+        light_count: scene.lights.len() as u32,
+        max_indirections: scene.settings.max_indirections,
+        strategy: scene.build.strategy.to_u32(),
+        bins: scene.build.bins,
+        max_leaf_size: scene.build.max_leaf_size,
+        traversal_cost: scene.build.traversal_cost,
+        intersection_cost: scene.build.intersection_cost,
+        sah_cost: stats.sah_cost as f32,
+        bounds_min,
+        bounds_max,
+        ambient: scene.settings.ambient,
+        background: scene.settings.background,
+        ..Header::default()
+    };
+    header.header_crc = header_crc(&header, bytemuck::cast_slice(&table));
+
+    let mut out = Vec::with_capacity(offset as usize);
+    out.extend_from_slice(bytemuck::bytes_of(&header));
+    out.extend_from_slice(bytemuck::cast_slice(&table));
+    for ((_, _, bytes), entry) in sections.iter().zip(&table) {
+        out.resize(entry.offset as usize, 0);
+        out.extend_from_slice(bytes);
+    }
+    out.resize(offset as usize, 0);
+    Ok(out)
+}
+
+/// CRC-32 over the header with its checksum field zeroed, then the section table.
+pub(crate) fn header_crc(header: &Header, table: &[u8]) -> u32 {
+    let mut h = *header;
+    h.header_crc = 0;
+    let mut hasher = crc32fast::Hasher::new();
+    hasher.update(bytemuck::bytes_of(&h));
+    hasher.update(table);
+    hasher.finalize()
+}
+
+/// Writes a scene to `path` through a temporary file in the same folder, renamed into place only
+/// when complete, so an interrupted write never leaves a damaged file under the final name.
+pub fn write_file(scene: &SceneFile, path: &std::path::Path) -> Result<(), FileError> {
+    let bytes = write(scene).map_err(|source| FileError::Invalid {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let werr = |source| FileError::Write {
+        path: path.display().to_string(),
+        source,
+    };
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".partial");
+    let tmp = std::path::PathBuf::from(tmp);
+    std::fs::write(&tmp, &bytes).map_err(werr)?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        werr(e)
+    })
+}
