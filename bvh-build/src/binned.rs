@@ -14,10 +14,7 @@ struct Bin {
     count: u32,
 }
 
-const EMPTY_BIN: Bin = Bin {
-    bounds: Aabb::EMPTY,
-    count: 0,
-};
+const EMPTY_BIN: Bin = Bin { bounds: Aabb::EMPTY, count: 0 };
 
 thread_local! {
     /// Reused bin storage: a fresh allocation per node would cost more than the binning of the
@@ -37,11 +34,7 @@ pub struct BinnedSah<'a> {
 fn bin_index(c: Vec3A, lo: Vec3A, scale: Vec3A, last: usize) -> [usize; 3] {
     let f = ((c - lo) * scale).to_array();
     // `as` saturates: NaN and negatives land in bin 0.
-    [
-        (f[0] as usize).min(last),
-        (f[1] as usize).min(last),
-        (f[2] as usize).min(last),
-    ]
+    [(f[0] as usize).min(last), (f[1] as usize).min(last), (f[2] as usize).min(last)]
 }
 
 impl BinnedSah<'_> {
@@ -83,13 +76,7 @@ impl BinnedSah<'_> {
         bins.copy_from_slice(&merged);
     }
 
-    fn split_with(
-        &self,
-        prims: &mut [u32],
-        nb: &NodeBounds,
-        may_leaf: bool,
-        bins: &mut [Bin],
-    ) -> Option<Split> {
+    fn split_with(&self, prims: &mut [u32], nb: &NodeBounds, may_leaf: bool, bins: &mut [Bin]) -> Option<Split> {
         let n = prims.len();
         let k = self.bins;
         let lo = nb.centroids.min;
@@ -98,11 +85,7 @@ impl BinnedSah<'_> {
             return None;
         }
         // Axes without extent get scale 0: everything in bin 0, so they offer no plane.
-        let scale = Vec3A::select(
-            ext.cmpgt(Vec3A::ZERO),
-            Vec3A::splat(k as f32) / ext,
-            Vec3A::ZERO,
-        );
+        let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(k as f32) / ext, Vec3A::ZERO);
         bins.fill(EMPTY_BIN);
         if n > PARALLEL_BINNING {
             self.bin_parallel(prims, lo, scale, bins);
@@ -136,13 +119,7 @@ impl BinnedSah<'_> {
                 if left_n == 0 || right_n == 0 {
                     continue;
                 }
-                let cost = self.costs.split_cost(
-                    parent_area,
-                    left.half_area(),
-                    left_n,
-                    right_area[plane],
-                    right_n,
-                );
+                let cost = self.costs.split_cost(parent_area, left.half_area(), left_n, right_area[plane], right_n);
                 if best.is_none_or(|(c, _, _)| cost < c) {
                     best = Some((cost, axis, plane));
                 }
@@ -153,10 +130,7 @@ impl BinnedSah<'_> {
             return None;
         }
         let ab = &bins[axis * k..axis * k + k];
-        let mut left = NodeBounds {
-            aabb: Aabb::EMPTY,
-            centroids: Aabb::EMPTY,
-        };
+        let mut left = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
         let mut right = left;
         for b in &ab[..plane] {
             left.aabb.grow(&b.bounds);
@@ -166,8 +140,7 @@ impl BinnedSah<'_> {
         }
 
         // In-place partition by bin, gathering the children's centroid bounds on the way.
-        let goes_left =
-            |p: u32| bin_index(self.prims.centroids[p as usize], lo, scale, k - 1)[axis] < plane;
+        let goes_left = |p: u32| bin_index(self.prims.centroids[p as usize], lo, scale, k - 1)[axis] < plane;
         let (mut i, mut j) = (0usize, n);
         while i < j {
             let p = prims[i];
@@ -181,11 +154,7 @@ impl BinnedSah<'_> {
             }
         }
         debug_assert!(i > 0 && i < n);
-        Some(Split {
-            mid: i,
-            left,
-            right,
-        })
+        Some(Split { mid: i, left, right })
     }
 }
 

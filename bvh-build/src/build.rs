@@ -21,10 +21,7 @@ pub struct Aabb {
 }
 
 impl Aabb {
-    pub const EMPTY: Aabb = Aabb {
-        min: Vec3A::splat(f32::INFINITY),
-        max: Vec3A::splat(f32::NEG_INFINITY),
-    };
+    pub const EMPTY: Aabb = Aabb { min: Vec3A::splat(f32::INFINITY), max: Vec3A::splat(f32::NEG_INFINITY) };
 
     #[inline]
     pub fn grow(&mut self, other: &Aabb) {
@@ -73,16 +70,10 @@ impl Primitives {
             .par_iter()
             .map(|t| {
                 let (a, b, c) = (Vec3A::from(t[0]), Vec3A::from(t[1]), Vec3A::from(t[2]));
-                Aabb {
-                    min: a.min(b).min(c),
-                    max: a.max(b).max(c),
-                }
+                Aabb { min: a.min(b).min(c), max: a.max(b).max(c) }
             })
             .collect();
-        let centroids = bounds
-            .par_iter()
-            .map(|b| b.min * 0.5 + b.max * 0.5)
-            .collect();
+        let centroids = bounds.par_iter().map(|b| b.min * 0.5 + b.max * 0.5).collect();
         Primitives { bounds, centroids }
     }
 
@@ -96,10 +87,7 @@ impl Primitives {
 
     /// Box and centroid box of a set of primitives.
     pub fn bounds_of(&self, prims: &[u32]) -> NodeBounds {
-        let mut nb = NodeBounds {
-            aabb: Aabb::EMPTY,
-            centroids: Aabb::EMPTY,
-        };
+        let mut nb = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
         for &p in prims {
             nb.aabb.grow(&self.bounds[p as usize]);
             nb.centroids.grow_point(self.centroids[p as usize]);
@@ -126,17 +114,8 @@ pub struct Costs {
 impl Costs {
     /// SAH cost of splitting a node of half area `parent_area` into the given children.
     #[inline]
-    pub fn split_cost(
-        &self,
-        parent_area: f64,
-        left_area: f64,
-        left_n: usize,
-        right_area: f64,
-        right_n: usize,
-    ) -> f64 {
-        self.traversal
-            + self.intersection * (left_area * left_n as f64 + right_area * right_n as f64)
-                / parent_area
+    pub fn split_cost(&self, parent_area: f64, left_area: f64, left_n: usize, right_area: f64, right_n: usize) -> f64 {
+        self.traversal + self.intersection * (left_area * left_n as f64 + right_area * right_n as f64) / parent_area
     }
 
     #[inline]
@@ -186,31 +165,18 @@ struct Ctx<'a, S: Splitter> {
 /// Builds a tree over every primitive with the given splitter.
 pub fn build<S: Splitter>(prims: &Primitives, splitter: &S, costs: Costs) -> BuiltTree {
     let n = prims.len();
-    assert!(
-        n > 0 && n < u32::MAX as usize / 2,
-        "the compiler rejects empty and oversized scenes before building"
-    );
+    assert!(n > 0 && n < u32::MAX as usize / 2, "the compiler rejects empty and oversized scenes before building");
     let mut order: Vec<u32> = (0..n as u32).collect();
     let mut slots = vec![Slot::default(); 2 * n - 1];
     let root = prims_bounds_parallel(prims);
-    let ctx = Ctx {
-        prims,
-        splitter,
-        costs,
-    };
+    let ctx = Ctx { prims, splitter, costs };
     build_node(&ctx, &mut order, 0, &mut slots, 0, root, 0);
-    BuiltTree {
-        nodes: flatten(&slots),
-        order,
-    }
+    BuiltTree { nodes: flatten(&slots), order }
 }
 
 fn prims_bounds_parallel(prims: &Primitives) -> NodeBounds {
     use rayon::prelude::*;
-    let empty = NodeBounds {
-        aabb: Aabb::EMPTY,
-        centroids: Aabb::EMPTY,
-    };
+    let empty = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
     (0..prims.len())
         .into_par_iter()
         .with_min_len(16384)
@@ -222,13 +188,7 @@ fn prims_bounds_parallel(prims: &Primitives) -> NodeBounds {
                 nb
             },
         )
-        .reduce(
-            || empty,
-            |a, b| NodeBounds {
-                aabb: a.aabb.union(&b.aabb),
-                centroids: a.centroids.union(&b.centroids),
-            },
-        )
+        .reduce(|| empty, |a, b| NodeBounds { aabb: a.aabb.union(&b.aabb), centroids: a.centroids.union(&b.centroids) })
 }
 
 fn build_node<S: Splitter>(
@@ -245,11 +205,7 @@ fn build_node<S: Splitter>(
     let split = if n == 1 {
         None
     } else if depth >= DEPTH_LIMIT {
-        if may_leaf {
-            None
-        } else {
-            Some(median_split(ctx.prims, prims, &bounds))
-        }
+        if may_leaf { None } else { Some(median_split(ctx.prims, prims, &bounds)) }
     } else {
         match ctx.splitter.split(prims, &bounds, may_leaf) {
             Some(s) => Some(s),
@@ -272,28 +228,8 @@ fn build_node<S: Splitter>(
     here.index = right_slot as u32;
     let (left_prims, right_prims) = prims.split_at_mut(mid);
     let (left_slots, right_slots) = slots[1..].split_at_mut(2 * mid - 1);
-    let mut left = || {
-        build_node(
-            ctx,
-            left_prims,
-            first,
-            left_slots,
-            slot + 1,
-            split.left,
-            depth + 1,
-        )
-    };
-    let mut right = || {
-        build_node(
-            ctx,
-            right_prims,
-            first + mid,
-            right_slots,
-            right_slot,
-            split.right,
-            depth + 1,
-        )
-    };
+    let mut left = || build_node(ctx, left_prims, first, left_slots, slot + 1, split.left, depth + 1);
+    let mut right = || build_node(ctx, right_prims, first + mid, right_slots, right_slot, split.right, depth + 1);
     if n > PARALLEL_THRESHOLD {
         rayon::join(left, right);
     } else {
@@ -313,11 +249,7 @@ pub fn median_split(p: &Primitives, prims: &mut [u32], bounds: &NodeBounds) -> S
             p.centroids[a as usize][axis].total_cmp(&p.centroids[b as usize][axis])
         });
     }
-    Split {
-        mid,
-        left: p.bounds_of(&prims[..mid]),
-        right: p.bounds_of(&prims[mid..]),
-    }
+    Split { mid, left: p.bounds_of(&prims[..mid]), right: p.bounds_of(&prims[mid..]) }
 }
 
 /// Turns the gapped depth-first slots into the child-pair layout: root at 0, the two children of

@@ -17,10 +17,7 @@ pub struct Layouts {
 
 impl Default for Layouts {
     fn default() -> Self {
-        Self {
-            child_pair: true,
-            escape: true,
-        }
+        Self { child_pair: true, escape: true }
     }
 }
 
@@ -31,10 +28,7 @@ pub const MAX_BINS: u32 = 1024;
 pub fn check_params(p: &BuildParams) -> Result<(), BuildError> {
     let bad = |m: &str| Err(BuildError::Params(m.to_owned()));
     if p.strategy == Strategy::Binned && !(2..=MAX_BINS).contains(&p.bins) {
-        return bad(&format!(
-            "the bin count must lie between 2 and {MAX_BINS}, not {}",
-            p.bins
-        ));
+        return bad(&format!("the bin count must lie between 2 and {MAX_BINS}, not {}", p.bins));
     }
     if !(p.traversal_cost.is_finite() && p.traversal_cost >= 0.0) {
         return bad("the traversal cost must be a finite, non-negative number");
@@ -49,10 +43,7 @@ pub fn check_params(p: &BuildParams) -> Result<(), BuildError> {
 }
 
 /// The tree alone (child-pair layout and leaf order), for benchmarks and tests.
-pub fn build_tree(
-    positions: &[[glam::Vec3; 3]],
-    p: &BuildParams,
-) -> Result<build::BuiltTree, BuildError> {
+pub fn build_tree(positions: &[[glam::Vec3; 3]], p: &BuildParams) -> Result<build::BuiltTree, BuildError> {
     check_params(p)?;
     if positions.is_empty() {
         return Err(BuildError::Empty);
@@ -60,10 +51,7 @@ pub fn build_tree(
     if positions.len() >= (u32::MAX / 2) as usize {
         return Err(BuildError::TooLarge(positions.len()));
     }
-    if let Some(t) = positions
-        .iter()
-        .position(|t| t.iter().any(|v| !v.is_finite()))
-    {
+    if let Some(t) = positions.iter().position(|t| t.iter().any(|v| !v.is_finite())) {
         return Err(BuildError::NonFinite { triangle: t });
     }
     let prims = Primitives::from_triangles(positions);
@@ -73,42 +61,19 @@ pub fn build_tree(
         max_leaf_size: p.max_leaf_size as usize,
     };
     Ok(match p.strategy {
-        Strategy::Binned => build::build(
-            &prims,
-            &BinnedSah {
-                prims: &prims,
-                bins: p.bins as usize,
-                costs,
-            },
-            costs,
-        ),
-        Strategy::Sweep => build::build(
-            &prims,
-            &SweepSah {
-                prims: &prims,
-                costs,
-            },
-            costs,
-        ),
+        Strategy::Binned => build::build(&prims, &BinnedSah { prims: &prims, bins: p.bins as usize, costs }, costs),
+        Strategy::Sweep => build::build(&prims, &SweepSah { prims: &prims, costs }, costs),
     })
 }
 
 /// Compiles a scene into the file's in-memory form (validated).
-pub fn compile(
-    scene: &Scene,
-    params: &BuildParams,
-    layouts: Layouts,
-) -> Result<SceneFile, BuildError> {
+pub fn compile(scene: &Scene, params: &BuildParams, layouts: Layouts) -> Result<SceneFile, BuildError> {
     if !layouts.child_pair && !layouts.escape {
-        return Err(BuildError::Params(
-            "at least one node layout must be chosen".to_owned(),
-        ));
+        return Err(BuildError::Params("at least one node layout must be chosen".to_owned()));
     }
     let n = scene.triangle_count();
     if scene.normals.len() != n || scene.material_ids.len() != n {
-        return Err(BuildError::Params(
-            "the scene's normals or material ids do not match its triangles".to_owned(),
-        ));
+        return Err(BuildError::Params("the scene's normals or material ids do not match its triangles".to_owned()));
     }
     let tree = build_tree(&scene.positions, params)?;
     let pad = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
@@ -124,18 +89,11 @@ pub fn compile(
         .iter()
         .map(|&i| {
             let [a, b, c] = scene.normals[i as usize];
-            TriangleNormals {
-                n: [pad(a), pad(b), pad(c)],
-            }
+            TriangleNormals { n: [pad(a), pad(b), pad(c)] }
         })
         .collect();
-    let material_ids = order
-        .iter()
-        .map(|&i| scene.material_ids[i as usize])
-        .collect();
-    let escape = layouts
-        .escape
-        .then(|| bvh_format::tree::escape_from_child_pair(&tree.nodes));
+    let material_ids = order.iter().map(|&i| scene.material_ids[i as usize]).collect();
+    let escape = layouts.escape.then(|| bvh_format::tree::escape_from_child_pair(&tree.nodes));
     let file = SceneFile {
         build: *params,
         settings: scene.settings,

@@ -39,8 +39,7 @@ impl Scene {
         let base = self.materials.len() as u32;
         self.positions.extend(other.positions);
         self.normals.extend(other.normals);
-        self.material_ids
-            .extend(other.material_ids.into_iter().map(|m| m + base));
+        self.material_ids.extend(other.material_ids.into_iter().map(|m| m + base));
         self.materials.extend(other.materials);
         self.material_names.extend(other.material_names);
     }

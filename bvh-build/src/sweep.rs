@@ -22,11 +22,7 @@ impl Splitter for SweepSah<'_> {
             *order = prims.to_vec();
             let c = &self.prims.centroids;
             // Ties broken by index so that the result does not depend on the input order.
-            order.sort_unstable_by(|&a, &b| {
-                c[a as usize][axis]
-                    .total_cmp(&c[b as usize][axis])
-                    .then(a.cmp(&b))
-            });
+            order.sort_unstable_by(|&a, &b| c[a as usize][axis].total_cmp(&c[b as usize][axis]).then(a.cmp(&b)));
             let mut acc = Aabb::EMPTY;
             for i in (1..n).rev() {
                 acc.grow(&self.prims.bounds[order[i] as usize]);
@@ -35,9 +31,7 @@ impl Splitter for SweepSah<'_> {
             let mut left = Aabb::EMPTY;
             for i in 1..n {
                 left.grow(&self.prims.bounds[order[i - 1] as usize]);
-                let cost =
-                    self.costs
-                        .split_cost(parent_area, left.half_area(), i, right_area[i], n - i);
+                let cost = self.costs.split_cost(parent_area, left.half_area(), i, right_area[i], n - i);
                 if best.is_none_or(|(b, _, _)| cost < b) {
                     best = Some((cost, axis, i));
                 }
@@ -48,10 +42,6 @@ impl Splitter for SweepSah<'_> {
             return None;
         }
         prims.copy_from_slice(&sorted[axis]);
-        Some(Split {
-            mid,
-            left: self.prims.bounds_of(&prims[..mid]),
-            right: self.prims.bounds_of(&prims[mid..]),
-        })
+        Some(Split { mid, left: self.prims.bounds_of(&prims[..mid]), right: self.prims.bounds_of(&prims[mid..]) })
     }
 }

@@ -21,11 +21,7 @@ impl std::fmt::Display for LayoutKind {
 #[derive(Debug, Error, PartialEq)]
 pub enum FormatError {
     #[error("the file is truncated: {what} needs {needed} bytes but the file has {len}")]
-    Truncated {
-        what: &'static str,
-        needed: u64,
-        len: u64,
-    },
+    Truncated { what: &'static str, needed: u64, len: u64 },
     #[error("this is not a BVH scene file (wrong magic bytes)")]
     BadMagic,
     #[error("the file has format version {found}, but this program reads version {supported}")]
@@ -40,93 +36,47 @@ pub enum FormatError {
     DuplicateSection(SectionKind),
     #[error("the file has no {0} section")]
     MissingSection(SectionKind),
-    #[error(
-        "the {section} section (offset {offset}, {size} bytes) reaches past the end of the {file_len}-byte file"
-    )]
-    SectionOutOfBounds {
-        section: SectionKind,
-        offset: u64,
-        size: u64,
-        file_len: u64,
-    },
+    #[error("the {section} section (offset {offset}, {size} bytes) reaches past the end of the {file_len}-byte file")]
+    SectionOutOfBounds { section: SectionKind, offset: u64, size: u64, file_len: u64 },
     #[error("the {section} section starts at offset {offset}, which is not 16-byte aligned")]
     SectionMisaligned { section: SectionKind, offset: u64 },
     #[error("the {section} section has element size {found}, expected {expected}")]
-    ElementSize {
-        section: SectionKind,
-        expected: u32,
-        found: u32,
-    },
+    ElementSize { section: SectionKind, expected: u32, found: u32 },
     #[error("the {a} and {b} sections overlap")]
     SectionOverlap { a: SectionKind, b: SectionKind },
     #[error("the {section} section is damaged (its checksum does not match)")]
     Checksum { section: SectionKind },
     #[error("the {section} section has {found} entries, but the header says {expected}")]
-    CountMismatch {
-        section: SectionKind,
-        expected: u64,
-        found: u64,
-    },
+    CountMismatch { section: SectionKind, expected: u64, found: u64 },
     #[error("the {section} section holds a non-finite number in entry {index}")]
     NonFinite { section: SectionKind, index: u64 },
-    #[error(
-        "entry {index} of the {section} section refers to {value}, which is out of range (limit {limit})"
-    )]
-    IndexOutOfRange {
-        section: SectionKind,
-        index: u64,
-        value: u64,
-        limit: u64,
-    },
+    #[error("entry {index} of the {section} section refers to {value}, which is out of range (limit {limit})")]
+    IndexOutOfRange { section: SectionKind, index: u64, value: u64, limit: u64 },
     #[error("input triangle {0} appears more than once in the triangle permutation")]
     PermutationRepeats(u32),
     #[error("material {index} is invalid: {reason}")]
     BadMaterial { index: u32, reason: &'static str },
-    #[error(
-        "the names of the materials are not valid UTF-8 text or do not match the material count"
-    )]
+    #[error("the names of the materials are not valid UTF-8 text or do not match the material count")]
     BadNames,
     #[error("camera {0} has a name that is not valid UTF-8")]
     BadCameraName(u32),
     #[error("the header's layout flags {0:#x} name no known node layout")]
     NoLayout(u32),
-    #[error(
-        "node {node} of the escape-pointer layout has escape index {escape}, which does not move forward"
-    )]
+    #[error("node {node} of the escape-pointer layout has escape index {escape}, which does not move forward")]
     EscapeBackwards { node: u32, escape: u32 },
     #[error("node {node} of the {layout} layout is malformed: {reason}")]
-    TreeShape {
-        layout: LayoutKind,
-        node: u32,
-        reason: &'static str,
-    },
+    TreeShape { layout: LayoutKind, node: u32, reason: &'static str },
     #[error("node {node} of the {layout} layout has bounds outside its parent's")]
     ChildOutsideParent { layout: LayoutKind, node: u32 },
     #[error("node {node} of the {layout} layout has inverted bounds (min above max)")]
     InvertedBounds { layout: LayoutKind, node: u32 },
-    #[error(
-        "triangle {triangle} is referenced by {times} leaves of the {layout} layout instead of exactly one"
-    )]
-    LeafCoverage {
-        layout: LayoutKind,
-        triangle: u32,
-        times: u32,
-    },
+    #[error("triangle {triangle} is referenced by {times} leaves of the {layout} layout instead of exactly one")]
+    LeafCoverage { layout: LayoutKind, triangle: u32, times: u32 },
     #[error("the header says the tree is {header} deep, but the {layout} layout is {actual} deep")]
-    DepthMismatch {
-        layout: LayoutKind,
-        header: u32,
-        actual: u32,
-    },
+    DepthMismatch { layout: LayoutKind, header: u32, actual: u32 },
     #[error("the header says the tree has {header} leaves, but the {layout} layout has {actual}")]
-    LeafCountMismatch {
-        layout: LayoutKind,
-        header: u32,
-        actual: u32,
-    },
-    #[error(
-        "the child-pair and escape-pointer layouts describe different trees (first difference at escape node {0})"
-    )]
+    LeafCountMismatch { layout: LayoutKind, header: u32, actual: u32 },
+    #[error("the child-pair and escape-pointer layouts describe different trees (first difference at escape node {0})")]
     LayoutsDiffer(u32),
     #[error("the scene has no triangles")]
     Empty,
@@ -136,15 +86,9 @@ pub enum FormatError {
 #[derive(Debug, Error)]
 pub enum FileError {
     #[error("cannot read {path}: {source}")]
-    Read {
-        path: String,
-        source: std::io::Error,
-    },
+    Read { path: String, source: std::io::Error },
     #[error("cannot write {path}: {source}")]
-    Write {
-        path: String,
-        source: std::io::Error,
-    },
+    Write { path: String, source: std::io::Error },
     #[error("{path} is not a valid scene file: {source}")]
     Invalid { path: String, source: FormatError },
 }

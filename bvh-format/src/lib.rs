@@ -18,8 +18,7 @@ pub use layout::SectionKind;
 pub use read::{read, read_file};
 pub use tree::{Tree, TreeStats};
 pub use types::{
-    BuildParams, CAMERA_NAME_LEN, Camera, Light, Material, Node, SceneSettings, Strategy, Triangle,
-    TriangleNormals,
+    BuildParams, CAMERA_NAME_LEN, Camera, Light, Material, Node, SceneSettings, Strategy, Triangle, TriangleNormals,
 };
 pub use write::{write, write_file};
 
@@ -61,20 +60,12 @@ impl SceneFile {
 
     /// Depth, leaf statistics and SAH cost, computed with the stored build constants.
     pub fn stats(&self) -> TreeStats {
-        tree::stats(
-            self.tree(),
-            self.build.traversal_cost,
-            self.build.intersection_cost,
-        )
+        tree::stats(self.tree(), self.build.traversal_cost, self.build.intersection_cost)
     }
 
     /// Bounds of the whole scene (the root node's box).
     pub fn bounds(&self) -> ([f32; 3], [f32; 3]) {
-        self.tree()
-            .nodes
-            .first()
-            .map(|r| (r.min, r.max))
-            .unwrap_or(([0.0; 3], [0.0; 3]))
+        self.tree().nodes.first().map(|r| (r.min, r.max)).unwrap_or(([0.0; 3], [0.0; 3]))
     }
 
     /// A camera by name.

@@ -5,8 +5,8 @@
 use crate::SceneFile;
 use crate::error::{FileError, FormatError, LayoutKind};
 use crate::layout::{
-    ALIGN, FLAG_CHILD_PAIR, FLAG_ESCAPE, HEADER_SIZE, Header, MAGIC, SECTION_ENTRY_SIZE,
-    SectionEntry, SectionKind, VERSION,
+    ALIGN, FLAG_CHILD_PAIR, FLAG_ESCAPE, HEADER_SIZE, Header, MAGIC, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
+    VERSION,
 };
 use crate::tree::{self, Tree};
 use crate::types::{BuildParams, SceneSettings, Strategy};
@@ -16,21 +16,14 @@ use bytemuck::Pod;
 pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
     let len = bytes.len() as u64;
     if bytes.len() < HEADER_SIZE {
-        return Err(FormatError::Truncated {
-            what: "the header",
-            needed: HEADER_SIZE as u64,
-            len,
-        });
+        return Err(FormatError::Truncated { what: "the header", needed: HEADER_SIZE as u64, len });
     }
     let header: Header = bytemuck::pod_read_unaligned(&bytes[..HEADER_SIZE]);
     if header.magic != MAGIC {
         return Err(FormatError::BadMagic);
     }
     if header.version != VERSION {
-        return Err(FormatError::UnsupportedVersion {
-            found: header.version,
-            supported: VERSION,
-        });
+        return Err(FormatError::UnsupportedVersion { found: header.version, supported: VERSION });
     }
     if header.header_size as usize != HEADER_SIZE {
         return Err(FormatError::BadHeader("its size field is wrong"));
@@ -38,11 +31,7 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
     let table_len = header.section_count as u64 * SECTION_ENTRY_SIZE as u64;
     let table_end = HEADER_SIZE as u64 + table_len;
     if table_end > len {
-        return Err(FormatError::Truncated {
-            what: "the section table",
-            needed: table_end,
-            len,
-        });
+        return Err(FormatError::Truncated { what: "the section table", needed: table_end, len });
     }
     let table_bytes = &bytes[HEADER_SIZE..table_end as usize];
     if crate::write::header_crc(&header, table_bytes) != header.header_crc {
@@ -64,10 +53,7 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
             });
         }
         if e.offset % ALIGN != 0 {
-            return Err(FormatError::SectionMisaligned {
-                section: kind,
-                offset: e.offset,
-            });
+            return Err(FormatError::SectionMisaligned { section: kind, offset: e.offset });
         }
         let size = e.count.checked_mul(e.element_size as u64);
         let end = size.and_then(|s| e.offset.checked_add(s));
@@ -82,9 +68,7 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
                 });
             }
             (Some(_), Some(_)) => {
-                return Err(FormatError::BadHeader(
-                    "a section overlaps the section table",
-                ));
+                return Err(FormatError::BadHeader("a section overlaps the section table"));
             }
             _ => {
                 return Err(FormatError::SectionOutOfBounds {
@@ -130,16 +114,13 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
         match (header.flags & flag != 0, section(kind)?) {
             (true, Some(d)) => Ok(Some(pod(d))),
             (true, None) => Err(FormatError::MissingSection(kind)),
-            (false, Some(_)) => Err(FormatError::BadHeader(
-                "a node section is present that the flags do not announce",
-            )),
+            (false, Some(_)) => Err(FormatError::BadHeader("a node section is present that the flags do not announce")),
             (false, None) => Ok(None),
         }
     };
-    let names = std::str::from_utf8(required(SectionKind::MaterialNames)?)
-        .map_err(|_| FormatError::BadNames)?;
-    let strategy = Strategy::from_u32(header.strategy)
-        .ok_or(FormatError::BadHeader("its builder strategy is unknown"))?;
+    let names = std::str::from_utf8(required(SectionKind::MaterialNames)?).map_err(|_| FormatError::BadNames)?;
+    let strategy =
+        Strategy::from_u32(header.strategy).ok_or(FormatError::BadHeader("its builder strategy is unknown"))?;
 
     let scene = SceneFile {
         build: BuildParams {
@@ -184,10 +165,7 @@ fn check_finite<T: Pod>(section: SectionKind, items: &[T]) -> Result<(), FormatE
     let floats: &[f32] = bytemuck::cast_slice(items);
     let per = std::mem::size_of::<T>() / 4;
     match all_finite(floats) {
-        Some(i) => Err(FormatError::NonFinite {
-            section,
-            index: (i / per) as u64,
-        }),
+        Some(i) => Err(FormatError::NonFinite { section, index: (i / per) as u64 }),
         None => Ok(()),
     }
 }
@@ -199,32 +177,18 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
         return Err(FormatError::Empty);
     }
     if n > u32::MAX as u64 - 1 {
-        return Err(FormatError::BadHeader(
-            "it counts more triangles than the format allows",
-        ));
+        return Err(FormatError::BadHeader("it counts more triangles than the format allows"));
     }
     let count = |section, expected: u64, found: usize| {
         if found as u64 != expected {
-            Err(FormatError::CountMismatch {
-                section,
-                expected,
-                found: found as u64,
-            })
+            Err(FormatError::CountMismatch { section, expected, found: found as u64 })
         } else {
             Ok(())
         }
     };
     if let Some(h) = header {
-        count(
-            SectionKind::Triangles,
-            h.triangle_count as u64,
-            s.triangles.len(),
-        )?;
-        count(
-            SectionKind::Materials,
-            h.material_count as u64,
-            s.materials.len(),
-        )?;
+        count(SectionKind::Triangles, h.triangle_count as u64, s.triangles.len())?;
+        count(SectionKind::Materials, h.material_count as u64, s.materials.len())?;
         count(SectionKind::Cameras, h.camera_count as u64, s.cameras.len())?;
         count(SectionKind::Lights, h.light_count as u64, s.lights.len())?;
     }
@@ -242,19 +206,14 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     for (i, c) in s.cameras.iter().enumerate() {
         let f = [c.eye, c.at, c.up].concat();
         if all_finite(&f).is_some() || !c.fov_deg.is_finite() {
-            return Err(FormatError::NonFinite {
-                section: SectionKind::Cameras,
-                index: i as u64,
-            });
+            return Err(FormatError::NonFinite { section: SectionKind::Cameras, index: i as u64 });
         }
         if c.name().is_none() {
             return Err(FormatError::BadCameraName(i as u32));
         }
     }
     let settings = [s.settings.ambient, s.settings.background].concat();
-    if all_finite(&settings).is_some()
-        || !s.build.traversal_cost.is_finite()
-        || !s.build.intersection_cost.is_finite()
+    if all_finite(&settings).is_some() || !s.build.traversal_cost.is_finite() || !s.build.intersection_cost.is_finite()
     {
         return Err(FormatError::BadHeader("it holds a non-finite setting"));
     }
@@ -271,12 +230,7 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
         }
     }
     for (i, mat) in s.materials.iter().enumerate() {
-        let bad = |reason| {
-            Err(FormatError::BadMaterial {
-                index: i as u32,
-                reason,
-            })
-        };
+        let bad = |reason| Err(FormatError::BadMaterial { index: i as u32, reason });
         let colours = [mat.kd, mat.ks].concat();
         if colours.iter().any(|&v| v < 0.0) || mat.shininess < 0.0 {
             return bad("a colour or the shininess is negative");
@@ -309,10 +263,7 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     if s.child_pair.is_none() && s.escape.is_none() {
         return Err(FormatError::NoLayout(0));
     }
-    let trees = [
-        s.child_pair.as_deref().map(Tree::child_pair),
-        s.escape.as_deref().map(Tree::escape),
-    ];
+    let trees = [s.child_pair.as_deref().map(Tree::child_pair), s.escape.as_deref().map(Tree::escape)];
     for t in trees.into_iter().flatten() {
         tree::check_shape(t, n as u32)?;
         if let Some(h) = header {
@@ -330,11 +281,7 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
             // The tracers size their stacks from the header's depth: it must be the truth.
             let st = tree::stats(t, s.build.traversal_cost, s.build.intersection_cost);
             if st.max_depth != h.max_depth {
-                return Err(FormatError::DepthMismatch {
-                    layout: t.layout,
-                    header: h.max_depth,
-                    actual: st.max_depth,
-                });
+                return Err(FormatError::DepthMismatch { layout: t.layout, header: h.max_depth, actual: st.max_depth });
             }
             if st.leaf_count != h.leaf_count {
                 return Err(FormatError::LeafCountMismatch {

@@ -17,16 +17,10 @@ pub struct Tree<'a> {
 
 impl<'a> Tree<'a> {
     pub fn child_pair(nodes: &'a [Node]) -> Self {
-        Self {
-            nodes,
-            layout: LayoutKind::ChildPair,
-        }
+        Self { nodes, layout: LayoutKind::ChildPair }
     }
     pub fn escape(nodes: &'a [Node]) -> Self {
-        Self {
-            nodes,
-            layout: LayoutKind::Escape,
-        }
+        Self { nodes, layout: LayoutKind::Escape }
     }
 
     /// The children of inner node `i`. Only meaningful on a validated tree.
@@ -90,17 +84,9 @@ pub fn half_area(min: [f32; 3], max: [f32; 3]) -> f64 {
 
 /// Depth, leaf statistics and SAH cost of a tree that has passed [`check_shape`].
 pub fn stats(tree: Tree<'_>, traversal_cost: f32, intersection_cost: f32) -> TreeStats {
-    let root_area = tree
-        .nodes
-        .first()
-        .map(|r| half_area(r.min, r.max))
-        .unwrap_or(0.0);
+    let root_area = tree.nodes.first().map(|r| half_area(r.min, r.max)).unwrap_or(0.0);
     // A flat or point-sized scene has zero area; then every node counts fully.
-    let norm = if root_area > 0.0 && root_area.is_finite() {
-        1.0 / root_area
-    } else {
-        0.0
-    };
+    let norm = if root_area > 0.0 && root_area.is_finite() { 1.0 / root_area } else { 0.0 };
     let mut s = TreeStats {
         node_count: tree.nodes.len() as u32,
         leaf_count: 0,
@@ -113,11 +99,7 @@ pub fn stats(tree: Tree<'_>, traversal_cost: f32, intersection_cost: f32) -> Tre
     let mut cost = 0f64;
     tree.for_each_depth_first(|i, depth| {
         let n = &tree.nodes[i];
-        let rel = if norm > 0.0 {
-            half_area(n.min, n.max) * norm
-        } else {
-            1.0
-        };
+        let rel = if norm > 0.0 { half_area(n.min, n.max) * norm } else { 1.0 };
         s.max_depth = s.max_depth.max(depth);
         if n.is_leaf() {
             s.leaf_count += 1;
@@ -132,11 +114,7 @@ pub fn stats(tree: Tree<'_>, traversal_cost: f32, intersection_cost: f32) -> Tre
             cost += traversal_cost as f64 * rel;
         }
     });
-    s.mean_leaf_depth = if s.leaf_count > 0 {
-        depth_sum / s.leaf_count as f64
-    } else {
-        0.0
-    };
+    s.mean_leaf_depth = if s.leaf_count > 0 { depth_sum / s.leaf_count as f64 } else { 0.0 };
     s.sah_cost = cost;
     s
 }
@@ -175,16 +153,10 @@ fn check_bounds(layout: LayoutKind, nodes: &[Node]) -> Result<(), FormatError> {
                 LayoutKind::ChildPair => crate::SectionKind::NodesChildPair,
                 LayoutKind::Escape => crate::SectionKind::NodesEscape,
             };
-            return Err(FormatError::NonFinite {
-                section,
-                index: i as u64,
-            });
+            return Err(FormatError::NonFinite { section, index: i as u64 });
         }
         if (0..3).any(|k| n.min[k] > n.max[k]) {
-            return Err(FormatError::InvertedBounds {
-                layout,
-                node: i as u32,
-            });
+            return Err(FormatError::InvertedBounds { layout, node: i as u32 });
         }
     }
     Ok(())
@@ -202,33 +174,18 @@ pub fn check_shape(tree: Tree<'_>, triangle_count: u32) -> Result<(), FormatErro
     let layout = tree.layout;
     let len = nodes.len();
     if len == 0 {
-        return Err(FormatError::TreeShape {
-            layout,
-            node: 0,
-            reason: "the layout has no nodes",
-        });
+        return Err(FormatError::TreeShape { layout, node: 0, reason: "the layout has no nodes" });
     }
     if len > u32::MAX as usize {
-        return Err(FormatError::TreeShape {
-            layout,
-            node: 0,
-            reason: "too many nodes",
-        });
+        return Err(FormatError::TreeShape { layout, node: 0, reason: "too many nodes" });
     }
     check_bounds(layout, nodes)?;
-    let shape = |node: usize, reason| FormatError::TreeShape {
-        layout,
-        node: node as u32,
-        reason,
-    };
+    let shape = |node: usize, reason| FormatError::TreeShape { layout, node: node as u32, reason };
 
     // Leaves first: ranges in bounds.
     for (i, n) in nodes.iter().enumerate() {
         if n.is_leaf() && (n.index as u64 + n.count as u64) > triangle_count as u64 {
-            return Err(shape(
-                i,
-                "its triangle range reaches past the last triangle",
-            ));
+            return Err(shape(i, "its triangle range reaches past the last triangle"));
         }
     }
 
@@ -257,10 +214,7 @@ pub fn check_shape(tree: Tree<'_>, triangle_count: u32) -> Result<(), FormatErro
                         return Err(shape(i, "a child is shared with another node"));
                     }
                     if !inside(&nodes[c], n) {
-                        return Err(FormatError::ChildOutsideParent {
-                            layout,
-                            node: c as u32,
-                        });
+                        return Err(FormatError::ChildOutsideParent { layout, node: c as u32 });
                     }
                     seen[c] = true;
                     reached += 1;
@@ -274,21 +228,10 @@ pub fn check_shape(tree: Tree<'_>, triangle_count: u32) -> Result<(), FormatErro
         }
         LayoutKind::Escape => {
             let end = |j: usize| {
-                if nodes[j].is_leaf() {
-                    j + 1
-                } else {
-                    nodes[j].index as usize
-                }
+                if nodes[j].is_leaf() { j + 1 } else { nodes[j].index as usize }
             };
-            if let Some((i, n)) = nodes
-                .iter()
-                .enumerate()
-                .find(|(i, n)| !n.is_leaf() && n.index as usize <= *i)
-            {
-                return Err(FormatError::EscapeBackwards {
-                    node: i as u32,
-                    escape: n.index,
-                });
+            if let Some((i, n)) = nodes.iter().enumerate().find(|(i, n)| !n.is_leaf() && n.index as usize <= *i) {
+                return Err(FormatError::EscapeBackwards { node: i as u32, escape: n.index });
             }
             for (i, n) in nodes.iter().enumerate() {
                 if n.is_leaf() {
@@ -304,31 +247,19 @@ pub fn check_shape(tree: Tree<'_>, triangle_count: u32) -> Result<(), FormatErro
                 // The left child spans [i+1, r); the right child must span exactly [r, e).
                 let r = end(i + 1);
                 if r <= i + 1 || r >= e {
-                    return Err(shape(
-                        i,
-                        "its left subtree does not end inside its own subtree",
-                    ));
+                    return Err(shape(i, "its left subtree does not end inside its own subtree"));
                 }
                 if end(r) != e {
-                    return Err(shape(
-                        i,
-                        "its right subtree does not end at its escape index",
-                    ));
+                    return Err(shape(i, "its right subtree does not end at its escape index"));
                 }
                 for c in [i + 1, r] {
                     if !inside(&nodes[c], n) {
-                        return Err(FormatError::ChildOutsideParent {
-                            layout,
-                            node: c as u32,
-                        });
+                        return Err(FormatError::ChildOutsideParent { layout, node: c as u32 });
                     }
                 }
             }
             if end(0) != len {
-                return Err(shape(
-                    0,
-                    "the root's subtree does not span the whole layout",
-                ));
+                return Err(shape(0, "the root's subtree does not span the whole layout"));
             }
         }
     }
@@ -340,20 +271,12 @@ pub fn check_shape(tree: Tree<'_>, triangle_count: u32) -> Result<(), FormatErro
             let c = &mut covered[t as usize];
             *c = c.saturating_add(1);
             if *c > 1 {
-                return Err(FormatError::LeafCoverage {
-                    layout,
-                    triangle: t,
-                    times: *c as u32,
-                });
+                return Err(FormatError::LeafCoverage { layout, triangle: t, times: *c as u32 });
             }
         }
     }
     if let Some(t) = covered.iter().position(|&c| c == 0) {
-        return Err(FormatError::LeafCoverage {
-            layout,
-            triangle: t as u32,
-            times: 0,
-        });
+        return Err(FormatError::LeafCoverage { layout, triangle: t as u32, times: 0 });
     }
     Ok(())
 }
@@ -370,11 +293,7 @@ pub fn check_same_tree(child_pair: &[Node], escape: &[Node]) -> Result<(), Forma
         if diff.is_none() {
             let a = &child_pair[i];
             let b = &escape[k];
-            if a.min != b.min
-                || a.max != b.max
-                || a.count != b.count
-                || (a.is_leaf() && a.index != b.index)
-            {
+            if a.min != b.min || a.max != b.max || a.count != b.count || (a.is_leaf() && a.index != b.index) {
                 diff = Some(k as u32);
             }
         }
@@ -391,31 +310,15 @@ mod tests {
     use super::*;
 
     fn leaf(lo: f32, hi: f32, first: u32, count: u32) -> Node {
-        Node {
-            min: [lo, 0.0, 0.0],
-            count,
-            max: [hi, 1.0, 1.0],
-            index: first,
-        }
+        Node { min: [lo, 0.0, 0.0], count, max: [hi, 1.0, 1.0], index: first }
     }
     fn inner(lo: f32, hi: f32, index: u32) -> Node {
-        Node {
-            min: [lo, 0.0, 0.0],
-            count: 0,
-            max: [hi, 1.0, 1.0],
-            index,
-        }
+        Node { min: [lo, 0.0, 0.0], count: 0, max: [hi, 1.0, 1.0], index }
     }
 
     /// root -> (A, B); A -> (t0, t1); B is a leaf with t2..t4.
     fn sample() -> Vec<Node> {
-        vec![
-            inner(0.0, 4.0, 1),
-            inner(0.0, 2.0, 3),
-            leaf(2.0, 4.0, 2, 3),
-            leaf(0.0, 1.0, 0, 1),
-            leaf(1.0, 2.0, 1, 1),
-        ]
+        vec![inner(0.0, 4.0, 1), inner(0.0, 2.0, 3), leaf(2.0, 4.0, 2, 3), leaf(0.0, 1.0, 0, 1), leaf(1.0, 2.0, 1, 1)]
     }
 
     #[test]
@@ -441,55 +344,32 @@ mod tests {
         // Half areas: root 4*1+1+4 = 9; A 2+1+2 = 5; B 5; leaves of width 1: 3 each.
         let s = stats(Tree::child_pair(&cp), 1.0, 2.0);
         let expect = (9.0 + 5.0) / 9.0 + 2.0 * (3.0 * 5.0 + 1.0 * 3.0 + 1.0 * 3.0) / 9.0;
-        assert!(
-            (s.sah_cost - expect).abs() < 1e-12,
-            "{} vs {}",
-            s.sah_cost,
-            expect
-        );
+        assert!((s.sah_cost - expect).abs() < 1e-12, "{} vs {}", s.sah_cost, expect);
     }
 
     #[test]
     fn shape_errors_are_detected() {
         let mut cp = sample();
         cp[1].index = 0; // child before parent
-        assert!(matches!(
-            check_shape(Tree::child_pair(&cp), 5),
-            Err(FormatError::TreeShape { .. })
-        ));
+        assert!(matches!(check_shape(Tree::child_pair(&cp), 5), Err(FormatError::TreeShape { .. })));
         let mut cp = sample();
         cp[2].count = 2; // triangle 4 uncovered
-        assert!(matches!(
-            check_shape(Tree::child_pair(&cp), 5),
-            Err(FormatError::LeafCoverage { times: 0, .. })
-        ));
+        assert!(matches!(check_shape(Tree::child_pair(&cp), 5), Err(FormatError::LeafCoverage { times: 0, .. })));
         let mut cp = sample();
         cp[4].index = 0; // triangle 0 twice
-        assert!(matches!(
-            check_shape(Tree::child_pair(&cp), 5),
-            Err(FormatError::LeafCoverage { times: 2, .. })
-        ));
+        assert!(matches!(check_shape(Tree::child_pair(&cp), 5), Err(FormatError::LeafCoverage { times: 2, .. })));
         let mut cp = sample();
         cp[3].max[0] = 9.0; // leaf sticks out of its parent
-        assert!(matches!(
-            check_shape(Tree::child_pair(&cp), 5),
-            Err(FormatError::ChildOutsideParent { .. })
-        ));
+        assert!(matches!(check_shape(Tree::child_pair(&cp), 5), Err(FormatError::ChildOutsideParent { .. })));
         let mut esc = escape_from_child_pair(&sample());
         esc[1].index = 0;
-        assert!(matches!(
-            check_shape(Tree::escape(&esc), 5),
-            Err(FormatError::EscapeBackwards { node: 1, .. })
-        ));
+        assert!(matches!(check_shape(Tree::escape(&esc), 5), Err(FormatError::EscapeBackwards { node: 1, .. })));
         let mut esc = escape_from_child_pair(&sample());
         esc[1].index = 5;
         assert!(check_shape(Tree::escape(&esc), 5).is_err());
         let mut esc = escape_from_child_pair(&sample());
         esc[2].min[1] = f32::NAN;
-        assert!(matches!(
-            check_shape(Tree::escape(&esc), 5),
-            Err(FormatError::NonFinite { .. })
-        ));
+        assert!(matches!(check_shape(Tree::escape(&esc), 5), Err(FormatError::NonFinite { .. })));
     }
 
     #[test]

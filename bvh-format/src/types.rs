@@ -76,15 +76,7 @@ pub struct Material {
 
 impl Default for Material {
     fn default() -> Self {
-        Self {
-            kd: [0.8, 0.8, 0.8],
-            shininess: 32.0,
-            ks: [0.0, 0.0, 0.0],
-            kr: 0.0,
-            kt: 0.0,
-            ior: 1.0,
-            _pad: [0.0; 2],
-        }
+        Self { kd: [0.8, 0.8, 0.8], shininess: 32.0, ks: [0.0, 0.0, 0.0], kr: 0.0, kt: 0.0, ior: 1.0, _pad: [0.0; 2] }
     }
 }
 
@@ -116,24 +108,12 @@ impl Camera {
             end -= 1;
         }
         bytes[..end].copy_from_slice(&name.as_bytes()[..end]);
-        Self {
-            eye,
-            fov_deg,
-            at,
-            _pad0: 0.0,
-            up,
-            _pad1: 0.0,
-            name: bytes,
-        }
+        Self { eye, fov_deg, at, _pad0: 0.0, up, _pad1: 0.0, name: bytes }
     }
 
     /// The name, or `None` when the stored bytes are not UTF-8.
     pub fn name(&self) -> Option<&str> {
-        let end = self
-            .name
-            .iter()
-            .position(|&b| b == 0)
-            .unwrap_or(CAMERA_NAME_LEN);
+        let end = self.name.iter().position(|&b| b == 0).unwrap_or(CAMERA_NAME_LEN);
         std::str::from_utf8(&self.name[..end]).ok()
     }
 }
@@ -150,12 +130,7 @@ pub struct Light {
 
 impl Light {
     pub fn new(position: [f32; 3], colour: [f32; 3]) -> Self {
-        Self {
-            position,
-            _pad0: 0.0,
-            colour,
-            _pad1: 0.0,
-        }
+        Self { position, _pad0: 0.0, colour, _pad1: 0.0 }
     }
 }
 
@@ -204,13 +179,7 @@ pub struct BuildParams {
 
 impl Default for BuildParams {
     fn default() -> Self {
-        Self {
-            strategy: Strategy::Binned,
-            bins: 16,
-            traversal_cost: 1.0,
-            intersection_cost: 1.0,
-            max_leaf_size: 8,
-        }
+        Self { strategy: Strategy::Binned, bins: 16, traversal_cost: 1.0, intersection_cost: 1.0, max_leaf_size: 8 }
     }
 }
 
@@ -227,11 +196,7 @@ pub struct SceneSettings {
 
 impl Default for SceneSettings {
     fn default() -> Self {
-        Self {
-            ambient: [0.05, 0.05, 0.05],
-            background: [0.0, 0.0, 0.0],
-            max_indirections: 0,
-        }
+        Self { ambient: [0.05, 0.05, 0.05], background: [0.0, 0.0, 0.0], max_indirections: 0 }
     }
 }
 
@@ -251,13 +216,7 @@ mod tests {
 
     #[test]
     fn camera_names_are_cut_at_char_boundaries() {
-        let c = Camera::new(
-            "ääääääääää",
-            [0.0; 3],
-            [0.0, 0.0, -1.0],
-            [0.0, 1.0, 0.0],
-            45.0,
-        );
+        let c = Camera::new("ääääääääää", [0.0; 3], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 45.0);
         assert_eq!(c.name(), Some("ääääääää"));
         let c = Camera::new("wide", [0.0; 3], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 45.0);
         assert_eq!(c.name(), Some("wide"));

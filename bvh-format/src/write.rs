@@ -3,8 +3,8 @@
 use crate::SceneFile;
 use crate::error::{FileError, FormatError};
 use crate::layout::{
-    ALIGN, FLAG_CHILD_PAIR, FLAG_ESCAPE, HEADER_SIZE, Header, MAGIC, SECTION_ENTRY_SIZE,
-    SectionEntry, SectionKind, VERSION,
+    ALIGN, FLAG_CHILD_PAIR, FLAG_ESCAPE, HEADER_SIZE, Header, MAGIC, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
+    VERSION,
 };
 
 fn align_up(v: u64) -> u64 {
@@ -31,60 +31,24 @@ pub fn write(scene: &SceneFile) -> Result<Vec<u8>, FormatError> {
     let names = encode_names(&scene.material_names);
 
     let mut sections: Vec<(SectionKind, u64, &[u8])> = vec![
-        (
-            SectionKind::Triangles,
-            scene.triangles.len() as u64,
-            bytemuck::cast_slice(&scene.triangles),
-        ),
-        (
-            SectionKind::Normals,
-            scene.normals.len() as u64,
-            bytemuck::cast_slice(&scene.normals),
-        ),
-        (
-            SectionKind::MaterialIds,
-            scene.material_ids.len() as u64,
-            bytemuck::cast_slice(&scene.material_ids),
-        ),
-        (
-            SectionKind::Materials,
-            scene.materials.len() as u64,
-            bytemuck::cast_slice(&scene.materials),
-        ),
+        (SectionKind::Triangles, scene.triangles.len() as u64, bytemuck::cast_slice(&scene.triangles)),
+        (SectionKind::Normals, scene.normals.len() as u64, bytemuck::cast_slice(&scene.normals)),
+        (SectionKind::MaterialIds, scene.material_ids.len() as u64, bytemuck::cast_slice(&scene.material_ids)),
+        (SectionKind::Materials, scene.materials.len() as u64, bytemuck::cast_slice(&scene.materials)),
         (SectionKind::MaterialNames, names.len() as u64, &names),
-        (
-            SectionKind::InputIndex,
-            scene.input_index.len() as u64,
-            bytemuck::cast_slice(&scene.input_index),
-        ),
+        (SectionKind::InputIndex, scene.input_index.len() as u64, bytemuck::cast_slice(&scene.input_index)),
     ];
     let mut flags = 0;
     if let Some(n) = &scene.child_pair {
         flags |= FLAG_CHILD_PAIR;
-        sections.push((
-            SectionKind::NodesChildPair,
-            n.len() as u64,
-            bytemuck::cast_slice(n),
-        ));
+        sections.push((SectionKind::NodesChildPair, n.len() as u64, bytemuck::cast_slice(n)));
     }
     if let Some(n) = &scene.escape {
         flags |= FLAG_ESCAPE;
-        sections.push((
-            SectionKind::NodesEscape,
-            n.len() as u64,
-            bytemuck::cast_slice(n),
-        ));
+        sections.push((SectionKind::NodesEscape, n.len() as u64, bytemuck::cast_slice(n)));
     }
-    sections.push((
-        SectionKind::Cameras,
-        scene.cameras.len() as u64,
-        bytemuck::cast_slice(&scene.cameras),
-    ));
-    sections.push((
-        SectionKind::Lights,
-        scene.lights.len() as u64,
-        bytemuck::cast_slice(&scene.lights),
-    ));
+    sections.push((SectionKind::Cameras, scene.cameras.len() as u64, bytemuck::cast_slice(&scene.cameras)));
+    sections.push((SectionKind::Lights, scene.lights.len() as u64, bytemuck::cast_slice(&scene.lights)));
 
     let table_end = (HEADER_SIZE + SECTION_ENTRY_SIZE * sections.len()) as u64;
     let mut offset = align_up(table_end);
@@ -154,14 +118,8 @@ pub(crate) fn header_crc(header: &Header, table: &[u8]) -> u32 {
 /// Writes a scene to `path` through a temporary file in the same folder, renamed into place only
 /// when complete, so an interrupted write never leaves a damaged file under the final name.
 pub fn write_file(scene: &SceneFile, path: &std::path::Path) -> Result<(), FileError> {
-    let bytes = write(scene).map_err(|source| FileError::Invalid {
-        path: path.display().to_string(),
-        source,
-    })?;
-    let werr = |source| FileError::Write {
-        path: path.display().to_string(),
-        source,
-    };
+    let bytes = write(scene).map_err(|source| FileError::Invalid { path: path.display().to_string(), source })?;
+    let werr = |source| FileError::Write { path: path.display().to_string(), source };
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(".partial");
     let tmp = std::path::PathBuf::from(tmp);
