@@ -1,7 +1,8 @@
 //! Wald's binned SAH split (Wald 2007): centroids are binned along each axis into K bins over the
-//! node's centroid bounds, and the K - 1 planes between bins are evaluated with the SAH.
+//! node's centroid bounds, and the K - 1 planes between bins are evaluated with the SAH. Nodes of at
+//! most K triangles are swept exactly instead.
 
-use crate::build::{Aabb, Costs, NodeBounds, Primitives, Split, Splitter};
+use crate::build::{Aabb, Costs, NodeBounds, PrimRef, Split, Splitter};
 use glam::Vec3A;
 use std::cell::RefCell;
 
@@ -22,8 +23,7 @@ thread_local! {
     static SCRATCH: RefCell<Vec<Bin>> = const { RefCell::new(Vec::new()) };
 }
 
-pub struct BinnedSah<'a> {
-    pub prims: &'a Primitives,
+pub struct BinnedSah {
     pub bins: usize,
     pub costs: Costs,
 }
@@ -37,21 +37,21 @@ fn bin_index(c: Vec3A, lo: Vec3A, scale: Vec3A, last: usize) -> [usize; 3] {
     [(f[0] as usize).min(last), (f[1] as usize).min(last), (f[2] as usize).min(last)]
 }
 
-impl BinnedSah<'_> {
-    fn bin_into(&self, prims: &[u32], lo: Vec3A, scale: Vec3A, bins: &mut [Bin]) {
+impl BinnedSah {
+    fn bin_into(&self, prims: &[PrimRef], lo: Vec3A, scale: Vec3A, bins: &mut [Bin]) {
         let k = self.bins;
-        for &p in prims {
-            let b = bin_index(self.prims.centroids[p as usize], lo, scale, k - 1);
-            let pb = &self.prims.bounds[p as usize];
+        for p in prims {
+            let b = bin_index(p.centroid(), lo, scale, k - 1);
+            let pb = p.aabb();
             for axis in 0..3 {
                 let bin = &mut bins[axis * k + b[axis]];
-                bin.bounds.grow(pb);
+                bin.bounds.grow(&pb);
                 bin.count += 1;
             }
         }
     }
 
-    fn bin_parallel(&self, prims: &[u32], lo: Vec3A, scale: Vec3A, bins: &mut [Bin]) {
+    fn bin_parallel(&self, prims: &[PrimRef], lo: Vec3A, scale: Vec3A, bins: &mut [Bin]) {
         use rayon::prelude::*;
         let k = self.bins;
         let merged = prims
@@ -76,7 +76,7 @@ impl BinnedSah<'_> {
         bins.copy_from_slice(&merged);
     }
 
-    fn split_with(&self, prims: &mut [u32], nb: &NodeBounds, may_leaf: bool, bins: &mut [Bin]) -> Option<Split> {
+    fn split_with(&self, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool, bins: &mut [Bin]) -> Option<Split> {
         let n = prims.len();
         let k = self.bins;
         let lo = nb.centroids.min;
@@ -140,16 +140,15 @@ impl BinnedSah<'_> {
         }
 
         // In-place partition by bin, gathering the children's centroid bounds on the way.
-        let goes_left = |p: u32| bin_index(self.prims.centroids[p as usize], lo, scale, k - 1)[axis] < plane;
         let (mut i, mut j) = (0usize, n);
         while i < j {
-            let p = prims[i];
-            if goes_left(p) {
-                left.centroids.grow_point(self.prims.centroids[p as usize]);
+            let c = prims[i].centroid();
+            if bin_index(c, lo, scale, k - 1)[axis] < plane {
+                left.centroids.grow_point(c);
                 i += 1;
             } else {
                 j -= 1;
-                right.centroids.grow_point(self.prims.centroids[p as usize]);
+                right.centroids.grow_point(c);
                 prims.swap(i, j);
             }
         }
@@ -158,8 +157,13 @@ impl BinnedSah<'_> {
     }
 }
 
-impl Splitter for BinnedSah<'_> {
-    fn split(&self, prims: &mut [u32], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
+impl Splitter for BinnedSah {
+    fn split(&self, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
+        // A node no larger than the bin count is swept exactly: sorting a handful of centroids
+        // costs less than clearing and sweeping K bins per axis, and finds at least as good a plane.
+        if prims.len() <= self.bins {
+            return crate::sweep::sweep_split(&self.costs, prims, nb, may_leaf);
+        }
         SCRATCH.with(|s| {
             // A nested use (rayon may steal work inside `bin_parallel`) gets its own buffer.
             let mut own;

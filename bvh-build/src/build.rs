@@ -4,6 +4,7 @@
 
 use bvh_format::Node;
 use glam::Vec3A;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Nodes deeper than this are split at the object median instead of by SAH, which bounds the
 /// depth of any tree by `DEPTH_LIMIT + log2(triangles)`: SAH can peel one triangle at a time off
@@ -56,44 +57,54 @@ impl Aabb {
     }
 }
 
-/// Per-triangle data every builder reads.
-pub struct Primitives {
-    pub bounds: Vec<Aabb>,
-    /// Centre of each triangle's box: what the builders sort and bin by.
-    pub centroids: Vec<Vec3A>,
+/// One triangle as the builders see it: its box and its input index, 32 bytes. The builders
+/// reorder these records themselves rather than an index array into them, so that binning and
+/// partitioning stream through memory instead of gathering from it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct PrimRef {
+    pub min: [f32; 3],
+    pub id: u32,
+    pub max: [f32; 3],
+    _pad: u32,
 }
 
-impl Primitives {
-    pub fn from_triangles(positions: &[[glam::Vec3; 3]]) -> Self {
-        use rayon::prelude::*;
-        let bounds: Vec<Aabb> = positions
-            .par_iter()
-            .map(|t| {
-                let (a, b, c) = (Vec3A::from(t[0]), Vec3A::from(t[1]), Vec3A::from(t[2]));
-                Aabb { min: a.min(b).min(c), max: a.max(b).max(c) }
-            })
-            .collect();
-        let centroids = bounds.par_iter().map(|b| b.min * 0.5 + b.max * 0.5).collect();
-        Primitives { bounds, centroids }
+impl PrimRef {
+    #[inline(always)]
+    pub fn aabb(&self) -> Aabb {
+        Aabb { min: Vec3A::from(self.min), max: Vec3A::from(self.max) }
     }
 
-    pub fn len(&self) -> usize {
-        self.bounds.len()
+    /// Centre of the triangle's box: what the builders sort and bin by.
+    #[inline(always)]
+    pub fn centroid(&self) -> Vec3A {
+        (Vec3A::from(self.min) + Vec3A::from(self.max)) * 0.5
     }
+}
 
-    pub fn is_empty(&self) -> bool {
-        self.bounds.is_empty()
-    }
+/// The references of every triangle, in input order.
+pub fn prim_refs(positions: &[[glam::Vec3; 3]]) -> Vec<PrimRef> {
+    use rayon::prelude::*;
+    positions
+        .par_iter()
+        .enumerate()
+        .map(|(i, t)| PrimRef {
+            min: t[0].min(t[1]).min(t[2]).into(),
+            id: i as u32,
+            max: t[0].max(t[1]).max(t[2]).into(),
+            _pad: 0,
+        })
+        .collect()
+}
 
-    /// Box and centroid box of a set of primitives.
-    pub fn bounds_of(&self, prims: &[u32]) -> NodeBounds {
-        let mut nb = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
-        for &p in prims {
-            nb.aabb.grow(&self.bounds[p as usize]);
-            nb.centroids.grow_point(self.centroids[p as usize]);
-        }
-        nb
+/// Box and centroid box of a set of primitives.
+pub fn bounds_of(refs: &[PrimRef]) -> NodeBounds {
+    let mut nb = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
+    for r in refs {
+        nb.aabb.grow(&r.aabb());
+        nb.centroids.grow_point(r.centroid());
     }
+    nb
 }
 
 /// A node's box and the box of its primitives' centroids.
@@ -133,9 +144,9 @@ pub struct Split {
 
 /// Decides how one node is split.
 pub trait Splitter: Sync {
-    /// Reorders `prims` and returns the split with the lowest SAH cost, or `None` when no split
+    /// Reorders `refs` and returns the split with the lowest SAH cost, or `None` when no split
     /// separates the primitives or, if `may_leaf`, when a leaf is cheaper than the best split.
-    fn split(&self, prims: &mut [u32], bounds: &NodeBounds, may_leaf: bool) -> Option<Split>;
+    fn split(&self, refs: &mut [PrimRef], bounds: &NodeBounds, may_leaf: bool) -> Option<Split>;
 }
 
 /// One node of the build, in a gapped depth-first array: a subtree of `c` primitives owns `2c - 1`
@@ -157,43 +168,39 @@ pub struct BuiltTree {
 }
 
 struct Ctx<'a, S: Splitter> {
-    prims: &'a Primitives,
     splitter: &'a S,
     costs: Costs,
+    progress: Option<&'a AtomicUsize>,
 }
 
-/// Builds a tree over every primitive with the given splitter.
-pub fn build<S: Splitter>(prims: &Primitives, splitter: &S, costs: Costs) -> BuiltTree {
-    let n = prims.len();
+/// Builds a tree over `refs` (reordering them into leaf order) with the given splitter.
+/// `progress`, when given, counts the primitives already placed in leaves, for a progress bar.
+pub fn build<S: Splitter>(
+    refs: &mut [PrimRef],
+    splitter: &S,
+    costs: Costs,
+    progress: Option<&AtomicUsize>,
+) -> BuiltTree {
+    let n = refs.len();
     assert!(n > 0 && n < u32::MAX as usize / 2, "the compiler rejects empty and oversized scenes before building");
-    let mut order: Vec<u32> = (0..n as u32).collect();
     let mut slots = vec![Slot::default(); 2 * n - 1];
-    let root = prims_bounds_parallel(prims);
-    let ctx = Ctx { prims, splitter, costs };
-    build_node(&ctx, &mut order, 0, &mut slots, 0, root, 0);
-    BuiltTree { nodes: flatten(&slots), order }
+    let root = bounds_parallel(refs);
+    let ctx = Ctx { splitter, costs, progress };
+    build_node(&ctx, refs, 0, &mut slots, 0, root, 0);
+    BuiltTree { nodes: flatten(&slots), order: refs.iter().map(|r| r.id).collect() }
 }
 
-fn prims_bounds_parallel(prims: &Primitives) -> NodeBounds {
+fn bounds_parallel(refs: &[PrimRef]) -> NodeBounds {
     use rayon::prelude::*;
     let empty = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
-    (0..prims.len())
-        .into_par_iter()
-        .with_min_len(16384)
-        .fold(
-            || empty,
-            |mut nb, i| {
-                nb.aabb.grow(&prims.bounds[i]);
-                nb.centroids.grow_point(prims.centroids[i]);
-                nb
-            },
-        )
+    refs.par_chunks(16384)
+        .map(bounds_of)
         .reduce(|| empty, |a, b| NodeBounds { aabb: a.aabb.union(&b.aabb), centroids: a.centroids.union(&b.centroids) })
 }
 
 fn build_node<S: Splitter>(
     ctx: &Ctx<'_, S>,
-    prims: &mut [u32],
+    prims: &mut [PrimRef],
     first: usize,
     slots: &mut [Slot],
     slot: usize,
@@ -205,12 +212,12 @@ fn build_node<S: Splitter>(
     let split = if n == 1 {
         None
     } else if depth >= DEPTH_LIMIT {
-        if may_leaf { None } else { Some(median_split(ctx.prims, prims, &bounds)) }
+        if may_leaf { None } else { Some(median_split(prims, &bounds)) }
     } else {
         match ctx.splitter.split(prims, &bounds, may_leaf) {
             Some(s) => Some(s),
             None if may_leaf => None,
-            None => Some(median_split(ctx.prims, prims, &bounds)),
+            None => Some(median_split(prims, &bounds)),
         }
     };
     let here = &mut slots[0];
@@ -219,6 +226,9 @@ fn build_node<S: Splitter>(
     let Some(split) = split else {
         here.count = n as u32;
         here.index = first as u32;
+        if let Some(p) = ctx.progress {
+            p.fetch_add(n, Ordering::Relaxed);
+        }
         return;
     };
     let mid = split.mid;
@@ -240,16 +250,14 @@ fn build_node<S: Splitter>(
 
 /// Splits at the object median along the widest centroid axis; with all centroids equal, simply
 /// in the middle of the list. Always makes progress, so degenerate input terminates.
-pub fn median_split(p: &Primitives, prims: &mut [u32], bounds: &NodeBounds) -> Split {
-    let mid = prims.len() / 2;
+pub fn median_split(refs: &mut [PrimRef], bounds: &NodeBounds) -> Split {
+    let mid = refs.len() / 2;
     let ext = bounds.centroids.extent();
     if ext.max_element() > 0.0 {
         let axis = ext.max_position();
-        prims.select_nth_unstable_by(mid, |&a, &b| {
-            p.centroids[a as usize][axis].total_cmp(&p.centroids[b as usize][axis])
-        });
+        refs.select_nth_unstable_by(mid, |a, b| a.centroid()[axis].total_cmp(&b.centroid()[axis]));
     }
-    Split { mid, left: p.bounds_of(&prims[..mid]), right: p.bounds_of(&prims[mid..]) }
+    Split { mid, left: bounds_of(&refs[..mid]), right: bounds_of(&refs[mid..]) }
 }
 
 /// Turns the gapped depth-first slots into the child-pair layout: root at 0, the two children of

@@ -3,9 +3,10 @@
 
 use crate::BuildError;
 use crate::binned::BinnedSah;
-use crate::build::{self, Costs, Primitives};
+use crate::build::{self, Costs};
 use crate::scene::Scene;
 use crate::sweep::SweepSah;
+use std::sync::atomic::AtomicUsize;
 use bvh_format::{BuildParams, SceneFile, Strategy, Triangle, TriangleNormals};
 
 /// Which node layouts to store.
@@ -44,6 +45,15 @@ pub fn check_params(p: &BuildParams) -> Result<(), BuildError> {
 
 /// The tree alone (child-pair layout and leaf order), for benchmarks and tests.
 pub fn build_tree(positions: &[[glam::Vec3; 3]], p: &BuildParams) -> Result<build::BuiltTree, BuildError> {
+    build_tree_with_progress(positions, p, None)
+}
+
+/// [`build_tree`], counting the triangles placed in leaves into `progress` as it goes.
+pub fn build_tree_with_progress(
+    positions: &[[glam::Vec3; 3]],
+    p: &BuildParams,
+    progress: Option<&AtomicUsize>,
+) -> Result<build::BuiltTree, BuildError> {
     check_params(p)?;
     if positions.is_empty() {
         return Err(BuildError::Empty);
@@ -54,20 +64,30 @@ pub fn build_tree(positions: &[[glam::Vec3; 3]], p: &BuildParams) -> Result<buil
     if let Some(t) = positions.iter().position(|t| t.iter().any(|v| !v.is_finite())) {
         return Err(BuildError::NonFinite { triangle: t });
     }
-    let prims = Primitives::from_triangles(positions);
+    let mut refs = build::prim_refs(positions);
     let costs = Costs {
         traversal: p.traversal_cost as f64,
         intersection: p.intersection_cost as f64,
         max_leaf_size: p.max_leaf_size as usize,
     };
     Ok(match p.strategy {
-        Strategy::Binned => build::build(&prims, &BinnedSah { prims: &prims, bins: p.bins as usize, costs }, costs),
-        Strategy::Sweep => build::build(&prims, &SweepSah { prims: &prims, costs }, costs),
+        Strategy::Binned => build::build(&mut refs, &BinnedSah { bins: p.bins as usize, costs }, costs, progress),
+        Strategy::Sweep => build::build(&mut refs, &SweepSah { costs }, costs, progress),
     })
 }
 
 /// Compiles a scene into the file's in-memory form (validated).
 pub fn compile(scene: &Scene, params: &BuildParams, layouts: Layouts) -> Result<SceneFile, BuildError> {
+    compile_with_progress(scene, params, layouts, None)
+}
+
+/// [`compile`], counting the triangles placed in leaves into `progress` as the tree is built.
+pub fn compile_with_progress(
+    scene: &Scene,
+    params: &BuildParams,
+    layouts: Layouts,
+    progress: Option<&AtomicUsize>,
+) -> Result<SceneFile, BuildError> {
     if !layouts.child_pair && !layouts.escape {
         return Err(BuildError::Params("at least one node layout must be chosen".to_owned()));
     }
@@ -75,7 +95,7 @@ pub fn compile(scene: &Scene, params: &BuildParams, layouts: Layouts) -> Result<
     if scene.normals.len() != n || scene.material_ids.len() != n {
         return Err(BuildError::Params("the scene's normals or material ids do not match its triangles".to_owned()));
     }
-    let tree = build_tree(&scene.positions, params)?;
+    let tree = build_tree_with_progress(&scene.positions, params, progress)?;
     let pad = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
     let order = &tree.order;
     let triangles = order

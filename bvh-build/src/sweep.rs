@@ -1,47 +1,82 @@
 //! The full-sweep SAH split: every boundary between centroid-sorted primitives on every axis is
-//! evaluated. O(n log n) per node; the quality reference the binned builder is measured against.
+//! evaluated. O(n log n) per node; the quality reference the binned builder is measured against,
+//! and the binned builder's choice for nodes no larger than its bin count.
 
-use crate::build::{Aabb, Costs, NodeBounds, Primitives, Split, Splitter};
+use crate::build::{bounds_of, Aabb, Costs, NodeBounds, PrimRef, Split, Splitter};
+use std::cell::RefCell;
 
-pub struct SweepSah<'a> {
-    pub prims: &'a Primitives,
+pub struct SweepSah {
     pub costs: Costs,
 }
 
-impl Splitter for SweepSah<'_> {
-    fn split(&self, prims: &mut [u32], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
-        let n = prims.len();
-        if nb.centroids.extent().max_element() <= 0.0 {
-            return None;
+#[derive(Default)]
+struct Scratch {
+    sorted: [Vec<PrimRef>; 3],
+    right_area: Vec<f64>,
+}
+
+thread_local! {
+    /// Reused buffers: four allocations per node would dominate the small nodes near the leaves.
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
+/// The cheapest full-sweep split of `prims`, reordering them; see [`Splitter::split`].
+pub fn sweep_split(
+    costs: &Costs,
+    prims: &mut [PrimRef],
+    nb: &NodeBounds,
+    may_leaf: bool,
+) -> Option<Split> {
+    if nb.centroids.extent().max_element() <= 0.0 {
+        return None;
+    }
+    SCRATCH.with(|s| match s.try_borrow_mut() {
+        Ok(mut s) => sweep_with(costs, prims, nb, may_leaf, &mut s),
+        Err(_) => sweep_with(costs, prims, nb, may_leaf, &mut Scratch::default()),
+    })
+}
+
+fn sweep_with(
+    costs: &Costs,
+    prims: &mut [PrimRef],
+    nb: &NodeBounds,
+    may_leaf: bool,
+    s: &mut Scratch,
+) -> Option<Split> {
+    let n = prims.len();
+    let parent_area = nb.aabb.half_area();
+    let mut best: Option<(f64, usize, usize)> = None; // (cost, axis, left count)
+    s.right_area.resize(n, 0.0);
+    for axis in 0..3 {
+        let order = &mut s.sorted[axis];
+        order.clear();
+        order.extend_from_slice(prims);
+        // Ties broken by input index so that the result does not depend on the current order.
+        order.sort_unstable_by(|a, b| a.centroid()[axis].total_cmp(&b.centroid()[axis]).then(a.id.cmp(&b.id)));
+        let mut acc = Aabb::EMPTY;
+        for i in (1..n).rev() {
+            acc.grow(&order[i].aabb());
+            s.right_area[i] = acc.half_area();
         }
-        let parent_area = nb.aabb.half_area();
-        let mut best: Option<(f64, usize, usize)> = None; // (cost, axis, left count)
-        let mut sorted: [Vec<u32>; 3] = Default::default();
-        let mut right_area = vec![0f64; n];
-        for (axis, order) in sorted.iter_mut().enumerate() {
-            *order = prims.to_vec();
-            let c = &self.prims.centroids;
-            // Ties broken by index so that the result does not depend on the input order.
-            order.sort_unstable_by(|&a, &b| c[a as usize][axis].total_cmp(&c[b as usize][axis]).then(a.cmp(&b)));
-            let mut acc = Aabb::EMPTY;
-            for i in (1..n).rev() {
-                acc.grow(&self.prims.bounds[order[i] as usize]);
-                right_area[i] = acc.half_area();
+        let mut left = Aabb::EMPTY;
+        for i in 1..n {
+            left.grow(&order[i - 1].aabb());
+            let cost = costs.split_cost(parent_area, left.half_area(), i, s.right_area[i], n - i);
+            if best.is_none_or(|(b, _, _)| cost < b) {
+                best = Some((cost, axis, i));
             }
-            let mut left = Aabb::EMPTY;
-            for i in 1..n {
-                left.grow(&self.prims.bounds[order[i - 1] as usize]);
-                let cost = self.costs.split_cost(parent_area, left.half_area(), i, right_area[i], n - i);
-                if best.is_none_or(|(b, _, _)| cost < b) {
-                    best = Some((cost, axis, i));
-                }
-            }
         }
-        let (cost, axis, mid) = best?;
-        if may_leaf && cost >= self.costs.leaf_cost(n) {
-            return None;
-        }
-        prims.copy_from_slice(&sorted[axis]);
-        Some(Split { mid, left: self.prims.bounds_of(&prims[..mid]), right: self.prims.bounds_of(&prims[mid..]) })
+    }
+    let (cost, axis, mid) = best?;
+    if may_leaf && cost >= costs.leaf_cost(n) {
+        return None;
+    }
+    prims.copy_from_slice(&s.sorted[axis]);
+    Some(Split { mid, left: bounds_of(&prims[..mid]), right: bounds_of(&prims[mid..]) })
+}
+
+impl Splitter for SweepSah {
+    fn split(&self, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
+        sweep_split(&self.costs, prims, nb, may_leaf)
     }
 }

@@ -12,6 +12,31 @@ use crate::tree::{self, Tree};
 use crate::types::{BuildParams, SceneSettings, Strategy};
 use bytemuck::Pod;
 
+/// Size of one section, as `bvhc info` reports it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SectionInfo {
+    pub kind: SectionKind,
+    pub count: u64,
+    pub bytes: u64,
+    pub offset: u64,
+}
+
+/// [`read`], also returning the section table in file order (for `bvhc info`).
+pub fn read_with_sections(bytes: &[u8]) -> Result<(SceneFile, Vec<SectionInfo>), FormatError> {
+    let scene = read(bytes)?;
+    let header: Header = bytemuck::pod_read_unaligned(&bytes[..HEADER_SIZE]);
+    let table = &bytes[HEADER_SIZE..HEADER_SIZE + header.section_count as usize * SECTION_ENTRY_SIZE];
+    let sections = table
+        .chunks_exact(SECTION_ENTRY_SIZE)
+        .filter_map(|c| {
+            let e: SectionEntry = bytemuck::pod_read_unaligned(c);
+            let kind = SectionKind::from_u32(e.kind)?;
+            Some(SectionInfo { kind, count: e.count, bytes: e.count * e.element_size as u64, offset: e.offset })
+        })
+        .collect();
+    Ok((scene, sections))
+}
+
 /// Reads and validates a scene file held in memory.
 pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
     let len = bytes.len() as u64;
