@@ -229,8 +229,10 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     check_finite(SectionKind::Lights, &s.lights)?;
     check_finite(SectionKind::Materials, &s.materials)?;
     for (i, c) in s.cameras.iter().enumerate() {
-        let f = [c.eye, c.at, c.up].concat();
-        if all_finite(&f).is_some() || !c.fov_deg.is_finite() {
+        // The padding too: FORMAT.md allows no non-finite float anywhere, and a NaN would make the
+        // scene unequal to itself after a round trip.
+        let f = [c.eye, c.at, c.up, [c.fov_deg, c._pad0, c._pad1]].concat();
+        if all_finite(&f).is_some() {
             return Err(FormatError::NonFinite { section: SectionKind::Cameras, index: i as u64 });
         }
         if c.name().is_none() {
