@@ -120,6 +120,8 @@ pub struct Costs {
     pub traversal: f64,
     pub intersection: f64,
     pub max_leaf_size: usize,
+    /// Depth below which nodes are split at the median; [`DEPTH_LIMIT`] outside tests.
+    pub depth_limit: u32,
 }
 
 impl Costs {
@@ -211,7 +213,7 @@ fn build_node<S: Splitter>(
     let may_leaf = n <= ctx.costs.max_leaf_size;
     let split = if n == 1 {
         None
-    } else if depth >= DEPTH_LIMIT {
+    } else if depth >= ctx.costs.depth_limit {
         if may_leaf { None } else { Some(median_split(prims, &bounds)) }
     } else {
         match ctx.splitter.split(prims, &bounds, may_leaf) {
@@ -284,4 +286,114 @@ fn flatten(slots: &[Slot]) -> Vec<Node> {
         stack.push((s + 1, pair));
     }
     nodes
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::build_tree;
+    use bvh_format::tree::{check_shape, stats};
+    use bvh_format::{BuildParams, Strategy, Tree};
+    use glam::Vec3;
+
+    fn params(strategy: Strategy, bins: u32, max_leaf_size: u32) -> BuildParams {
+        BuildParams { strategy, bins, max_leaf_size, ..BuildParams::default() }
+    }
+
+    /// A deterministic pseudo-random soup of small triangles in a 10-unit cube.
+    fn soup(n: usize) -> Vec<[Vec3; 3]> {
+        let mut seed = 12345u32;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed as f32 / u32::MAX as f32
+        };
+        (0..n)
+            .map(|_| {
+                let c = Vec3::new(rnd(), rnd(), rnd()) * 10.0;
+                [c, c + Vec3::new(rnd(), rnd(), rnd()) * 0.3, c + Vec3::new(rnd(), rnd(), rnd()) * 0.3]
+            })
+            .collect()
+    }
+
+    fn check(tris: &[[Vec3; 3]], p: &BuildParams) -> bvh_format::TreeStats {
+        let t = build_tree(tris, p).expect("builds");
+        check_shape(Tree::child_pair(&t.nodes), tris.len() as u32).expect("valid tree");
+        let mut order = t.order.clone();
+        order.sort_unstable();
+        assert!(order.iter().enumerate().all(|(i, &o)| i as u32 == o), "leaf order is a permutation");
+        stats(Tree::child_pair(&t.nodes), p.traversal_cost, p.intersection_cost)
+    }
+
+    #[test]
+    fn identical_triangles_end_in_leaves_no_larger_than_allowed() {
+        let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let tris = vec![t; 1000];
+        for strategy in [Strategy::Binned, Strategy::Sweep] {
+            let s = check(&tris, &params(strategy, 16, 4));
+            assert!(s.leaf_sizes.len() <= 5, "{:?}", s.leaf_sizes);
+            // Median splits of 1000 items: depth ceil(log2(1000 / 4)) = 8.
+            assert!(s.max_depth <= 8, "{}", s.max_depth);
+        }
+    }
+
+    #[test]
+    fn below_the_depth_limit_splits_are_medians_and_depth_stays_bounded() {
+        let tris = soup(4000);
+        let free = check(&tris, &params(Strategy::Binned, 16, 1));
+        let limit = 3;
+        assert!(free.max_depth > limit, "the soup is meant to be deeper than the limit");
+        let mut refs = super::prim_refs(&tris);
+        let costs = super::Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 1, depth_limit: limit };
+        let t = super::build(&mut refs, &crate::binned::BinnedSah { bins: 16, costs }, costs, None);
+        check_shape(Tree::child_pair(&t.nodes), tris.len() as u32).expect("valid tree");
+        let s = stats(Tree::child_pair(&t.nodes), 1.0, 1.0);
+        // Median splits halve the count: at most ceil(log2(4000)) = 12 more levels, and a tree of
+        // SAH splits this shallow would have to be perfectly balanced.
+        assert!(s.max_depth <= limit + 12, "depth {}", s.max_depth);
+        assert!(s.sah_cost > free.sah_cost, "median levels cost more than SAH ones");
+        assert_eq!(s.leaf_count, 4000);
+    }
+
+    #[test]
+    fn binning_with_more_bins_than_triangles_is_the_sweep() {
+        let tris: Vec<[Vec3; 3]> = (0..40)
+            .map(|i| {
+                let x = ((i * 37) % 40) as f32;
+                let y = ((i * 11) % 7) as f32;
+                [Vec3::new(x, y, 0.0), Vec3::new(x + 1.5, y, 0.3), Vec3::new(x, y + 0.7, 1.0)]
+            })
+            .collect();
+        let a = build_tree(&tris, &params(Strategy::Binned, 64, 4)).unwrap();
+        let b = build_tree(&tris, &params(Strategy::Sweep, 16, 4)).unwrap();
+        assert_eq!(a.nodes, b.nodes);
+        assert_eq!(a.order, b.order);
+    }
+
+    #[test]
+    fn flat_huge_and_tiny_scenes_build() {
+        for scale in [1e-30f32, 1.0, 1e30] {
+            let tris: Vec<[Vec3; 3]> = (0..500)
+                .map(|i| {
+                    let x = (i % 25) as f32 * scale;
+                    let y = (i / 25) as f32 * scale;
+                    [Vec3::new(x, y, 0.0), Vec3::new(x + scale, y, 0.0), Vec3::new(x, y + scale, 0.0)]
+                })
+                .collect();
+            for strategy in [Strategy::Binned, Strategy::Sweep] {
+                let s = check(&tris, &params(strategy, 8, 4));
+                assert!(s.sah_cost.is_finite(), "scale {scale}: SAH {}", s.sah_cost);
+            }
+        }
+    }
+
+    #[test]
+    fn more_bins_do_not_make_a_random_scene_much_worse() {
+        // The 16-bin tree must be within 5% of the sweep.
+        let tris = soup(5000);
+        let sweep = check(&tris, &params(Strategy::Sweep, 16, 8)).sah_cost;
+        let binned = check(&tris, &params(Strategy::Binned, 16, 8)).sah_cost;
+        assert!(binned <= sweep * 1.05, "binned {binned} vs sweep {sweep}");
+        assert!(binned >= sweep * 0.95, "binned {binned} vs sweep {sweep}: sweep should be near-optimal");
+    }
 }

@@ -6,8 +6,8 @@ use crate::binned::BinnedSah;
 use crate::build::{self, Costs};
 use crate::scene::Scene;
 use crate::sweep::SweepSah;
-use std::sync::atomic::AtomicUsize;
 use bvh_format::{BuildParams, SceneFile, Strategy, Triangle, TriangleNormals};
+use std::sync::atomic::AtomicUsize;
 
 /// Which node layouts to store.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -69,6 +69,7 @@ pub fn build_tree_with_progress(
         traversal: p.traversal_cost as f64,
         intersection: p.intersection_cost as f64,
         max_leaf_size: p.max_leaf_size as usize,
+        depth_limit: build::DEPTH_LIMIT,
     };
     Ok(match p.strategy {
         Strategy::Binned => build::build(&mut refs, &BinnedSah { bins: p.bins as usize, costs }, costs, progress),

@@ -9,10 +9,16 @@
 pub mod binned;
 pub mod build;
 mod compile;
+pub mod import;
+#[cfg(feature = "compare")]
+pub mod peers;
 pub mod scene;
 pub mod sweep;
 
-pub use compile::{Layouts, MAX_BINS, build_tree, check_params, compile};
+pub use compile::{
+    Layouts, MAX_BINS, build_tree, build_tree_with_progress, check_params, compile, compile_with_progress,
+};
+pub use import::{ImportError, ImportOptions};
 pub use scene::Scene;
 
 use thiserror::Error;

@@ -15,7 +15,7 @@ mod write;
 
 pub use error::{FileError, FormatError, LayoutKind};
 pub use layout::SectionKind;
-pub use read::{read, read_file, read_with_sections, SectionInfo};
+pub use read::{SectionInfo, read, read_file, read_with_sections};
 pub use tree::{Tree, TreeStats};
 pub use types::{
     BuildParams, CAMERA_NAME_LEN, Camera, Light, Material, Node, SceneSettings, Strategy, Triangle, TriangleNormals,

@@ -46,7 +46,14 @@ fn compiles_verifies_and_describes_the_bunny() {
     let o = bvhc(&["info", out.to_str().unwrap()]);
     assert!(o.status.success(), "{:?}", text(&o));
     let (info, _) = text(&o);
-    for needle in ["triangles       69451", "SAH cost", "leaf sizes", "child-pair nodes", "escape-pointer nodes", "binned (16 bins)"] {
+    for needle in [
+        "triangles       69451",
+        "SAH cost",
+        "leaf sizes",
+        "child-pair nodes",
+        "escape-pointer nodes",
+        "binned (16 bins)",
+    ] {
         assert!(info.contains(needle), "info lacks {needle:?}:\n{info}");
     }
     // The file agrees with the library's own reading of it.

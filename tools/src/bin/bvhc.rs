@@ -1,8 +1,8 @@
 //! `bvhc`: compiles OBJ, glTF/GLB and scene descriptions into a validated BVH scene file, and
 //! explains or verifies such a file.
 
-use bvh_build::import::{self, ImportOptions};
 use bvh_build::Layouts;
+use bvh_build::import::{self, ImportOptions};
 use bvh_format::{BuildParams, SceneFile, Strategy};
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -229,7 +229,10 @@ fn info(file: &Path) -> Result<(), String> {
     println!("{}", file.display());
     println!("  triangles       {}", scene.triangles.len());
     println!("  materials       {}", scene.materials.len());
-    println!("  bounds          ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4})", lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+    println!(
+        "  bounds          ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4})",
+        lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]
+    );
     println!("  layouts         {}", layout_names(&scene));
     println!(
         "  build           {}{}, traversal cost {}, intersection cost {}, max leaf size {}",
