@@ -2,7 +2,7 @@
 //! evaluated. O(n log n) per node; the quality reference the binned builder is measured against,
 //! and the binned builder's choice for nodes no larger than its bin count.
 
-use crate::build::{bounds_of, Aabb, Costs, NodeBounds, PrimRef, Split, Splitter};
+use crate::build::{Aabb, Costs, NodeBounds, PrimRef, Split, Splitter, bounds_of};
 use std::cell::RefCell;
 
 pub struct SweepSah {
@@ -21,12 +21,7 @@ thread_local! {
 }
 
 /// The cheapest full-sweep split of `prims`, reordering them; see [`Splitter::split`].
-pub fn sweep_split(
-    costs: &Costs,
-    prims: &mut [PrimRef],
-    nb: &NodeBounds,
-    may_leaf: bool,
-) -> Option<Split> {
+pub fn sweep_split(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
     if nb.centroids.extent().max_element() <= 0.0 {
         return None;
     }
@@ -36,13 +31,7 @@ pub fn sweep_split(
     })
 }
 
-fn sweep_with(
-    costs: &Costs,
-    prims: &mut [PrimRef],
-    nb: &NodeBounds,
-    may_leaf: bool,
-    s: &mut Scratch,
-) -> Option<Split> {
+fn sweep_with(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool, s: &mut Scratch) -> Option<Split> {
     let n = prims.len();
     let parent_area = nb.aabb.half_area();
     let mut best: Option<(f64, usize, usize)> = None; // (cost, axis, left count)
