@@ -1,0 +1,239 @@
+//! Shared geometry for the readers: emitting indexed meshes as triangles with unit shading
+//! normals, and affine transforms of points and normals.
+//!
+//! Normal arithmetic runs in f64: cross products of tiny (or huge) f32 edges underflow (or
+//! overflow) in f32, and a triangle must still get a finite unit normal.
+
+use crate::scene::Scene;
+use glam::{DMat3, DMat4, DVec3, Vec3};
+
+/// The normal of a triangle that has none (zero area): +z, so that every normal stays unit.
+pub(crate) const FALLBACK_NORMAL: Vec3 = Vec3::Z;
+
+/// `v` scaled to unit length, or `None` when that is not possible.
+pub(crate) fn unit(v: DVec3) -> Option<Vec3> {
+    let len = v.length();
+    if !(len > 0.0 && len.is_finite()) {
+        return None;
+    }
+    let u = (v / len).as_vec3();
+    // f32 rounding can still leave a vector far from unit for denormal inputs; reject those.
+    (u.is_finite() && (u.length() - 1.0).abs() < 1e-3).then_some(u)
+}
+
+/// Twice the area-weighted normal of a triangle (its edge cross product), in f64.
+pub(crate) fn area_normal(a: Vec3, b: Vec3, c: Vec3) -> DVec3 {
+    let (a, b, c) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
+    (b - a).cross(c - a)
+}
+
+/// The unit geometric normal by the right-hand rule, or [`FALLBACK_NORMAL`] for a zero-area
+/// triangle.
+pub(crate) fn face_normal(a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    unit(area_normal(a, b, c)).unwrap_or(FALLBACK_NORMAL)
+}
+
+/// Where the shading normals of a mesh come from.
+pub(crate) enum Normals<'a> {
+    /// None in the file: flat or smooth normals are computed.
+    Missing,
+    /// One normal per position, indexed like the positions (glTF).
+    PerVertex(&'a [Vec3]),
+    /// A separate normal array with its own index triangles, parallel to the position triangles
+    /// (OBJ).
+    Indexed(&'a [Vec3], &'a [[u32; 3]]),
+}
+
+/// Why an indexed mesh could not be emitted; the reader adds the file and the mesh's name.
+#[derive(Debug)]
+pub(crate) enum EmitError {
+    /// Triangle `triangle` refers to `value` in an array of `limit` entries.
+    Index { triangle: usize, value: u32, limit: usize, normal: bool },
+    /// Position `vertex` is not finite.
+    NonFinite { vertex: usize },
+}
+
+/// Appends an indexed mesh (positions already in world space) to `scene` with material
+/// `material`. Triangles keep their order.
+pub(crate) fn emit(
+    scene: &mut Scene,
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    normals: Normals<'_>,
+    material: u32,
+    smooth: bool,
+) -> Result<(), EmitError> {
+    for (t, tri) in triangles.iter().enumerate() {
+        for &i in tri {
+            if i as usize >= positions.len() {
+                return Err(EmitError::Index { triangle: t, value: i, limit: positions.len(), normal: false });
+            }
+        }
+    }
+    // Only referenced vertices matter: an unused NaN vertex harms nothing.
+    for tri in triangles {
+        for &i in tri {
+            if !positions[i as usize].is_finite() {
+                return Err(EmitError::NonFinite { vertex: i as usize });
+            }
+        }
+    }
+    match normals {
+        Normals::PerVertex(n) if n.len() != positions.len() => {
+            return Err(EmitError::Index { triangle: 0, value: n.len() as u32, limit: positions.len(), normal: true });
+        }
+        Normals::Indexed(n, idx) => {
+            if idx.len() != triangles.len() {
+                return Err(EmitError::Index {
+                    triangle: 0,
+                    value: idx.len() as u32,
+                    limit: triangles.len(),
+                    normal: true,
+                });
+            }
+            for (t, tri) in idx.iter().enumerate() {
+                for &i in tri {
+                    if i as usize >= n.len() {
+                        return Err(EmitError::Index { triangle: t, value: i, limit: n.len(), normal: true });
+                    }
+                }
+            }
+        }
+        _ => {}
+    }
+
+    let smoothed = match normals {
+        Normals::Missing if smooth => Some(smooth_normals(positions, triangles)),
+        _ => None,
+    };
+    scene.positions.reserve(triangles.len());
+    scene.normals.reserve(triangles.len());
+    scene.material_ids.reserve(triangles.len());
+    for (t, tri) in triangles.iter().enumerate() {
+        let p = tri.map(|i| positions[i as usize]);
+        let flat = face_normal(p[0], p[1], p[2]);
+        let fix = |n: Vec3| unit(n.as_dvec3()).unwrap_or(flat);
+        let n = match (&normals, &smoothed) {
+            (_, Some(s)) => tri.map(|i| s[i as usize].unwrap_or(flat)),
+            (Normals::PerVertex(n), None) => tri.map(|i| fix(n[i as usize])),
+            (Normals::Indexed(n, idx), None) => idx[t].map(|i| fix(n[i as usize])),
+            (Normals::Missing, None) => [flat; 3],
+        };
+        scene.positions.push(p);
+        scene.normals.push(n);
+        scene.material_ids.push(material);
+    }
+    Ok(())
+}
+
+/// Area-weighted vertex normals: each vertex gets the sum of its triangles' edge cross products
+/// (twice their area times their normal), normalized; `None` where that sum vanishes.
+pub(crate) fn smooth_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Option<Vec3>> {
+    let mut sum = vec![DVec3::ZERO; positions.len()];
+    for tri in triangles {
+        let [a, b, c] = tri.map(|i| positions.get(i as usize).copied().unwrap_or(Vec3::ZERO));
+        let n = area_normal(a, b, c);
+        for &i in tri {
+            if let Some(s) = sum.get_mut(i as usize) {
+                *s += n;
+            }
+        }
+    }
+    sum.into_iter().map(unit).collect()
+}
+
+/// An affine transform of points, with its normal transform.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Affine {
+    pub m: DMat4,
+    /// The inverse transpose of the linear part, up to a positive factor: the cofactor matrix
+    /// times the sign of the determinant. Unlike the inverse it exists for singular matrices too,
+    /// where it still maps normals onto the normal of the flattened surface.
+    normal: DMat3,
+    /// The transform mirrors (negative determinant), so triangles must swap two vertices to keep
+    /// their winding consistent with their normals.
+    pub flips: bool,
+}
+
+impl Affine {
+    pub fn new(m: DMat4) -> Self {
+        let l = DMat3::from_mat4(m);
+        let det = l.determinant();
+        let cof = DMat3::from_cols(l.y_axis.cross(l.z_axis), l.z_axis.cross(l.x_axis), l.x_axis.cross(l.y_axis));
+        let flips = det < 0.0;
+        Self { m, normal: if flips { -cof } else { cof }, flips }
+    }
+
+    pub fn is_identity(&self) -> bool {
+        self.m == DMat4::IDENTITY
+    }
+
+    pub fn point(&self, p: Vec3) -> Vec3 {
+        self.m.transform_point3(p.as_dvec3()).as_vec3()
+    }
+
+    /// The transformed unit normal, or `None` where the transform collapses it.
+    pub fn normal(&self, n: Vec3) -> Option<Vec3> {
+        unit(self.normal * n.as_dvec3())
+    }
+}
+
+/// Applies `aff` to triangles with their normals, in place. Returns the index of the first
+/// triangle whose transformed position is not finite.
+pub(crate) fn transform_triangles(
+    positions: &mut [[Vec3; 3]],
+    normals: &mut [[Vec3; 3]],
+    aff: &Affine,
+) -> Result<(), usize> {
+    if aff.is_identity() {
+        return Ok(());
+    }
+    for (t, (p, n)) in positions.iter_mut().zip(normals.iter_mut()).enumerate() {
+        let mut q = p.map(|v| aff.point(v));
+        if !q.iter().all(|v| v.is_finite()) {
+            return Err(t);
+        }
+        let flat = face_normal(q[0], q[1], q[2]);
+        let mut m = n.map(|v| aff.normal(v).unwrap_or(flat));
+        if aff.flips {
+            q.swap(1, 2);
+            m.swap(1, 2);
+        }
+        *p = q;
+        *n = m;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn degenerate_triangles_get_a_unit_normal() {
+        let p = Vec3::new(1.0, 2.0, 3.0);
+        assert_eq!(face_normal(p, p, p), FALLBACK_NORMAL);
+        let tiny = face_normal(Vec3::ZERO, Vec3::new(1e-30, 0.0, 0.0), Vec3::new(0.0, 1e-30, 0.0));
+        assert!((tiny - Vec3::Z).length() < 1e-6);
+        let huge = face_normal(Vec3::ZERO, Vec3::new(3e38, 0.0, 0.0), Vec3::new(0.0, 3e38, 0.0));
+        assert!((huge - Vec3::Z).length() < 1e-6);
+    }
+
+    #[test]
+    fn mirroring_keeps_normals_outward_and_flips_winding() {
+        let aff = Affine::new(DMat4::from_scale(DVec3::new(-1.0, 1.0, 1.0)));
+        let mut p = [[Vec3::ZERO, Vec3::X, Vec3::Y]];
+        let mut n = [[Vec3::Z; 3]];
+        transform_triangles(&mut p, &mut n, &aff).unwrap();
+        assert_eq!(n[0], [Vec3::Z; 3]);
+        assert_eq!(face_normal(p[0][0], p[0][1], p[0][2]), Vec3::Z);
+    }
+
+    #[test]
+    fn non_uniform_scale_uses_the_inverse_transpose() {
+        let aff = Affine::new(DMat4::from_scale(DVec3::new(1.0, 4.0, 1.0)));
+        let n = aff.normal(Vec3::new(1.0, 1.0, 0.0).normalize()).unwrap();
+        // A 45-degree slope stretched along y gets steeper, so its normal tilts towards x.
+        assert!(n.x > 0.9 && n.y > 0.0 && (n.length() - 1.0).abs() < 1e-6);
+    }
+}

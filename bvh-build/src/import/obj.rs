@@ -1,0 +1,173 @@
+//! Wavefront OBJ with MTL materials, through tobj.
+//!
+//! Triangle order: models (tobj splits at `o`, `g` and material changes) in file order, faces in
+//! file order, a polygon of `k` corners as `k - 2` fan triangles. Points and lines are skipped.
+//! A missing or malformed material library is an error; a `usemtl` naming no known material
+//! gives the default material.
+
+use super::geometry::{self, EmitError, Normals};
+use super::{DEFAULT_MATERIAL_NAME, ImportError, ImportOptions, guarded, materials, read_file};
+use crate::scene::Scene;
+use glam::Vec3;
+use std::cell::RefCell;
+use std::io::Cursor;
+use std::path::Path;
+
+pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
+    let bytes = read_file(path)?;
+    let err = |message: String| ImportError::Obj { path: path.to_owned(), message };
+    check_vertex_lines(path, &bytes)?;
+
+    let dir = path.parent().unwrap_or(Path::new(""));
+    // tobj's loader callback cannot return our error, so the reason is kept aside.
+    let mtl_error: RefCell<Option<String>> = RefCell::new(None);
+    // tobj's "merging" and "reordering" features add fields; another crate enabling them must
+    // not break this build.
+    #[allow(clippy::needless_update)]
+    let load_opts = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ignore_points: true,
+        ignore_lines: true,
+        ..Default::default()
+    };
+    let parsed = guarded(|| {
+        tobj::load_obj_buf(&mut Cursor::new(&bytes), &load_opts, |mtl_path| {
+            let full = dir.join(mtl_path);
+            let fail = |msg: String| {
+                mtl_error.borrow_mut().get_or_insert(msg);
+                tobj::LoadError::MaterialParseError
+            };
+            match std::fs::read(&full) {
+                Ok(text) => match normalize_mtl(&text) {
+                    Ok(text) => tobj::load_mtl_buf(&mut Cursor::new(text))
+                        .map_err(|e| fail(format!("its material library {} is malformed ({e})", full.display()))),
+                    Err(line) => {
+                        Err(fail(format!("its material library {} is malformed at line {line}", full.display())))
+                    }
+                },
+                Err(e) => Err(fail(format!("its material library {} cannot be read ({e})", full.display()))),
+            }
+        })
+    })
+    .ok_or_else(|| err("the OBJ parser failed on this input".to_owned()))?;
+    let (models, mtl_result) = parsed.map_err(|e| err(e.to_string()))?;
+    if let Some(msg) = mtl_error.into_inner() {
+        return Err(err(msg));
+    }
+    // With the callback above, tobj only reports a material error that the callback recorded,
+    // or "no material library at all", which is fine.
+    let mtls = mtl_result.unwrap_or_default();
+
+    let mut scene = Scene {
+        materials: mtls.iter().map(materials::from_mtl).collect(),
+        material_names: mtls.iter().map(|m| m.name.clone()).collect(),
+        ..Scene::default()
+    };
+    let mut default_id = None;
+    for model in &models {
+        let mesh = &model.mesh;
+        let material = match mesh.material_id.filter(|&id| id < mtls.len()) {
+            Some(id) => id as u32,
+            None => *default_id.get_or_insert_with(|| {
+                scene.materials.push(super::default_material());
+                scene.material_names.push(DEFAULT_MATERIAL_NAME.to_owned());
+                scene.materials.len() as u32 - 1
+            }),
+        };
+        let positions: Vec<Vec3> = mesh.positions.chunks_exact(3).map(Vec3::from_slice).collect();
+        let triangles = triples(&mesh.indices);
+        let normal_values: Vec<Vec3> = mesh.normals.chunks_exact(3).map(Vec3::from_slice).collect();
+        let normal_tris = triples(&mesh.normal_indices);
+        let normals = if normal_values.is_empty() || normal_tris.len() != triangles.len() {
+            Normals::Missing
+        } else {
+            Normals::Indexed(&normal_values, &normal_tris)
+        };
+        let first = scene.triangle_count();
+        geometry::emit(&mut scene, &positions, &triangles, normals, material, opts.smooth_normals).map_err(|e| {
+            let name = &model.name;
+            match e {
+                EmitError::Index { triangle, value, limit, normal } => ImportError::IndexOutOfRange {
+                    path: path.to_owned(),
+                    what: format!(
+                        "triangle {} (object '{name}') refers to {} {value}, but there are only {limit}",
+                        first + triangle,
+                        if normal { "normal" } else { "vertex" },
+                    ),
+                },
+                EmitError::NonFinite { vertex } => ImportError::NonFinite {
+                    path: path.to_owned(),
+                    what: format!("vertex {vertex} of object '{name}'"),
+                },
+            }
+        })?;
+    }
+    Ok(scene)
+}
+
+fn triples(v: &[u32]) -> Vec<[u32; 3]> {
+    v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+}
+
+/// Rejects `v` lines with a coordinate that is not finite, naming the OBJ vertex number (1-based,
+/// as faces refer to it) and the line. tobj would accept "nan" and "inf" silently.
+fn check_vertex_lines(path: &Path, bytes: &[u8]) -> Result<(), ImportError> {
+    let mut vertex = 0usize;
+    for (line_no, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        let Ok(line) = std::str::from_utf8(line) else { continue };
+        let mut words = line.split_whitespace();
+        if words.next() != Some("v") {
+            continue;
+        }
+        vertex += 1;
+        // Only x, y, z: a fourth value (w) or vertex colours do not place the vertex.
+        let bad = words.take(3).any(|w| w.parse::<f32>().is_ok_and(|x| !x.is_finite()));
+        if bad {
+            return Err(ImportError::NonFinite {
+                path: path.to_owned(),
+                what: format!("vertex {vertex} (line {})", line_no + 1),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Makes an MTL file safe for tobj, which panics on a colour with fewer than three values: a
+/// single value is widened to grey (as the MTL specification allows), anything else short is
+/// reported by its line number.
+fn normalize_mtl(text: &[u8]) -> Result<Vec<u8>, usize> {
+    let text = String::from_utf8_lossy(text);
+    let mut out = String::with_capacity(text.len() + 64);
+    for (i, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let key = words.next();
+        if matches!(key, Some("Ka" | "Kd" | "Ks" | "Ke")) {
+            let values: Vec<&str> = words.collect();
+            match values.len() {
+                1 => {
+                    let v = values[0];
+                    out.push_str(&format!("{} {v} {v} {v}\n", key.unwrap_or_default()));
+                    continue;
+                }
+                n if n < 3 => return Err(i + 1),
+                _ => {}
+            }
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    Ok(out.into_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn short_mtl_colours_are_widened_or_rejected() {
+        let t = normalize_mtl(b"newmtl a\nKd 0.5\nKs 1 1 1\n").unwrap();
+        assert_eq!(String::from_utf8(t).unwrap(), "newmtl a\nKd 0.5 0.5 0.5\nKs 1 1 1\n");
+        assert_eq!(normalize_mtl(b"newmtl a\nKd 0.5 0.2\n"), Err(2));
+    }
+}
