@@ -802,3 +802,18 @@ mod never_panics {
         }
     }
 }
+
+#[test]
+fn gltf_accessor_without_data_is_bounded() {
+    let dir = temp_dir("zeros");
+    let good = gltf(&TRI, &[0, 1, 2], None, r#"{"mesh": 0}"#, "0", "");
+    let text = good.replace(
+        r#"{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"}"#,
+        r#"{"componentType": 5126, "count": 4294967295, "type": "VEC3"}"#,
+    );
+    assert_ne!(text, good);
+    let msg = load(&write(&dir, "z.gltf", text), &opts()).unwrap_err().to_string();
+    // The crate's validation already demands a buffer view here; the reader's own bound stays
+    // as a second line.
+    assert!(msg.contains("z.gltf") && (msg.contains("no data") || msg.contains("bufferView")), "{msg}");
+}

@@ -199,7 +199,7 @@ pub const SPHERE_RINGS: u32 = 16;
 pub const TORUS_SEGMENTS: u32 = 48;
 pub const TORUS_SIDES: u32 = 16;
 /// Most triangles one generated shape may have, so that a typo cannot exhaust memory.
-pub const MAX_SHAPE_TRIANGLES: u64 = 1 << 24;
+pub const MAX_SHAPE_TRIANGLES: u64 = 1 << 22;
 
 /// Reads a scene description and everything it references.
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {

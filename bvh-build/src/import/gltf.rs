@@ -162,6 +162,9 @@ fn camera(node: &Node<'_>, world: &DMat4, centre: Option<DVec3>) -> Option<Camer
     (finite && fov > 0.0 && fov < 180.0 && c.eye != c.at).then_some(c)
 }
 
+/// Most elements of an accessor without a buffer view (all zeros).
+const MAX_ZERO_ELEMENTS: usize = 1 << 24;
+
 struct Reader<'a> {
     path: &'a Path,
     buffers: &'a [buffer::Data],
@@ -277,7 +280,14 @@ impl Reader<'_> {
         if acc.sparse().is_some() {
             return Err(format!("accessor {i} is sparse, which is not supported"));
         }
-        let Some(view) = acc.view() else { return Ok(None) };
+        let Some(view) = acc.view() else {
+            // Nothing bounds the count of an accessor without data but the JSON, so a typo could
+            // ask for terabytes of zeros.
+            if acc.count() > MAX_ZERO_ELEMENTS {
+                return Err(format!("accessor {i} has no data but {} elements", acc.count()));
+            }
+            return Ok(None);
+        };
         let stride = view.stride().unwrap_or(elem);
         if stride < elem {
             return Err(format!("accessor {i} has a byte stride of {stride}, less than its element size {elem}"));
