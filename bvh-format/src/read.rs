@@ -77,7 +77,7 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
                 found: e.element_size,
             });
         }
-        if e.offset % ALIGN != 0 {
+        if !e.offset.is_multiple_of(ALIGN) {
             return Err(FormatError::SectionMisaligned { section: kind, offset: e.offset });
         }
         let size = e.count.checked_mul(e.element_size as u64);
