@@ -1,2 +1,57 @@
-//! The CPU tracer (DESIGN.md sections 6-7). Not written yet: it is the subject of issue 3.
-//! Nothing here renders; the crate exists so that the workspace has the layout of DESIGN.md.
+//! The CPU tracer: the baseline every GPU figure is compared against, and the trusted side of the
+//! cross-backend image diffs. The shading definition it implements is `docs/shading.md`.
+//!
+//! - [`geometry`]: rays, the slab test, Möller-Trumbore, self-intersection offsets.
+//! - [`traverse`]: scalar ordered child-pair traversal and stackless escape-pointer traversal.
+//! - [`packet`]: 8-wide AVX2 packets for coherent primary and shadow rays.
+//! - [`reference`]: the exact f64 brute-force closest hit tests compare against.
+//! - [`shade`] and [`render`]: ray casting and Whitted shading of whole images, with AOVs.
+
+pub mod camera;
+pub mod geometry;
+pub mod packet;
+pub mod reference;
+pub mod render;
+pub mod shade;
+pub mod traverse;
+
+pub use camera::CameraSpec;
+pub use geometry::{Cost, Hit, Ray};
+pub use render::{Aovs, Image, Mode, RayCounts, RenderSettings, Tracer, render};
+
+/// How rays find their closest hit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// Ordered traversal of the child-pair layout with a stack, one ray at a time.
+    Ordered,
+    /// Stackless walk of the escape-pointer layout, one ray at a time.
+    Stackless,
+    /// 8-wide SIMD packets (AVX2) for primary and shadow rays, ordered traversal for the rest.
+    Packet,
+    /// [`Method::Packet`] where the CPU has AVX2, else [`Method::Ordered`].
+    Auto,
+}
+
+impl Method {
+    /// The method actually used: packets fall back to ordered traversal without AVX2.
+    pub fn resolve(self) -> Method {
+        match self {
+            Method::Auto | Method::Packet if packet::available() => Method::Packet,
+            Method::Auto | Method::Packet => Method::Ordered,
+            m => m,
+        }
+    }
+}
+
+/// Why an image cannot be rendered. One sentence each.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RenderError {
+    #[error("the image must be at least 1 x 1 pixels")]
+    EmptyImage,
+    #[error("the camera is degenerate: the eye is on the look-at point or the up vector is parallel to the view")]
+    DegenerateCamera,
+    #[error("the field of view must lie between 0 and 180 degrees, not {0}")]
+    FieldOfView(f32),
+    #[error("this method needs the {0} layout, which the scene file does not contain (compile it with --layout both)")]
+    MissingLayout(&'static str),
+}

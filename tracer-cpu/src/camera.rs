@@ -1,0 +1,100 @@
+//! The camera convention of DESIGN.md section 7, shared by every tracer and tool.
+
+use glam::Vec3;
+
+/// A pinhole camera: eye, look-at point, up vector, vertical field of view in degrees.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraSpec {
+    pub eye: Vec3,
+    pub at: Vec3,
+    pub up: Vec3,
+    pub fov_deg: f32,
+}
+
+impl From<&bvh_format::Camera> for CameraSpec {
+    fn from(c: &bvh_format::Camera) -> Self {
+        Self { eye: c.eye.into(), at: c.at.into(), up: c.up.into(), fov_deg: c.fov_deg }
+    }
+}
+
+/// Per-frame precomputation (thesis code example 4.4): the direction to the top-left image corner
+/// and the steps from one pixel to the next.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    pub eye: Vec3,
+    pub top_left: Vec3,
+    pub h_step: Vec3,
+    pub v_step: Vec3,
+}
+
+/// Why a camera cannot be used.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CameraError {
+    /// Eye and look-at point coincide, or up is parallel to the view direction.
+    Degenerate,
+    /// Field of view outside (0, 180) degrees.
+    FieldOfView,
+}
+
+impl CameraSpec {
+    pub fn frame(&self, width: u32, height: u32) -> Result<Frame, CameraError> {
+        if !(self.fov_deg > 0.0 && self.fov_deg < 180.0) {
+            return Err(CameraError::FieldOfView);
+        }
+        let f = (self.at - self.eye).normalize_or_zero();
+        let r = f.cross(self.up).normalize_or_zero();
+        if f == Vec3::ZERO || r == Vec3::ZERO || !f.is_finite() || !r.is_finite() {
+            return Err(CameraError::Degenerate);
+        }
+        let u = r.cross(f);
+        let t = (self.fov_deg.to_radians() * 0.5).tan();
+        let a = width as f32 / height as f32;
+        Ok(Frame {
+            eye: self.eye,
+            top_left: f - t * a * r + t * u,
+            h_step: 2.0 * t * a * r / width as f32,
+            v_step: -2.0 * t * u / height as f32,
+        })
+    }
+}
+
+impl Frame {
+    /// Unit direction of the primary ray through pixel (x, y), x right and y down from the
+    /// top-left corner.
+    #[inline(always)]
+    pub fn direction(&self, x: u32, y: u32) -> Vec3 {
+        (self.top_left + (x as f32 + 0.5) * self.h_step + (y as f32 + 0.5) * self.v_step).normalize()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn centre_pixel_looks_at_the_target_and_corners_span_the_fov() {
+        let cam = CameraSpec { eye: Vec3::new(0.0, 0.0, 5.0), at: Vec3::ZERO, up: Vec3::Y, fov_deg: 90.0 };
+        let f = cam.frame(2, 2).unwrap();
+        // With an even size the image centre lies between pixels: average the four.
+        let c = (f.direction(0, 0) + f.direction(1, 0) + f.direction(0, 1) + f.direction(1, 1)).normalize();
+        assert!((c - Vec3::NEG_Z).length() < 1e-6);
+        // Top-left pixel points up and to the left.
+        let tl = f.direction(0, 0);
+        assert!(tl.x < 0.0 && tl.y > 0.0 && tl.z < 0.0);
+        // A 1x1 image's only pixel looks straight ahead; the vertical edge of a 90 degree view is at 45.
+        let f1 = cam.frame(1, 1).unwrap();
+        assert!((f1.direction(0, 0) - Vec3::NEG_Z).length() < 1e-6);
+        let top = f1.top_left + 0.5 * f1.h_step;
+        assert!((top.normalize().y - (45f32).to_radians().sin()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn degenerate_cameras_are_rejected() {
+        let bad = CameraSpec { eye: Vec3::ZERO, at: Vec3::ZERO, up: Vec3::Y, fov_deg: 45.0 };
+        assert_eq!(bad.frame(4, 4).unwrap_err(), CameraError::Degenerate);
+        let bad = CameraSpec { eye: Vec3::ZERO, at: Vec3::Y, up: Vec3::Y, fov_deg: 45.0 };
+        assert_eq!(bad.frame(4, 4).unwrap_err(), CameraError::Degenerate);
+        let bad = CameraSpec { eye: Vec3::ZERO, at: Vec3::Z, up: Vec3::Y, fov_deg: 180.0 };
+        assert_eq!(bad.frame(4, 4).unwrap_err(), CameraError::FieldOfView);
+    }
+}

@@ -1,0 +1,386 @@
+//! Coherent packets of 8 rays (a 4 x 2 pixel block) traced together with AVX2: one walk through
+//! the child-pair tree for all 8, each node's box and each leaf's triangles tested 8-wide. Used for
+//! primary rays and for the shadow rays of their hits; secondary rays go one by one.
+//!
+//! Every lane computes exactly what the scalar path computes, in the same order and without fused
+//! multiply-adds, so a packet finds bit-identical hits (a test holds it to that).
+
+use crate::camera::Frame;
+use crate::geometry::{Cost, Hit, Ray};
+use crate::render::{Sample, Shading, Tracer, shade_pixel, shadow_query};
+use crate::traverse::Stack;
+use bvh_format::{Node, Triangle};
+
+/// Lanes of a packet.
+pub const LANES: usize = 8;
+
+/// Whether this CPU runs the packet path.
+pub fn available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Up to 8 rays; lanes with `valid[i] == false` take no part.
+#[derive(Clone, Copy)]
+pub struct Rays {
+    pub rays: [Ray; LANES],
+    pub valid: [bool; LANES],
+    pub t_max: [f32; LANES],
+}
+
+/// The result for each lane: its closest (or, for any-hit, some) hit and its work.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Results {
+    pub hits: [Option<Hit>; LANES],
+    pub cost: [Cost; LANES],
+}
+
+/// Closest hits (`ANY == false`, `t_min` 0) or occlusion (`ANY == true`) for a packet. Only call
+/// when [`available`] is true.
+pub fn trace<const ANY: bool>(nodes: &[Node], tris: &[Triangle], rays: &Rays, stack: &mut Vec<Entry>) -> Results {
+    #[cfg(target_arch = "x86_64")]
+    {
+        assert!(available(), "the packet path needs AVX2; callers check `available()` first");
+        // SAFETY: AVX2 is present (checked above).
+        unsafe { avx2::trace::<ANY>(nodes, tris, rays, stack) }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = (nodes, tris, rays, stack);
+        unreachable!("the packet path is only chosen where `available()` is true")
+    }
+}
+
+/// A deferred subtree on the packet's stack: node, lane mask and per-lane entry distances.
+#[derive(Clone, Copy)]
+pub struct Entry {
+    node: u32,
+    #[cfg(target_arch = "x86_64")]
+    mask: std::arch::x86_64::__m256,
+    #[cfg(target_arch = "x86_64")]
+    near: std::arch::x86_64::__m256,
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{Entry, LANES, Rays, Results};
+    use crate::geometry::{Cost, Hit};
+    use bvh_format::{Node, Triangle};
+    use std::arch::x86_64::*;
+
+    struct Packet {
+        o: [__m256; 3],
+        d: [__m256; 3],
+        inv: [__m256; 3],
+    }
+
+    #[inline(always)]
+    fn splat(v: f32) -> __m256 {
+        // SAFETY: plain register arithmetic; AVX is enabled for every caller of this module.
+        unsafe { _mm256_set1_ps(v) }
+    }
+
+    #[target_feature(enable = "avx2")]
+    fn lanes(f: impl Fn(usize) -> f32) -> __m256 {
+        let a: [f32; LANES] = std::array::from_fn(f);
+        // SAFETY: `a` holds 8 floats.
+        unsafe { _mm256_loadu_ps(a.as_ptr()) }
+    }
+
+    #[target_feature(enable = "avx2")]
+    fn to_array(v: __m256) -> [f32; LANES] {
+        let mut a = [0f32; LANES];
+        // SAFETY: `a` has room for 8 floats.
+        unsafe { _mm256_storeu_ps(a.as_mut_ptr(), v) };
+        a
+    }
+
+    #[target_feature(enable = "avx2")]
+    fn to_array_i(v: __m256i) -> [i32; LANES] {
+        let mut a = [0i32; LANES];
+        // SAFETY: `a` has room for 8 ints.
+        unsafe { _mm256_storeu_si256(a.as_mut_ptr().cast(), v) };
+        a
+    }
+
+    /// The scalar slab test's comparisons, 8-wide; `_mm256_min_ps(a, b)` is `a < b ? a : b` and
+    /// `_mm256_max_ps(a, b)` is `a > b ? a : b`, exactly the scalar `if`s. An axis with a NaN
+    /// distance becomes NaN in both, which the last two comparisons then ignore, as the scalar
+    /// path skips it.
+    #[target_feature(enable = "avx2")]
+    fn slab(node: &Node, p: &Packet, t_max: __m256) -> (__m256, __m256) {
+        let mut near = _mm256_setzero_ps();
+        let mut far = t_max;
+        for a in 0..3 {
+            let t0 = _mm256_mul_ps(_mm256_sub_ps(splat(node.min[a]), p.o[a]), p.inv[a]);
+            let t1 = _mm256_mul_ps(_mm256_sub_ps(splat(node.max[a]), p.o[a]), p.inv[a]);
+            let unordered = _mm256_cmp_ps::<_CMP_UNORD_Q>(t0, t1);
+            let enter = _mm256_or_ps(_mm256_min_ps(t1, t0), unordered);
+            let exit = _mm256_or_ps(_mm256_max_ps(t0, t1), unordered);
+            near = _mm256_max_ps(enter, near);
+            far = _mm256_min_ps(exit, far);
+        }
+        (_mm256_cmp_ps::<_CMP_LE_OQ>(near, far), near)
+    }
+
+    #[inline(always)]
+    fn mul(a: __m256, b: __m256) -> __m256 {
+        // SAFETY: register arithmetic under the callers' AVX2.
+        unsafe { _mm256_mul_ps(a, b) }
+    }
+    #[inline(always)]
+    fn sub(a: __m256, b: __m256) -> __m256 {
+        // SAFETY: as above.
+        unsafe { _mm256_sub_ps(a, b) }
+    }
+    #[inline(always)]
+    fn add(a: __m256, b: __m256) -> __m256 {
+        // SAFETY: as above.
+        unsafe { _mm256_add_ps(a, b) }
+    }
+
+    /// Möller-Trumbore with the scalar path's operations; returns (hit mask, t, u, v).
+    #[target_feature(enable = "avx2")]
+    fn intersect(tri: &Triangle, pk: &Packet, t_min: __m256, t_max: __m256) -> (__m256, __m256, __m256, __m256) {
+        let (o, d) = (&pk.o, &pk.d);
+        let e1 = [splat(tri.e1[0]), splat(tri.e1[1]), splat(tri.e1[2])];
+        let e2 = [splat(tri.e2[0]), splat(tri.e2[1]), splat(tri.e2[2])];
+        let p = [
+            sub(mul(d[1], e2[2]), mul(e2[1], d[2])),
+            sub(mul(d[2], e2[0]), mul(e2[2], d[0])),
+            sub(mul(d[0], e2[1]), mul(e2[0], d[1])),
+        ];
+        let det = add(add(mul(e1[0], p[0]), mul(e1[1], p[1])), mul(e1[2], p[2]));
+        let inv = _mm256_div_ps(splat(1.0), det);
+        let s = [sub(o[0], splat(tri.v0[0])), sub(o[1], splat(tri.v0[1])), sub(o[2], splat(tri.v0[2]))];
+        let u = mul(add(add(mul(s[0], p[0]), mul(s[1], p[1])), mul(s[2], p[2])), inv);
+        let q = [
+            sub(mul(s[1], e1[2]), mul(e1[1], s[2])),
+            sub(mul(s[2], e1[0]), mul(e1[2], s[0])),
+            sub(mul(s[0], e1[1]), mul(e1[0], s[1])),
+        ];
+        let v = mul(add(add(mul(d[0], q[0]), mul(d[1], q[1])), mul(d[2], q[2])), inv);
+        let t = mul(add(add(mul(e2[0], q[0]), mul(e2[1], q[1])), mul(e2[2], q[2])), inv);
+        let zero = _mm256_setzero_ps();
+        let one = splat(1.0);
+        let mut m = _mm256_cmp_ps::<_CMP_NEQ_OQ>(det, zero);
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GE_OQ>(u, zero));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(u, one));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GE_OQ>(v, zero));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(add(u, v), one));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, t_min));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
+        (m, t, u, v)
+    }
+
+    /// Adds 1 to the counters of the lanes in `mask`.
+    #[target_feature(enable = "avx2")]
+    fn count(acc: __m256i, mask: __m256) -> __m256i {
+        // An all-ones lane is -1.
+        _mm256_sub_epi32(acc, _mm256_castps_si256(mask))
+    }
+
+    #[target_feature(enable = "avx2")]
+    fn any(mask: __m256) -> bool {
+        _mm256_movemask_ps(mask) != 0
+    }
+
+    #[target_feature(enable = "avx2")]
+    pub fn trace<const ANY: bool>(nodes: &[Node], tris: &[Triangle], rays: &Rays, stack: &mut Vec<Entry>) -> Results {
+        let r = &rays.rays;
+        let pk = Packet {
+            o: [lanes(|i| r[i].origin.x), lanes(|i| r[i].origin.y), lanes(|i| r[i].origin.z)],
+            d: [lanes(|i| r[i].dir.x), lanes(|i| r[i].dir.y), lanes(|i| r[i].dir.z)],
+            inv: [lanes(|i| r[i].inv_dir.x), lanes(|i| r[i].inv_dir.y), lanes(|i| r[i].inv_dir.z)],
+        };
+        // Lanes still looking: valid ones, minus (for any-hit) those already blocked.
+        let mut alive = lanes(|i| if rays.valid[i] { f32::from_bits(u32::MAX) } else { 0.0 });
+        let mut best_t = lanes(|i| rays.t_max[i]);
+        let mut best_tri = _mm256_set1_epi32(-1);
+        let mut best_u = _mm256_setzero_ps();
+        let mut best_v = _mm256_setzero_ps();
+        let mut hit_any = _mm256_setzero_ps();
+        let mut n_nodes = _mm256_setzero_si256();
+        let mut n_tris = _mm256_setzero_si256();
+        let zero = _mm256_setzero_ps();
+        let bias = _mm256_set1_epi32(i32::MIN);
+        stack.clear();
+
+        n_nodes = count(n_nodes, alive);
+        let (m, _) = slab(&nodes[0], &pk, best_t);
+        let mut cur_mask = _mm256_and_ps(m, alive);
+        let mut current = 0usize;
+        let mut live = any(cur_mask);
+        while live {
+            let node = &nodes[current];
+            let mut descend = false;
+            if node.is_leaf() {
+                for i in node.index..node.index + node.count {
+                    n_tris = count(n_tris, cur_mask);
+                    let (m, t, u, v) = intersect(&tris[i as usize], &pk, zero, best_t);
+                    // Hit::beats: nearer, or equally near with a lower index (unsigned compare
+                    // through a sign flip).
+                    let idx = _mm256_set1_epi32(i as i32);
+                    let lower = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+                        _mm256_xor_si256(best_tri, bias),
+                        _mm256_xor_si256(idx, bias),
+                    ));
+                    let nearer = _mm256_cmp_ps::<_CMP_LT_OQ>(t, best_t);
+                    let tie = _mm256_and_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(t, best_t), lower);
+                    let win = _mm256_and_ps(_mm256_and_ps(m, cur_mask), _mm256_or_ps(nearer, tie));
+                    best_t = _mm256_blendv_ps(best_t, t, win);
+                    best_u = _mm256_blendv_ps(best_u, u, win);
+                    best_v = _mm256_blendv_ps(best_v, v, win);
+                    best_tri = _mm256_castps_si256(_mm256_blendv_ps(
+                        _mm256_castsi256_ps(best_tri),
+                        _mm256_castsi256_ps(idx),
+                        win,
+                    ));
+                    hit_any = _mm256_or_ps(hit_any, win);
+                    if ANY {
+                        alive = _mm256_andnot_ps(win, alive);
+                        cur_mask = _mm256_and_ps(cur_mask, alive);
+                        if !any(alive) {
+                            break;
+                        }
+                    }
+                }
+            } else {
+                let (l, r) = (node.index as usize, node.index as usize + 1);
+                n_nodes = count(n_nodes, cur_mask);
+                n_nodes = count(n_nodes, cur_mask);
+                let (ml, nl) = slab(&nodes[l], &pk, best_t);
+                let (mr, nr) = slab(&nodes[r], &pk, best_t);
+                let ml = _mm256_and_ps(ml, cur_mask);
+                let mr = _mm256_and_ps(mr, cur_mask);
+                match (any(ml), any(mr)) {
+                    (true, true) => {
+                        // The majority of the lanes that hit both decides which goes first.
+                        let both = _mm256_and_ps(ml, mr);
+                        let right_first = _mm256_and_ps(both, _mm256_cmp_ps::<_CMP_LT_OQ>(nr, nl));
+                        let votes_right = _mm256_movemask_ps(right_first).count_ones();
+                        let votes_left = _mm256_movemask_ps(both).count_ones() - votes_right;
+                        let (near, nm, far, fm, fnear) =
+                            if votes_right > votes_left { (r, mr, l, ml, nl) } else { (l, ml, r, mr, nr) };
+                        stack.push(Entry { node: far as u32, mask: fm, near: fnear });
+                        current = near;
+                        cur_mask = nm;
+                        descend = true;
+                    }
+                    (true, false) => {
+                        current = l;
+                        cur_mask = ml;
+                        descend = true;
+                    }
+                    (false, true) => {
+                        current = r;
+                        cur_mask = mr;
+                        descend = true;
+                    }
+                    (false, false) => {}
+                }
+            }
+            if descend {
+                continue;
+            }
+            live = false;
+            while let Some(e) = stack.pop() {
+                let m = _mm256_and_ps(_mm256_and_ps(e.mask, alive), _mm256_cmp_ps::<_CMP_LE_OQ>(e.near, best_t));
+                if any(m) {
+                    current = e.node as usize;
+                    cur_mask = m;
+                    live = true;
+                    break;
+                }
+            }
+        }
+
+        let (t, u, v) = (to_array(best_t), to_array(best_u), to_array(best_v));
+        let (tri, hit) = (to_array_i(best_tri), to_array(hit_any));
+        let (nn, nt) = (to_array_i(n_nodes), to_array_i(n_tris));
+        let mut out = Results::default();
+        for i in 0..LANES {
+            if hit[i].to_bits() != 0 {
+                out.hits[i] = Some(Hit { t: t[i], tri: tri[i] as u32, u: u[i], v: v[i] });
+            }
+            out.cost[i] = Cost { nodes: nn[i] as u32, tris: nt[i] as u32 };
+        }
+        out
+    }
+}
+
+/// Renders one or two rows (`rows` holds them, `w` pixels each) in 4 x 2 packets.
+pub(crate) fn render_rows(
+    tracer: &Tracer<'_>,
+    sh: &Shading<'_>,
+    frame: &Frame,
+    y0: u32,
+    rows: &mut [Sample],
+    w: usize,
+    stack: &mut Stack,
+) {
+    let nodes = tracer.scene.child_pair.as_deref().expect("render checked the layout");
+    let tris = &tracer.scene.triangles;
+    let h = rows.len() / w;
+    let mut pstack = Vec::with_capacity(128);
+    let lights = sh.lights;
+    let mut x0 = 0usize;
+    while x0 < w {
+        let lane_xy = |i: usize| (x0 + i % 4, i / 4);
+        let mut valid = [false; LANES];
+        let mut rays = [Ray::new(frame.eye, glam::Vec3::Z); LANES];
+        for (i, (v, r)) in valid.iter_mut().zip(rays.iter_mut()).enumerate() {
+            let (x, dy) = lane_xy(i);
+            *v = x < w && dy < h;
+            if *v {
+                *r = Ray::new(frame.eye, frame.direction(x as u32, y0 + dy as u32));
+            }
+        }
+        let primary = trace::<false>(nodes, tris, &Rays { rays, valid, t_max: [f32::INFINITY; LANES] }, &mut pstack);
+
+        // Shadow rays of the primary hits, one packet per light.
+        let mut shadowed = vec![[false; LANES]; if sh.mode == crate::Mode::Whitted { lights.len() } else { 0 }];
+        let mut extra = [Cost::default(); LANES];
+        let mut shadow_rays = [0u64; LANES];
+        for (li, light) in lights.iter().enumerate().take(shadowed.len()) {
+            let mut srays = Rays { rays, valid: [false; LANES], t_max: [0.0; LANES] };
+            for i in 0..LANES {
+                let Some(hit) = primary.hits[i].filter(|_| valid[i]) else { continue };
+                if let (_, Some((ray, t_max))) = shadow_query(tracer, &rays[i], &hit, light) {
+                    srays.rays[i] = ray;
+                    srays.t_max[i] = t_max;
+                    srays.valid[i] = true;
+                    shadow_rays[i] += 1;
+                }
+            }
+            if !srays.valid.iter().any(|&v| v) {
+                continue;
+            }
+            let res = trace::<true>(nodes, tris, &srays, &mut pstack);
+            for i in 0..LANES {
+                shadowed[li][i] = res.hits[i].is_some();
+                extra[i] += res.cost[i];
+            }
+        }
+
+        for i in 0..LANES {
+            if !valid[i] {
+                continue;
+            }
+            let (x, dy) = lane_xy(i);
+            let mut cost = primary.cost[i];
+            cost += extra[i];
+            let per_light: Vec<bool> = shadowed.iter().map(|s| s[i]).collect();
+            let mut s = shade_pixel(tracer, sh, rays[i], primary.hits[i], cost, Some(&per_light), stack);
+            s.rays.shadow += shadow_rays[i];
+            rows[dy * w + x] = s;
+        }
+        x0 += 4;
+    }
+}

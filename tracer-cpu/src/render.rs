@@ -1,0 +1,323 @@
+//! Whole images: primary rays per pixel, ray casting or Whitted shading, AOVs, rayon over rows.
+
+use crate::camera::{CameraError, CameraSpec, Frame};
+use crate::geometry::{Cost, Hit, Ray, offset_origin};
+use crate::shade::{self, Surface};
+use crate::traverse::{self, Stack};
+use crate::{Method, RenderError};
+use bvh_format::{Light, Material, NO_TRIANGLE, Node, SceneFile};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// Ray casting or Whitted ray tracing (DESIGN.md section 7).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    Cast,
+    Whitted,
+}
+
+/// What to render.
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    pub width: u32,
+    pub height: u32,
+    pub camera: CameraSpec,
+    pub mode: Mode,
+    /// Lights for Whitted mode (ray casting always uses one white light at the eye).
+    pub lights: Vec<Light>,
+    /// Longest chain of secondary rays.
+    pub max_indirections: u32,
+    pub method: Method,
+    /// Fill [`Image::aov`].
+    pub aovs: bool,
+}
+
+/// Per-pixel outputs besides the colour, row-major from the top-left pixel.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Aovs {
+    /// Distance to the primary hit; +inf on a miss.
+    pub t: Vec<f32>,
+    /// Shading normal at the primary hit, facing the camera; zero on a miss.
+    pub normal: Vec<[f32; 3]>,
+    /// Index of the primary hit's triangle in the input scene; [`NO_TRIANGLE`] on a miss.
+    pub prim: Vec<u32>,
+    /// Node boxes tested, over every ray of the pixel.
+    pub nodes: Vec<u32>,
+    /// Triangles tested, over every ray of the pixel.
+    pub tris: Vec<u32>,
+}
+
+/// Rays traced, by kind.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayCounts {
+    pub primary: u64,
+    pub shadow: u64,
+    pub secondary: u64,
+}
+
+impl std::ops::Add for RayCounts {
+    type Output = RayCounts;
+    fn add(self, o: RayCounts) -> RayCounts {
+        RayCounts {
+            primary: self.primary + o.primary,
+            shadow: self.shadow + o.shadow,
+            secondary: self.secondary + o.secondary,
+        }
+    }
+}
+
+/// A rendered image.
+#[derive(Clone, Debug)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    /// 8-bit RGB, row-major from the top-left pixel.
+    pub rgb: Vec<[u8; 3]>,
+    pub aov: Option<Aovs>,
+    pub rays: RayCounts,
+}
+
+/// The scene prepared for tracing: layouts, and the bounds behind the adaptive bounce stop.
+pub struct Tracer<'a> {
+    pub scene: &'a SceneFile,
+    child_pair: Option<&'a [Node]>,
+    escape: Option<&'a [Node]>,
+}
+
+impl<'a> Tracer<'a> {
+    pub fn new(scene: &'a SceneFile) -> Self {
+        Self { scene, child_pair: scene.child_pair.as_deref(), escape: scene.escape.as_deref() }
+    }
+
+    fn layout_for(&self, method: Method) -> Result<(), RenderError> {
+        match method {
+            Method::Stackless if self.escape.is_none() => Err(RenderError::MissingLayout("escape-pointer")),
+            Method::Ordered | Method::Packet if self.child_pair.is_none() => {
+                Err(RenderError::MissingLayout("child-pair"))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Closest hit in `(t_min, t_max]`; adds the work done to `cost`.
+    pub fn closest(&self, method: Method, ray: &Ray, t_min: f32, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> Option<Hit> {
+        let tris = &self.scene.triangles;
+        match (method, self.child_pair, self.escape) {
+            (Method::Stackless, _, Some(esc)) => traverse::escape::<false>(esc, tris, ray, t_min, t_max, cost),
+            (_, Some(cp), _) => traverse::child_pair::<false>(cp, tris, ray, t_min, t_max, stack, cost),
+            (_, None, Some(esc)) => traverse::escape::<false>(esc, tris, ray, t_min, t_max, cost),
+            (_, None, None) => None,
+        }
+    }
+
+    /// Whether anything lies in `(0, t_max]` along the ray.
+    pub fn occluded(&self, method: Method, ray: &Ray, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> bool {
+        let tris = &self.scene.triangles;
+        match (method, self.child_pair, self.escape) {
+            (Method::Stackless, _, Some(esc)) => traverse::escape::<true>(esc, tris, ray, 0.0, t_max, cost),
+            (_, Some(cp), _) => traverse::child_pair::<true>(cp, tris, ray, 0.0, t_max, stack, cost),
+            (_, None, Some(esc)) => traverse::escape::<true>(esc, tris, ray, 0.0, t_max, cost),
+            (_, None, None) => None,
+        }
+        .is_some()
+    }
+
+    fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
+        let i = hit.tri as usize;
+        shade::surface(&self.scene.triangles[i], &self.scene.normals[i], ray.origin, ray.dir, hit.t, hit.u, hit.v)
+    }
+}
+
+/// One pixel's result.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Sample {
+    pub colour: Vec3,
+    pub t: f32,
+    pub normal: Vec3,
+    pub prim: u32,
+    pub cost: Cost,
+    pub rays: RayCounts,
+}
+
+/// Per-frame constants of the Whitted pipeline.
+pub(crate) struct Shading<'a> {
+    pub mode: Mode,
+    pub lights: &'a [Light],
+    pub max_indirections: u32,
+    pub ambient: Vec3,
+    pub background: Vec3,
+    pub bound: f32,
+    pub k_max: f32,
+    pub method: Method,
+}
+
+impl<'a> Shading<'a> {
+    pub fn new(scene: &SceneFile, s: &'a RenderSettings) -> Self {
+        let colours: Vec<Vec3> = s.lights.iter().map(|l| Vec3::from(l.colour)).collect();
+        let ambient = Vec3::from(scene.settings.ambient);
+        let background = Vec3::from(scene.settings.background);
+        Self {
+            mode: s.mode,
+            lights: &s.lights,
+            max_indirections: s.max_indirections,
+            ambient,
+            background,
+            bound: shade::max_hit_radiance(&scene.materials, ambient, &colours, background),
+            k_max: scene.materials.iter().map(|m| m.kr.max(m.kt)).fold(0.0, f32::max),
+            // Secondary and shadow rays are incoherent: the SIMD packet path traces them one by one.
+            method: if s.method == Method::Packet { Method::Ordered } else { s.method },
+        }
+    }
+}
+
+/// One light's unshadowed Phong term at a hit, and the shadow ray that decides whether it counts
+/// (none when the term is zero: a light behind the surface needs no shadow ray). The shadow ray
+/// leaves from the side of the surface the light is on and ends at the light.
+fn light_query(m: &Material, surf: &Surface, ray: &Ray, light: &Light) -> (Vec3, Option<(Ray, f32)>) {
+    let to = Vec3::from(light.position) - surf.point;
+    let l = to.normalize_or_zero();
+    let term = shade::phong(m, surf, ray.dir, l);
+    if term == Vec3::ZERO {
+        return (term, None);
+    }
+    let side = if surf.geometric.dot(l) >= 0.0 { surf.geometric } else { -surf.geometric };
+    let o = offset_origin(surf.point, side);
+    (term, Some((Ray::new(o, l), (Vec3::from(light.position) - o).length())))
+}
+
+/// [`light_query`] for a primary hit, for the packet path.
+pub(crate) fn shadow_query(tracer: &Tracer<'_>, ray: &Ray, hit: &Hit, light: &Light) -> (Vec3, Option<(Ray, f32)>) {
+    let scene = tracer.scene;
+    let m = &scene.materials[scene.material_ids[hit.tri as usize] as usize];
+    light_query(m, &tracer.surface(ray, hit), ray, light)
+}
+
+/// Shades one primary ray whose closest hit is already known (`primary`, found with `cost`), and
+/// follows its shadow and secondary rays. `shadowed`, when given, holds the primary hit's shadow
+/// test per light (a packet path traced those together).
+pub(crate) fn shade_pixel(
+    tracer: &Tracer<'_>,
+    sh: &Shading<'_>,
+    ray: Ray,
+    primary: Option<Hit>,
+    mut cost: Cost,
+    shadowed: Option<&[bool]>,
+    stack: &mut Stack,
+) -> Sample {
+    let scene = tracer.scene;
+    let mut rays = RayCounts { primary: 1, ..RayCounts::default() };
+    let Some(hit) = primary else {
+        return Sample { colour: sh.background, t: f32::INFINITY, normal: Vec3::ZERO, prim: NO_TRIANGLE, cost, rays };
+    };
+    let surf = tracer.surface(&ray, &hit);
+    let mut sample = Sample {
+        colour: Vec3::ZERO,
+        t: hit.t,
+        normal: surf.shading,
+        prim: scene.input_index[hit.tri as usize],
+        cost,
+        rays,
+    };
+    if sh.mode == Mode::Cast {
+        let m = &scene.materials[scene.material_ids[hit.tri as usize] as usize];
+        sample.colour = shade::cast(m, &surf, ray.dir);
+        return sample;
+    }
+
+    let mut colour = Vec3::ZERO;
+    let mut weight = 1.0f32;
+    let mut ray = ray;
+    let mut hit = hit;
+    let mut surf = surf;
+    let mut depth = 0u32;
+    loop {
+        let m = &scene.materials[scene.material_ids[hit.tri as usize] as usize];
+        let mut local = sh.ambient * Vec3::from(m.kd);
+        for (li, light) in sh.lights.iter().enumerate() {
+            let (term, shadow) = light_query(m, &surf, &ray, light);
+            let Some((sray, t_max)) = shadow else { continue };
+            let blocked = match shadowed.filter(|_| depth == 0) {
+                Some(s) => s[li],
+                None => {
+                    rays.shadow += 1;
+                    tracer.occluded(sh.method, &sray, t_max, stack, &mut cost)
+                }
+            };
+            if !blocked {
+                local += Vec3::from(light.colour) * term;
+            }
+        }
+        colour += weight * local;
+
+        let Some(next) = shade::secondary(m, &surf, ray.dir) else { break };
+        let remaining = sh.max_indirections - depth;
+        if remaining == 0 || !shade::worth_tracing(weight * next.factor, remaining, sh.bound, sh.k_max) {
+            break;
+        }
+        weight *= next.factor;
+        depth += 1;
+        let side = if next.same_side { surf.geometric } else { -surf.geometric };
+        ray = Ray::new(offset_origin(surf.point, side), next.dir);
+        rays.secondary += 1;
+        match tracer.closest(sh.method, &ray, 0.0, f32::INFINITY, stack, &mut cost) {
+            Some(h) => {
+                surf = tracer.surface(&ray, &h);
+                hit = h;
+            }
+            None => {
+                colour += weight * sh.background;
+                break;
+            }
+        }
+    }
+    sample.colour = colour;
+    sample.cost = cost;
+    sample.rays = rays;
+    sample
+}
+
+fn check(settings: &RenderSettings) -> Result<Frame, RenderError> {
+    if settings.width == 0 || settings.height == 0 {
+        return Err(RenderError::EmptyImage);
+    }
+    settings.camera.frame(settings.width, settings.height).map_err(|e| match e {
+        CameraError::Degenerate => RenderError::DegenerateCamera,
+        CameraError::FieldOfView => RenderError::FieldOfView(settings.camera.fov_deg),
+    })
+}
+
+/// Renders an image. Pixels are independent, so the result does not depend on the thread count.
+pub fn render(tracer: &Tracer<'_>, settings: &RenderSettings) -> Result<Image, RenderError> {
+    let frame = check(settings)?;
+    let method = settings.method.resolve();
+    tracer.layout_for(method)?;
+    let (w, h) = (settings.width as usize, settings.height as usize);
+    let sh = Shading::new(tracer.scene, settings);
+    let mut samples = vec![Sample::default(); w * h];
+    // Pairs of rows: the packet path traces 4 x 2 blocks.
+    samples.par_chunks_mut(2 * w).enumerate().for_each_init(Stack::default, |stack, (pair, rows)| {
+        let y0 = (pair * 2) as u32;
+        if method == Method::Packet {
+            crate::packet::render_rows(tracer, &sh, &frame, y0, rows, w, stack);
+            return;
+        }
+        for (i, s) in rows.iter_mut().enumerate() {
+            let (x, y) = ((i % w) as u32, y0 + (i / w) as u32);
+            let ray = Ray::new(frame.eye, frame.direction(x, y));
+            let mut cost = Cost::default();
+            let hit = tracer.closest(method, &ray, 0.0, f32::INFINITY, stack, &mut cost);
+            *s = shade_pixel(tracer, &sh, ray, hit, cost, None, stack);
+        }
+    });
+
+    let rays = samples.par_iter().map(|s| s.rays).reduce(RayCounts::default, |a, b| a + b);
+    let rgb = samples.iter().map(|s| shade::to_u8(s.colour)).collect();
+    let aov = settings.aovs.then(|| Aovs {
+        t: samples.iter().map(|s| s.t).collect(),
+        normal: samples.iter().map(|s| s.normal.to_array()).collect(),
+        prim: samples.iter().map(|s| s.prim).collect(),
+        nodes: samples.iter().map(|s| s.cost.nodes).collect(),
+        tris: samples.iter().map(|s| s.cost.tris).collect(),
+    });
+    Ok(Image { width: settings.width, height: settings.height, rgb, aov, rays })
+}

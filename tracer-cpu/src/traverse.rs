@@ -1,0 +1,158 @@
+//! Scalar traversals: ordered child-pair traversal with a stack (the CPU analogue of LST) and the
+//! stackless walk of the escape-pointer layout. Both exist in a closest-hit and an any-hit form.
+
+use crate::geometry::{Cost, Hit, Ray, intersect, slab};
+use bvh_format::{Node, Triangle};
+
+/// A traversal stack of (node, entry distance) pairs: a fixed array that covers every tree our
+/// builder makes (depth at most 64 + log2 n), spilling to the heap for deeper trees from elsewhere.
+pub struct Stack {
+    inline: [(u32, f32); 128],
+    len: usize,
+    spill: Vec<(u32, f32)>,
+}
+
+impl Default for Stack {
+    fn default() -> Self {
+        Self { inline: [(0, 0.0); 128], len: 0, spill: Vec::new() }
+    }
+}
+
+impl Stack {
+    #[inline(always)]
+    pub fn clear(&mut self) {
+        self.len = 0;
+        self.spill.clear();
+    }
+    #[inline(always)]
+    pub fn push(&mut self, e: (u32, f32)) {
+        if self.len < self.inline.len() {
+            self.inline[self.len] = e;
+        } else {
+            self.spill.push(e);
+        }
+        self.len += 1;
+    }
+    #[inline(always)]
+    pub fn pop(&mut self) -> Option<(u32, f32)> {
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        if self.len < self.inline.len() { Some(self.inline[self.len]) } else { self.spill.pop() }
+    }
+}
+
+/// Tests the leaf's triangles; returns true when `ANY` and something was hit.
+#[inline(always)]
+fn leaf<const ANY: bool>(
+    tris: &[Triangle],
+    node: &Node,
+    ray: &Ray,
+    t_min: f32,
+    best: &mut Hit,
+    cost: &mut Cost,
+) -> bool {
+    for i in node.index..node.index + node.count {
+        cost.tris += 1;
+        if let Some((t, u, v)) = intersect(&tris[i as usize], ray, t_min, best.t)
+            && Hit::beats(t, i, best.t, best.tri)
+        {
+            *best = Hit { t, tri: i, u, v };
+            if ANY {
+                return true;
+            }
+        }
+    }
+    false
+}
+
+fn no_hit(t_max: f32) -> Hit {
+    Hit { t: t_max, tri: u32::MAX, u: 0.0, v: 0.0 }
+}
+
+/// Ordered traversal of the child-pair layout: both children are tested, the nearer is entered
+/// and the farther pushed with its entry distance, so that a pop can skip it once a nearer hit
+/// was found.
+pub fn child_pair<const ANY: bool>(
+    nodes: &[Node],
+    tris: &[Triangle],
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    stack: &mut Stack,
+    cost: &mut Cost,
+) -> Option<Hit> {
+    let mut best = no_hit(t_max);
+    stack.clear();
+    cost.nodes += 1;
+    slab(&nodes[0], ray, best.t)?;
+    let mut current = 0u32;
+    loop {
+        let node = &nodes[current as usize];
+        if node.is_leaf() {
+            if leaf::<ANY>(tris, node, ray, t_min, &mut best, cost) {
+                return Some(best);
+            }
+        } else {
+            let (l, r) = (node.index, node.index + 1);
+            cost.nodes += 2;
+            let tl = slab(&nodes[l as usize], ray, best.t);
+            let tr = slab(&nodes[r as usize], ray, best.t);
+            match (tl, tr) {
+                (Some(a), Some(b)) => {
+                    let (near, far, tfar) = if b < a { (r, l, a) } else { (l, r, b) };
+                    stack.push((far, tfar));
+                    current = near;
+                    continue;
+                }
+                (Some(_), None) => {
+                    current = l;
+                    continue;
+                }
+                (None, Some(_)) => {
+                    current = r;
+                    continue;
+                }
+                (None, None) => {}
+            }
+        }
+        loop {
+            match stack.pop() {
+                None => return (best.tri != u32::MAX).then_some(best),
+                Some((n, t)) if t <= best.t => {
+                    current = n;
+                    break;
+                }
+                Some(_) => {}
+            }
+        }
+    }
+}
+
+/// Stackless traversal of the escape-pointer layout (Smits 1998; thesis 4.3.4): walk the array
+/// front to back, jumping to the escape index past every inner node whose box is missed.
+pub fn escape<const ANY: bool>(
+    nodes: &[Node],
+    tris: &[Triangle],
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    cost: &mut Cost,
+) -> Option<Hit> {
+    let mut best = no_hit(t_max);
+    let mut i = 0usize;
+    while i < nodes.len() {
+        let node = &nodes[i];
+        cost.nodes += 1;
+        if slab(node, ray, best.t).is_some() {
+            if node.is_leaf() && leaf::<ANY>(tris, node, ray, t_min, &mut best, cost) {
+                return Some(best);
+            }
+            i += 1;
+        } else {
+            i = if node.is_leaf() { i + 1 } else { node.index as usize };
+        }
+    }
+    (best.tri != u32::MAX).then_some(best)
+}
