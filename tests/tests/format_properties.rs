@@ -443,7 +443,7 @@ fn intersect_f64_raw(ray: &Ray, tri: &Tri) -> Option<Hit64> {
     let p = cross(d, e2);
     let det = dot(e1, p);
     let size = dot(e1, e1).sqrt() * dot(e2, e2).sqrt() * dot(d, d).sqrt();
-    if !(det.abs() > 1e-12 * size) {
+    if det.is_nan() || det.abs() <= 1e-12 * size {
         return None;
     }
     let s = sub(o, a);
@@ -505,11 +505,12 @@ fn slab(ray: &Ray, n: &Node, t_max: f32) -> Option<f32> {
 }
 
 fn test_leaf(ray: &Ray, n: &Node, tris: &[Triangle], best: &mut Option<(f32, usize)>) {
-    for k in n.index as usize..(n.index + n.count) as usize {
-        if let Some(t) = intersect_f32(ray, &tris[k])
+    let first = n.index as usize;
+    for (k, tri) in tris[first..first + n.count as usize].iter().enumerate() {
+        if let Some(t) = intersect_f32(ray, tri)
             && best.is_none_or(|(b, _)| t < b)
         {
-            *best = Some((t, k));
+            *best = Some((t, first + k));
         }
     }
 }

@@ -1,0 +1,597 @@
+//! Damaged and forged scene files: the reader must reject every one with the error that names the
+//! damage, and never panic. Forged files have their checksums recomputed, so that the semantic
+//! checks behind the checksums are reached.
+
+use bvh_build::Layouts;
+use bvh_build::scene::Scene;
+use bvh_format::layout::{HEADER_SIZE, Header, SECTION_ENTRY_SIZE, SectionEntry};
+use bvh_format::{
+    BuildParams, Camera, FormatError, LayoutKind, Light, Material, Node, SceneFile, SceneSettings, SectionKind,
+};
+use glam::Vec3;
+
+/// xorshift64*: a fixed seed makes every damaged file reproducible.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+    fn unit(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+fn scene(triangles: usize, layouts: Layouts) -> SceneFile {
+    let mut rng = Rng(0x5eed_1234_abcd_0001);
+    let mut p = || Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 20.0 - 10.0;
+    let positions: Vec<[Vec3; 3]> = (0..triangles)
+        .map(|_| {
+            let a = p();
+            [a, a + p() * 0.1, a + p() * 0.1]
+        })
+        .collect();
+    let materials = vec![
+        Material::default(),
+        Material { kr: 0.6, ks: [0.5; 3], ..Material::default() },
+        Material { kt: 0.9, ior: 1.5, ..Material::default() },
+    ];
+    let scene = Scene {
+        normals: vec![[Vec3::Y; 3]; positions.len()],
+        material_ids: (0..positions.len() as u32).map(|i| i % 3).collect(),
+        material_names: vec!["white".into(), "mirror".into(), "glass".into()],
+        materials,
+        cameras: vec![
+            Camera::new("front", [0.0, 0.0, 30.0], [0.0; 3], [0.0, 1.0, 0.0], 45.0),
+            Camera::new("top", [0.0, 30.0, 0.0], [0.0; 3], [0.0, 0.0, -1.0], 60.0),
+        ],
+        lights: vec![Light::new([5.0, 5.0, 5.0], [1.0, 1.0, 1.0]), Light::new([-5.0, 8.0, 0.0], [0.3, 0.3, 0.5])],
+        settings: SceneSettings { max_indirections: 3, ..SceneSettings::default() },
+        positions,
+    };
+    bvh_build::compile(&scene, &BuildParams { max_leaf_size: 4, ..BuildParams::default() }, layouts).unwrap()
+}
+
+fn bytes_of(file: &SceneFile) -> Vec<u8> {
+    let bytes = bvh_format::write(file).unwrap();
+    assert_eq!(bvh_format::read(&bytes).as_ref(), Ok(file), "the undamaged file must read back");
+    bytes
+}
+
+fn big_file() -> Vec<u8> {
+    bytes_of(&scene(300, Layouts::default()))
+}
+
+fn header(bytes: &[u8]) -> Header {
+    bytemuck::pod_read_unaligned(&bytes[..HEADER_SIZE])
+}
+
+fn table(bytes: &[u8]) -> Vec<SectionEntry> {
+    let count = header(bytes).section_count as usize;
+    (0..count)
+        .map(|i| {
+            let at = HEADER_SIZE + i * SECTION_ENTRY_SIZE;
+            bytemuck::pod_read_unaligned(&bytes[at..at + SECTION_ENTRY_SIZE])
+        })
+        .collect()
+}
+
+fn set_table(bytes: &mut [u8], table: &[SectionEntry]) {
+    let start = HEADER_SIZE;
+    bytes[start..start + table.len() * SECTION_ENTRY_SIZE].copy_from_slice(bytemuck::cast_slice(table));
+}
+
+fn set_header(bytes: &mut [u8], h: &Header) {
+    bytes[..HEADER_SIZE].copy_from_slice(bytemuck::bytes_of(h));
+}
+
+fn edit_header(bytes: &mut [u8], f: impl FnOnce(Header) -> Header) {
+    let h = f(header(bytes));
+    set_header(bytes, &h);
+}
+
+fn range(e: &SectionEntry) -> std::ops::Range<usize> {
+    e.offset as usize..(e.offset + e.count * e.element_size as u64) as usize
+}
+
+fn entry(bytes: &[u8], kind: SectionKind) -> SectionEntry {
+    *table(bytes).iter().find(|e| e.kind == kind as u32).unwrap_or_else(|| panic!("no {kind} section"))
+}
+
+fn section_mut(bytes: &mut [u8], kind: SectionKind) -> &mut [u8] {
+    let r = range(&entry(bytes, kind));
+    &mut bytes[r]
+}
+
+/// Recomputes every section checksum, then the header checksum, as a writer would: after this
+/// only the semantic checks can find what was changed.
+fn reseal(bytes: &mut [u8]) {
+    let mut t = table(bytes);
+    for e in &mut t {
+        // Entries that reach outside the file keep their checksum: the reader stops at them first.
+        let end = e.count.checked_mul(e.element_size as u64).and_then(|s| s.checked_add(e.offset));
+        if let Some(end) = end.filter(|&end| end <= bytes.len() as u64) {
+            e.crc = crc32fast::hash(&bytes[e.offset as usize..end as usize]);
+        }
+    }
+    set_table(bytes, &t);
+    reseal_header(bytes);
+}
+
+/// Recomputes the header checksum only (over the header with the field zero, then the table).
+fn reseal_header(bytes: &mut [u8]) {
+    let mut h = header(bytes);
+    h.header_crc = 0;
+    let table_end = HEADER_SIZE + h.section_count as usize * SECTION_ENTRY_SIZE;
+    let mut hasher = crc32fast::Hasher::new();
+    hasher.update(bytemuck::bytes_of(&h));
+    hasher.update(&bytes[HEADER_SIZE..table_end]);
+    h.header_crc = hasher.finalize();
+    set_header(bytes, &h);
+}
+
+/// Reads a file that must be rejected, and checks the message is one sentence.
+fn rejected(bytes: &[u8]) -> FormatError {
+    match bvh_format::read(bytes) {
+        Ok(_) => panic!("a damaged file of {} bytes was accepted", bytes.len()),
+        Err(e) => {
+            let msg = e.to_string();
+            assert!(!msg.is_empty() && !msg.contains('\n'), "message {msg:?} of {e:?} is not one line");
+            e
+        }
+    }
+}
+
+fn nodes(bytes: &[u8], kind: SectionKind) -> Vec<Node> {
+    bytemuck::pod_collect_to_vec(&bytes[range(&entry(bytes, kind))])
+}
+
+fn set_node(bytes: &mut [u8], kind: SectionKind, i: usize, n: Node) {
+    section_mut(bytes, kind)[i * 32..i * 32 + 32].copy_from_slice(bytemuck::bytes_of(&n));
+}
+
+/// Bytes that some checksum covers: the header, the table and every section's data (the padding
+/// between sections is not covered).
+fn covered_bytes(bytes: &[u8]) -> Vec<std::ops::Range<usize>> {
+    let head = 0..HEADER_SIZE + table(bytes).len() * SECTION_ENTRY_SIZE;
+    std::iter::once(head).chain(table(bytes).iter().map(range).filter(|r| !r.is_empty())).collect()
+}
+
+fn data_end(bytes: &[u8]) -> usize {
+    table(bytes).iter().map(|e| range(e).end).max().unwrap()
+}
+
+/// Every cut that loses a byte of the header, table or a section is reported as a truncation;
+/// only the zero padding after the last section may go.
+fn check_cut(bytes: &[u8], len: usize) {
+    let cut = &bytes[..len];
+    if len >= data_end(bytes) {
+        assert!(bvh_format::read(cut).is_ok(), "cutting only padding at {len} must be harmless");
+        return;
+    }
+    let e = rejected(cut);
+    assert!(matches!(e, FormatError::Truncated { .. } | FormatError::SectionOutOfBounds { .. }), "cut at {len}: {e:?}");
+}
+
+#[test]
+fn truncation_at_every_section_boundary() {
+    let bytes = big_file();
+    let table_end = HEADER_SIZE + table(&bytes).len() * SECTION_ENTRY_SIZE;
+    let mut cuts = vec![0, 1, 8, HEADER_SIZE - 1, HEADER_SIZE, HEADER_SIZE + 1, table_end - 1, table_end];
+    for e in table(&bytes) {
+        let r = range(&e);
+        cuts.extend([r.start, r.start + 1, r.end.saturating_sub(1), r.end, r.end + 1]);
+    }
+    cuts.retain(|&c| c < bytes.len());
+    for len in cuts {
+        check_cut(&bytes, len);
+    }
+    assert!(matches!(rejected(&bytes[..HEADER_SIZE - 1]), FormatError::Truncated { needed: 144, len: 143, .. }));
+    assert!(matches!(rejected(&bytes[..table_end - 1]), FormatError::Truncated { .. }));
+    let last = table(&bytes).into_iter().max_by_key(|e| e.offset).unwrap();
+    let section = SectionKind::from_u32(last.kind).unwrap();
+    let e = rejected(&bytes[..range(&last).end - 1]);
+    assert!(matches!(e, FormatError::SectionOutOfBounds { section: s, .. } if s == section), "{e:?}");
+}
+
+#[test]
+fn truncation_at_every_byte_of_small_files() {
+    for layouts in
+        [Layouts::default(), Layouts { child_pair: true, escape: false }, Layouts { child_pair: false, escape: true }]
+    {
+        let bytes = bytes_of(&scene(3, layouts));
+        for len in 0..bytes.len() {
+            check_cut(&bytes, len);
+        }
+    }
+}
+
+#[test]
+fn wrong_magic_and_version() {
+    let bytes = big_file();
+    for i in 0..8 {
+        let mut b = bytes.clone();
+        b[i] ^= 0x20;
+        assert_eq!(rejected(&b), FormatError::BadMagic);
+    }
+    for version in [0u32, 2, 7, u32::MAX] {
+        let mut b = bytes.clone();
+        b[8..12].copy_from_slice(&version.to_le_bytes());
+        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 1 });
+        // A correct checksum does not make an unknown version readable.
+        reseal_header(&mut b);
+        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 1 });
+    }
+}
+
+#[test]
+fn every_bit_flip_of_header_and_table() {
+    let bytes = big_file();
+    let table_end = HEADER_SIZE + table(&bytes).len() * SECTION_ENTRY_SIZE;
+    for byte in 0..table_end {
+        for bit in 0..8 {
+            let mut b = bytes.clone();
+            b[byte] ^= 1 << bit;
+            let e = rejected(&b);
+            let ok = match byte {
+                0..8 => e == FormatError::BadMagic,
+                8..12 => matches!(e, FormatError::UnsupportedVersion { .. }),
+                12..16 => e == FormatError::BadHeader("its size field is wrong"),
+                // A larger section count reaches past the file or reads section data as table.
+                20..24 => matches!(e, FormatError::Truncated { .. } | FormatError::HeaderChecksum),
+                _ => e == FormatError::HeaderChecksum,
+            };
+            assert!(ok, "bit {bit} of byte {byte}: {e:?}");
+        }
+    }
+}
+
+#[test]
+fn flipped_bit_in_each_section_names_it() {
+    let bytes = big_file();
+    for e in table(&bytes) {
+        let kind = SectionKind::from_u32(e.kind).unwrap();
+        let r = range(&e);
+        if r.is_empty() {
+            continue;
+        }
+        for at in [r.start, r.start + r.len() / 2, r.end - 1] {
+            let mut b = bytes.clone();
+            b[at] ^= 0x10;
+            assert_eq!(rejected(&b), FormatError::Checksum { section: kind }, "byte {at} of {kind}");
+        }
+    }
+}
+
+#[test]
+fn random_bit_flips_in_checksummed_bytes() {
+    let bytes = big_file();
+    let covered: Vec<usize> = covered_bytes(&bytes).into_iter().flatten().collect();
+    let mut rng = Rng(0xf11b_5eed);
+    for _ in 0..3000 {
+        let mut b = bytes.clone();
+        // Distinct bytes, so that two flips never cancel.
+        let mut at: Vec<usize> = (0..1 + rng.below(8)).map(|_| covered[rng.below(covered.len())]).collect();
+        at.sort_unstable();
+        at.dedup();
+        for &i in &at {
+            b[i] ^= 1 << rng.below(8);
+        }
+        rejected(&b);
+    }
+}
+
+#[test]
+fn random_garbage() {
+    let mut rng = Rng(0x6a5b_a6e0);
+    let good = big_file();
+    for len in (0..600).chain((600..40_000).step_by(997)) {
+        let mut garbage: Vec<u8> = (0..len).map(|_| rng.next() as u8).collect();
+        rejected(&garbage);
+        // The same garbage behind a plausible start, so that the checks past the magic run too.
+        if len >= 16 {
+            garbage[..16].copy_from_slice(&good[..16]);
+            rejected(&garbage);
+        }
+    }
+}
+
+#[test]
+fn random_section_tables_with_valid_header_checksum() {
+    // Plausible tables (known kinds, right element sizes, aligned offsets, small counts) behind a
+    // correct header checksum reach the bounds, overlap and content checks. None may panic.
+    let mut rng = Rng(0x7ab1_e5ee);
+    let good = big_file();
+    for _ in 0..2000 {
+        let mut b = good.clone();
+        let mut t = table(&b);
+        for _ in 0..1 + rng.below(4) {
+            let i = rng.below(t.len());
+            match rng.below(5) {
+                0 => t[i].count = rng.below(64) as u64,
+                1 => t[i].offset = (rng.below(b.len() / 16 + 2) * 16) as u64,
+                2 => t[i].kind = 1 + rng.below(11) as u32,
+                3 => t[i].count = rng.next() >> rng.below(64),
+                _ => {
+                    let j = rng.below(t.len());
+                    t.swap(i, j);
+                }
+            }
+            t[i].element_size = SectionKind::from_u32(t[i].kind).map_or(8, |k| k.element_size());
+        }
+        set_table(&mut b, &t);
+        if rng.below(2) == 0 {
+            reseal(&mut b);
+        } else {
+            reseal_header(&mut b);
+        }
+        // Some edits (swapping entries) leave a readable file; only panics are failures here.
+        if let Err(e) = bvh_format::read(&b) {
+            let msg = e.to_string();
+            assert!(!msg.is_empty() && !msg.contains('\n'));
+        }
+    }
+}
+
+#[test]
+fn inflated_section_counts() {
+    let bytes = big_file();
+    for i in 0..table(&bytes).len() {
+        let kind = SectionKind::from_u32(table(&bytes)[i].kind).unwrap();
+        for extra in [1u64, 16, 1000, 1 << 40, u64::MAX / 2] {
+            let mut b = bytes.clone();
+            let mut t = table(&b);
+            t[i].count = t[i].count.saturating_add(extra);
+            set_table(&mut b, &t);
+            assert_eq!(rejected(&b), FormatError::HeaderChecksum);
+            reseal_header(&mut b);
+            let e = rejected(&b);
+            let ok = match e {
+                FormatError::SectionOutOfBounds { section, .. } => section == kind,
+                FormatError::SectionOverlap { a, b } => a == kind || b == kind,
+                // A section that grows only into the zero padding behind it keeps its bounds.
+                FormatError::Checksum { section } => section == kind,
+                _ => false,
+            };
+            assert!(ok, "{kind} count + {extra}: {e:?}");
+            // With every checksum recomputed the contents themselves must give it away.
+            reseal(&mut b);
+            rejected(&b);
+        }
+    }
+}
+
+/// Edits a fresh copy of the big file, reseals it, and returns the error.
+fn forge(edit: impl FnOnce(&mut Vec<u8>)) -> FormatError {
+    let mut b = big_file();
+    edit(&mut b);
+    reseal(&mut b);
+    rejected(&b)
+}
+
+fn first_inner(nodes: &[Node], from: usize) -> usize {
+    (from..nodes.len()).find(|&i| !nodes[i].is_leaf()).unwrap()
+}
+
+#[test]
+fn forged_escape_pointer_moving_backwards() {
+    let e = forge(|b| {
+        let esc = nodes(b, SectionKind::NodesEscape);
+        let i = first_inner(&esc, 1);
+        set_node(b, SectionKind::NodesEscape, i, Node { index: i as u32 - 1, ..esc[i] });
+    });
+    assert!(matches!(e, FormatError::EscapeBackwards { .. }), "{e:?}");
+    let e = forge(|b| {
+        let esc = nodes(b, SectionKind::NodesEscape);
+        set_node(b, SectionKind::NodesEscape, 0, Node { index: 0, ..esc[0] });
+    });
+    assert_eq!(e, FormatError::EscapeBackwards { node: 0, escape: 0 });
+}
+
+#[test]
+fn forged_leaf_range_out_of_range() {
+    for kind in [SectionKind::NodesChildPair, SectionKind::NodesEscape] {
+        let layout = if kind == SectionKind::NodesEscape { LayoutKind::Escape } else { LayoutKind::ChildPair };
+        for past in [1u32, 1000, u32::MAX - 300] {
+            let e = forge(|b| {
+                let ns = nodes(b, kind);
+                let i = ns.iter().position(|n| n.is_leaf()).unwrap();
+                set_node(b, kind, i, Node { index: 300 - ns[i].count + past, ..ns[i] });
+            });
+            assert!(matches!(e, FormatError::TreeShape { layout: l, .. } if l == layout), "{e:?}");
+        }
+        // A count that overflows u32 when added to the index.
+        let e = forge(|b| {
+            let ns = nodes(b, kind);
+            let i = ns.iter().position(|n| n.is_leaf()).unwrap();
+            set_node(b, kind, i, Node { count: u32::MAX, ..ns[i] });
+        });
+        assert!(matches!(e, FormatError::TreeShape { .. }), "{e:?}");
+    }
+}
+
+#[test]
+fn forged_leaf_coverage() {
+    for kind in [SectionKind::NodesChildPair, SectionKind::NodesEscape] {
+        // A triangle dropped from a leaf.
+        let mut dropped = 0;
+        let e = forge(|b| {
+            let ns = nodes(b, kind);
+            let i = ns.iter().position(|n| n.count >= 2).unwrap();
+            dropped = ns[i].index + ns[i].count - 1;
+            set_node(b, kind, i, Node { count: ns[i].count - 1, ..ns[i] });
+        });
+        assert!(matches!(e, FormatError::LeafCoverage { triangle, times: 0, .. } if triangle == dropped), "{e:?}");
+        // A triangle in two leaves (and another leaf's triangles in none).
+        let mut twice = 0;
+        let e = forge(|b| {
+            let ns = nodes(b, kind);
+            let leaves: Vec<usize> = (0..ns.len()).filter(|&i| ns[i].is_leaf()).collect();
+            let (a, c) = (leaves[0], leaves[1]);
+            twice = ns[a].index;
+            set_node(b, kind, c, Node { index: ns[a].index, count: 1, ..ns[c] });
+        });
+        assert!(matches!(e, FormatError::LeafCoverage { triangle, times: 2, .. } if triangle == twice), "{e:?}");
+    }
+}
+
+#[test]
+fn forged_non_finite_numbers() {
+    for (kind, index) in [(SectionKind::NodesChildPair, 0usize), (SectionKind::NodesEscape, 5)] {
+        for v in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let e = forge(|b| {
+                let ns = nodes(b, kind);
+                let mut n = ns[index];
+                n.max[1] = v;
+                set_node(b, kind, index, n);
+            });
+            assert_eq!(e, FormatError::NonFinite { section: kind, index: index as u64 });
+        }
+    }
+    let e = forge(|b| {
+        section_mut(b, SectionKind::Triangles)[48 * 7 + 4..48 * 7 + 8].copy_from_slice(&f32::NAN.to_le_bytes())
+    });
+    assert_eq!(e, FormatError::NonFinite { section: SectionKind::Triangles, index: 7 });
+    let e = forge(|b| {
+        section_mut(b, SectionKind::Normals)[48 * 9..48 * 9 + 4].copy_from_slice(&f32::INFINITY.to_le_bytes())
+    });
+    assert_eq!(e, FormatError::NonFinite { section: SectionKind::Normals, index: 9 });
+    let e = forge(|b| section_mut(b, SectionKind::Lights)[32 + 16..32 + 20].copy_from_slice(&f32::NAN.to_le_bytes()));
+    assert_eq!(e, FormatError::NonFinite { section: SectionKind::Lights, index: 1 });
+    let e = forge(|b| section_mut(b, SectionKind::Cameras)[64..68].copy_from_slice(&f32::NAN.to_le_bytes()));
+    assert_eq!(e, FormatError::NonFinite { section: SectionKind::Cameras, index: 1 });
+}
+
+#[test]
+fn forged_material_errors() {
+    let e =
+        forge(|b| section_mut(b, SectionKind::MaterialIds)[4 * 11..4 * 11 + 4].copy_from_slice(&3u32.to_le_bytes()));
+    assert_eq!(e, FormatError::IndexOutOfRange { section: SectionKind::MaterialIds, index: 11, value: 3, limit: 3 });
+    // Material 1 is the mirror (kr = 0.6); give it transmission as well.
+    let e = forge(|b| section_mut(b, SectionKind::Materials)[48 + 32..48 + 36].copy_from_slice(&0.5f32.to_le_bytes()));
+    assert_eq!(e, FormatError::BadMaterial { index: 1, reason: "it is both reflective and refractive" });
+    let e = forge(|b| section_mut(b, SectionKind::Materials)[0..4].copy_from_slice(&(-1.0f32).to_le_bytes()));
+    assert!(matches!(e, FormatError::BadMaterial { index: 0, .. }), "{e:?}");
+    let e = forge(|b| section_mut(b, SectionKind::MaterialNames)[1] = 0xff);
+    assert_eq!(e, FormatError::BadNames);
+}
+
+#[test]
+fn forged_input_index_that_is_not_a_permutation() {
+    let mut repeated = 0;
+    let e = forge(|b| {
+        let s = section_mut(b, SectionKind::InputIndex);
+        let first: [u8; 4] = s[0..4].try_into().unwrap();
+        repeated = u32::from_le_bytes(first);
+        s[40..44].copy_from_slice(&first);
+    });
+    assert_eq!(e, FormatError::PermutationRepeats(repeated));
+    let e = forge(|b| section_mut(b, SectionKind::InputIndex)[8..12].copy_from_slice(&300u32.to_le_bytes()));
+    assert_eq!(e, FormatError::IndexOutOfRange { section: SectionKind::InputIndex, index: 2, value: 300, limit: 300 });
+}
+
+#[test]
+fn forged_header_statistics() {
+    let truth = header(&big_file());
+    for depth in [0, truth.max_depth - 1, truth.max_depth + 1, u32::MAX] {
+        let e = forge(|b| edit_header(b, |h| Header { max_depth: depth, ..h }));
+        let expected =
+            FormatError::DepthMismatch { layout: LayoutKind::ChildPair, header: depth, actual: truth.max_depth };
+        assert_eq!(e, expected);
+    }
+    let e = forge(|b| edit_header(b, |h| Header { leaf_count: truth.leaf_count + 1, ..h }));
+    assert!(matches!(e, FormatError::LeafCountMismatch { .. }), "{e:?}");
+    let e = forge(|b| edit_header(b, |h| Header { triangle_count: 299, ..h }));
+    assert!(matches!(e, FormatError::CountMismatch { section: SectionKind::Triangles, .. }), "{e:?}");
+    let e = forge(|b| edit_header(b, |h| Header { node_count: truth.node_count + 2, ..h }));
+    assert!(matches!(e, FormatError::CountMismatch { section: SectionKind::NodesChildPair, .. }), "{e:?}");
+    let e = forge(|b| edit_header(b, |h| Header { flags: 4, ..h }));
+    assert_eq!(e, FormatError::NoLayout(4));
+    let e = forge(|b| edit_header(b, |h| Header { flags: 1, ..h }));
+    assert!(matches!(e, FormatError::BadHeader(_)), "an unannounced escape section: {e:?}");
+    let e = forge(|b| edit_header(b, |h| Header { traversal_cost: f32::NAN, ..h }));
+    assert!(matches!(e, FormatError::BadHeader(_)), "{e:?}");
+}
+
+#[test]
+fn forged_layouts_that_describe_different_trees() {
+    // Swapping the root's two children keeps a valid child-pair tree (every index is absolute),
+    // but its depth-first order is no longer the escape layout's.
+    let e = forge(|b| {
+        let cp = nodes(b, SectionKind::NodesChildPair);
+        let l = cp[0].index as usize;
+        set_node(b, SectionKind::NodesChildPair, l, cp[l + 1]);
+        set_node(b, SectionKind::NodesChildPair, l + 1, cp[l]);
+    });
+    assert_eq!(e, FormatError::LayoutsDiffer(1));
+    // A leaf that names other triangles in one layout only.
+    let e = forge(|b| {
+        let cp = nodes(b, SectionKind::NodesChildPair);
+        let leaves: Vec<usize> = (0..cp.len()).filter(|&i| cp[i].is_leaf() && cp[i].count == 1).collect();
+        let (x, y) = (leaves[0], leaves[1]);
+        set_node(b, SectionKind::NodesChildPair, x, Node { index: cp[y].index, ..cp[x] });
+        set_node(b, SectionKind::NodesChildPair, y, Node { index: cp[x].index, ..cp[y] });
+    });
+    assert!(matches!(e, FormatError::LayoutsDiffer(_)), "{e:?}");
+}
+
+#[test]
+fn forged_section_table_errors() {
+    let e = forge(|b| {
+        let mut t = table(b);
+        t[1].kind = t[0].kind;
+        set_table(b, &t);
+    });
+    assert!(
+        matches!(e, FormatError::DuplicateSection(SectionKind::Triangles) | FormatError::ElementSize { .. }),
+        "{e:?}"
+    );
+    let e = forge(|b| {
+        let mut t = table(b);
+        t[2].kind = 99;
+        set_table(b, &t);
+    });
+    assert_eq!(e, FormatError::UnknownSection(99));
+    let e = forge(|b| {
+        let mut t = table(b);
+        t[0].offset += 8;
+        set_table(b, &t);
+    });
+    assert!(matches!(e, FormatError::SectionMisaligned { section: SectionKind::Triangles, .. }), "{e:?}");
+    let e = forge(|b| {
+        let mut t = table(b);
+        t[0].element_size = 32;
+        set_table(b, &t);
+    });
+    assert_eq!(e, FormatError::ElementSize { section: SectionKind::Triangles, expected: 48, found: 32 });
+    let e = forge(|b| {
+        let mut t = table(b);
+        t[1].offset = t[0].offset;
+        set_table(b, &t);
+    });
+    assert!(matches!(e, FormatError::SectionOverlap { .. }), "{e:?}");
+    // Dropping the lights entry from the table.
+    let e = forge(|b| {
+        let h = header(b);
+        set_header(b, &Header { section_count: h.section_count - 1, ..h });
+    });
+    assert_eq!(e, FormatError::MissingSection(SectionKind::Lights));
+}
+
+#[test]
+fn forged_nan_in_camera_padding() {
+    // FORMAT.md: every floating-point value in every section is finite, padding included; a NaN
+    // accepted here would also make the scene unequal to itself after a round trip.
+    for at in [12usize, 28, 44] {
+        let e = forge(|b| {
+            section_mut(b, SectionKind::Cameras)[64 + at..64 + at + 4].copy_from_slice(&f32::NAN.to_le_bytes())
+        });
+        assert_eq!(e, FormatError::NonFinite { section: SectionKind::Cameras, index: 1 }, "byte {at}");
+    }
+}
