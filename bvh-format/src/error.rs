@@ -56,7 +56,9 @@ pub enum FormatError {
     PermutationRepeats(u32),
     #[error("material {index} is invalid: {reason}")]
     BadMaterial { index: u32, reason: &'static str },
-    #[error("the names of the materials are not valid UTF-8 text or do not match the material count")]
+    #[error(
+        "the names of the materials are not valid UTF-8 text, contain NUL bytes or do not match the material count"
+    )]
     BadNames,
     #[error("camera {0} has a name that is not valid UTF-8")]
     BadCameraName(u32),
@@ -80,6 +82,10 @@ pub enum FormatError {
     LayoutsDiffer(u32),
     #[error("the scene has no triangles")]
     Empty,
+    #[error("leaf {node} of the {layout} layout does not contain all of its triangles")]
+    TriangleOutsideLeaf { layout: LayoutKind, node: u32 },
+    #[error("entry {index} of the {section} section has non-zero padding")]
+    NonZeroPadding { section: SectionKind, index: u64 },
 }
 
 /// A scene file that could not be read or written.

@@ -220,11 +220,14 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     count(SectionKind::Normals, n, s.normals.len())?;
     count(SectionKind::MaterialIds, n, s.material_ids.len())?;
     count(SectionKind::InputIndex, n, s.input_index.len())?;
-    if s.material_names.len() != s.materials.len() {
+    if s.material_names.len() != s.materials.len() || s.material_names.iter().any(|n| n.contains('\0')) {
         return Err(FormatError::BadNames);
     }
 
     check_finite(SectionKind::Triangles, &s.triangles)?;
+    if let Some(i) = s.triangles.iter().position(|t| t.v0[3] != 0.0 || t.e1[3] != 0.0 || t.e2[3] != 0.0) {
+        return Err(FormatError::NonZeroPadding { section: SectionKind::Triangles, index: i as u64 });
+    }
     check_finite(SectionKind::Normals, &s.normals)?;
     check_finite(SectionKind::Lights, &s.lights)?;
     check_finite(SectionKind::Materials, &s.materials)?;
@@ -321,6 +324,34 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     }
     if let (Some(cp), Some(esc)) = (&s.child_pair, &s.escape) {
         tree::check_same_tree(cp, esc)?;
+    }
+    let t = s.tree();
+    check_leaf_boxes(t, &s.triangles)?;
+    if let Some(h) = header
+        && (h.bounds_min != t.nodes[0].min || h.bounds_max != t.nodes[0].max)
+    {
+        return Err(FormatError::BadHeader("its scene bounds differ from the root node's box"));
+    }
+    Ok(())
+}
+
+/// Every leaf's box must hold its triangles, or a tracer would skip triangles it should hit. The
+/// stored triangle is a vertex and two edges, so its other vertices are rebuilt with one rounding
+/// each: a few units in the last place of slack cover that, and nothing a forger could exploit.
+fn check_leaf_boxes(t: Tree<'_>, tris: &[crate::Triangle]) -> Result<(), FormatError> {
+    for (i, n) in t.nodes.iter().enumerate().filter(|(_, n)| n.is_leaf()) {
+        for tri in &tris[n.index as usize..(n.index + n.count) as usize] {
+            for (k, v) in tri.vertices().iter().enumerate() {
+                for a in 0..3 {
+                    // v0 is exact; v0 + e rounds once, by at most an ulp of the larger operand.
+                    let e = [0.0, tri.e1[a], tri.e2[a]][k];
+                    let slack = 4.0 * f32::EPSILON * (tri.v0[a].abs() + e.abs());
+                    if v[a] < n.min[a] - slack || v[a] > n.max[a] + slack {
+                        return Err(FormatError::TriangleOutsideLeaf { layout: t.layout, node: i as u32 });
+                    }
+                }
+            }
+        }
     }
     Ok(())
 }

@@ -11,16 +11,9 @@ fn align_up(v: u64) -> u64 {
     v.div_ceil(ALIGN) * ALIGN
 }
 
-/// Material names joined by NUL bytes (names themselves hold none; the writer drops any).
+/// Material names joined by NUL bytes (validation rejects names that contain one).
 pub(crate) fn encode_names(names: &[String]) -> Vec<u8> {
-    let mut out = Vec::new();
-    for (i, n) in names.iter().enumerate() {
-        if i > 0 {
-            out.push(0);
-        }
-        out.extend(n.bytes().filter(|&b| b != 0));
-    }
-    out
+    names.join("\0").into_bytes()
 }
 
 /// Serialises a scene. The scene is validated first, so the writer never produces a file that the

@@ -595,3 +595,36 @@ fn forged_nan_in_camera_padding() {
         assert_eq!(e, FormatError::NonFinite { section: SectionKind::Cameras, index: 1 }, "byte {at}");
     }
 }
+
+#[test]
+fn forged_triangle_outside_its_leaf() {
+    // Move the first stored triangle far away: its leaf box no longer holds it, and a tracer
+    // would skip it.
+    let e = forge(|b| {
+        let t = &mut section_mut(b, SectionKind::Triangles)[0..4];
+        let x = f32::from_le_bytes(t.try_into().unwrap()) + 1000.0;
+        t.copy_from_slice(&x.to_le_bytes());
+    });
+    assert!(matches!(e, FormatError::TriangleOutsideLeaf { .. }), "{e:?}");
+}
+
+#[test]
+fn forged_triangle_padding_and_header_bounds() {
+    let e = forge(|b| section_mut(b, SectionKind::Triangles)[12..16].copy_from_slice(&1.0f32.to_le_bytes()));
+    assert_eq!(e, FormatError::NonZeroPadding { section: SectionKind::Triangles, index: 0 });
+    let e = forge(|b| {
+        edit_header(b, |mut h| {
+            h.bounds_max[1] += 1.0;
+            h
+        })
+    });
+    assert!(matches!(e, FormatError::BadHeader(_)), "{e:?}");
+}
+
+#[test]
+fn names_with_nul_bytes_are_rejected_not_rewritten() {
+    let mut s = scene(10, Layouts::default());
+    s.material_names[0] = "a\0b".to_owned();
+    assert_eq!(s.validate(), Err(FormatError::BadNames));
+    assert!(bvh_format::write(&s).is_err());
+}
