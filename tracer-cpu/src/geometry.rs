@@ -50,7 +50,20 @@ impl std::ops::AddAssign for Cost {
     }
 }
 
-/// Entry distance of the ray into the node's box if it enters within `[0, t_max]`.
+/// Relative slack of every comparison of a box's distance with a hit's distance: both are rounded
+/// (the box's by two operations, the triangle's by more), so a triangle exactly on its box's
+/// boundary can come out a few units in the last place nearer than the box. Without the slack a
+/// ray through a shared vertex could skip the box of the triangle that should win.
+pub const T_SLACK: f32 = 1.0 / (1 << 20) as f32;
+
+/// Whether a box entered at `near` may still hold a hit at `t` or nearer.
+#[inline(always)]
+pub fn may_hold(near: f32, t: f32) -> bool {
+    near <= t + t.abs() * T_SLACK
+}
+
+/// Entry distance of the ray into the node's box if it enters within `[0, t_max]` (with
+/// [`T_SLACK`]).
 ///
 /// A zero direction component has an infinite inverse, and an origin exactly on that slab's plane
 /// makes `0 * inf = NaN`, in the entry or the exit distance depending on the sign of the zero.
@@ -74,7 +87,7 @@ pub fn slab(node: &Node, ray: &Ray, t_max: f32) -> Option<f32> {
         near = if enter > near { enter } else { near };
         far = if exit < far { exit } else { far };
     }
-    (near <= far).then_some(near)
+    may_hold(near, far).then_some(near)
 }
 
 /// Möller-Trumbore (thesis 4.2.4): the distance and barycentrics of a hit in `(t_min, t_max]`

@@ -70,7 +70,7 @@ pub struct Entry {
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{Entry, LANES, Rays, Results};
-    use crate::geometry::{Cost, Hit};
+    use crate::geometry::{Cost, Hit, T_SLACK};
     use bvh_format::{Node, Triangle};
     use std::arch::x86_64::*;
 
@@ -126,7 +126,14 @@ mod avx2 {
             near = _mm256_max_ps(enter, near);
             far = _mm256_min_ps(exit, far);
         }
-        (_mm256_cmp_ps::<_CMP_LE_OQ>(near, far), near)
+        (may_hold(near, far), near)
+    }
+
+    /// [`crate::geometry::may_hold`], 8-wide: `near <= t + |t| * T_SLACK`.
+    #[target_feature(enable = "avx2")]
+    fn may_hold(near: __m256, t: __m256) -> __m256 {
+        let abs = _mm256_andnot_ps(splat(-0.0), t);
+        _mm256_cmp_ps::<_CMP_LE_OQ>(near, add(t, mul(abs, splat(T_SLACK))))
     }
 
     #[inline(always)]
@@ -291,7 +298,7 @@ mod avx2 {
             }
             live = false;
             while let Some(e) = stack.pop() {
-                let m = _mm256_and_ps(_mm256_and_ps(e.mask, alive), _mm256_cmp_ps::<_CMP_LE_OQ>(e.near, best_t));
+                let m = _mm256_and_ps(_mm256_and_ps(e.mask, alive), may_hold(e.near, best_t));
                 if any(m) {
                     current = e.node as usize;
                     cur_mask = m;

@@ -100,7 +100,15 @@ impl<'a> Tracer<'a> {
     }
 
     /// Closest hit in `(t_min, t_max]`; adds the work done to `cost`.
-    pub fn closest(&self, method: Method, ray: &Ray, t_min: f32, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> Option<Hit> {
+    pub fn closest(
+        &self,
+        method: Method,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Hit> {
         let tris = &self.scene.triangles;
         match (method, self.child_pair, self.escape) {
             (Method::Stackless, _, Some(esc)) => traverse::escape::<false>(esc, tris, ray, t_min, t_max, cost),

@@ -1,7 +1,7 @@
 //! Scalar traversals: ordered child-pair traversal with a stack (the CPU analogue of LST) and the
 //! stackless walk of the escape-pointer layout. Both exist in a closest-hit and an any-hit form.
 
-use crate::geometry::{Cost, Hit, Ray, intersect, slab};
+use crate::geometry::{Cost, Hit, Ray, intersect, may_hold, slab};
 use bvh_format::{Node, Triangle};
 
 /// A traversal stack of (node, entry distance) pairs: a fixed array that covers every tree our
@@ -120,7 +120,7 @@ pub fn child_pair<const ANY: bool>(
         loop {
             match stack.pop() {
                 None => return (best.tri != u32::MAX).then_some(best),
-                Some((n, t)) if t <= best.t => {
+                Some((n, t)) if may_hold(t, best.t) => {
                     current = n;
                     break;
                 }
