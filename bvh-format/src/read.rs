@@ -342,11 +342,11 @@ fn check_leaf_boxes(t: Tree<'_>, tris: &[crate::Triangle]) -> Result<(), FormatE
     for (i, n) in t.nodes.iter().enumerate().filter(|(_, n)| n.is_leaf()) {
         for tri in &tris[n.index as usize..(n.index + n.count) as usize] {
             for (k, v) in tri.vertices().iter().enumerate() {
-                for a in 0..3 {
+                for (a, &x) in v.iter().enumerate() {
                     // v0 is exact; v0 + e rounds once, by at most an ulp of the larger operand.
                     let e = [0.0, tri.e1[a], tri.e2[a]][k];
                     let slack = 4.0 * f32::EPSILON * (tri.v0[a].abs() + e.abs());
-                    if v[a] < n.min[a] - slack || v[a] > n.max[a] + slack {
+                    if x < n.min[a] - slack || x > n.max[a] + slack {
                         return Err(FormatError::TriangleOutsideLeaf { layout: t.layout, node: i as u32 });
                     }
                 }
