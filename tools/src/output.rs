@@ -68,7 +68,7 @@ pub fn read_aov(path: &Path) -> Result<(u32, u32, Aovs), String> {
             .channel_data
             .list
             .iter()
-            .find(|c| c.name == name)
+            .find(|c| c.name.eq(name))
             .ok_or_else(|| format!("{} has no channel {name}", path.display()))
     };
     let f = |name: &str| -> std::result::Result<Vec<f32>, String> {

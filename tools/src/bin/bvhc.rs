@@ -130,7 +130,7 @@ fn compile(args: &CompileArgs) -> Result<(), String> {
     };
     let t0 = Instant::now();
     let pb = spinner(&format!("reading {}", args.input.display()));
-    let opts = ImportOptions { smooth_normals: args.smooth_normals, ..ImportOptions::default() };
+    let opts = ImportOptions { smooth_normals: args.smooth_normals };
     let scene = import::load(&args.input, &opts).map_err(|e| e.to_string())?;
     pb.finish_and_clear();
     let t_import = t0.elapsed();

@@ -61,7 +61,7 @@ pub fn random_rays(scene: &SceneFile, n: usize, seed: u64) -> Vec<(Vec3, Vec3)> 
     let centre = (lo + hi) * 0.5;
     let radius = (hi - lo).length() * 0.5;
     let mut rng = Rng(seed);
-    let mut inside = |rng: &mut Rng| lo + (hi - lo) * Vec3::new(rng.next(), rng.next(), rng.next());
+    let inside = |rng: &mut Rng| lo + (hi - lo) * Vec3::new(rng.next(), rng.next(), rng.next());
     (0..n)
         .map(|i| match i % 5 {
             0 | 1 => {
