@@ -1,0 +1,189 @@
+//! Whole images: every traversal renders the same image, thread counts do not matter, shadow
+//! rays end at the light, and the adaptive bounce stop traces only what can change a pixel.
+
+mod common;
+
+use bvh_format::{Light, SceneFile};
+use glam::Vec3;
+use tracer_cpu::traverse::Stack;
+use tracer_cpu::{CameraSpec, Cost, Image, Method, Mode, Ray, RenderSettings, Tracer, render};
+
+fn settings(scene: &SceneFile, camera: &str, mode: Mode, method: Method, w: u32, h: u32) -> RenderSettings {
+    RenderSettings {
+        width: w,
+        height: h,
+        camera: CameraSpec::from(scene.camera(camera).expect("camera exists")),
+        mode,
+        lights: scene.lights.clone(),
+        max_indirections: scene.settings.max_indirections,
+        method,
+        aovs: true,
+    }
+}
+
+fn same_image(a: &Image, b: &Image, what: &str) {
+    assert_eq!(a.rgb, b.rgb, "{what}: colours differ");
+    let (x, y) = (a.aov.as_ref().unwrap(), b.aov.as_ref().unwrap());
+    assert_eq!(x.prim, y.prim, "{what}: triangle ids differ");
+    assert_eq!(x.t, y.t, "{what}: distances differ");
+    assert_eq!(x.normal, y.normal, "{what}: normals differ");
+    assert_eq!(a.rays, b.rays, "{what}: ray counts differ");
+}
+
+#[test]
+fn every_method_renders_the_same_image() {
+    let room = common::compile(&common::scenes_dir().join("room.toml"));
+    let bunny = common::compile(&common::scenes_dir().join("bunny.toml"));
+    for (name, scene, camera) in [("room", &room, "medium"), ("room", &room, "close-up"), ("bunny", &bunny, "medium")] {
+        let tracer = Tracer::new(scene);
+        for mode in [Mode::Cast, Mode::Whitted] {
+            let base = render(&tracer, &settings(scene, camera, mode, Method::Ordered, 97, 61)).unwrap();
+            for method in [Method::Stackless, Method::Packet] {
+                let img = render(&tracer, &settings(scene, camera, mode, method, 97, 61)).unwrap();
+                same_image(&base, &img, &format!("{name} {camera} {mode:?} {method:?}"));
+            }
+            let hits = base.aov.as_ref().unwrap().prim.iter().filter(|&&p| p != bvh_format::NO_TRIANGLE).count();
+            assert!(hits > 97 * 61 / 4, "{name} {camera}: the camera should see the scene ({hits} hits)");
+        }
+    }
+}
+
+#[test]
+fn whitted_images_do_not_depend_on_the_thread_count() {
+    let room = common::compile(&common::scenes_dir().join("room.toml"));
+    let tracer = Tracer::new(&room);
+    let s = settings(&room, "medium", Mode::Whitted, Method::Auto, 160, 120);
+    let images: Vec<Image> = [1, 2, 3]
+        .iter()
+        .map(|&n| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
+            pool.install(|| render(&tracer, &s).unwrap())
+        })
+        .collect();
+    same_image(&images[0], &images[1], "1 vs 2 threads");
+    same_image(&images[0], &images[2], "1 vs 3 threads");
+    assert!(images[0].rays.secondary > 0 && images[0].rays.shadow > 0);
+}
+
+/// A floor (y = 0) under a roof (y = 2), both 10 x 10 quads.
+fn floor_and_roof() -> SceneFile {
+    common::compile_toml(
+        "roof",
+        r#"
+[[object]]
+type = "quad"
+size = [10.0, 10.0]
+
+[[object]]
+type = "quad"
+centre = [0.0, 2.0, 0.0]
+size = [10.0, 10.0]
+normal = [0.0, -1.0, 0.0]
+
+[[camera]]
+name = "down"
+eye = [0.0, 1.0, 0.5]
+at = [0.0, 0.0, 0.0]
+
+[[light]]
+position = [0.0, 1.5, 0.0]
+"#,
+    )
+}
+
+#[test]
+fn shadow_rays_end_at_the_light() {
+    let scene = floor_and_roof();
+    let tracer = Tracer::new(&scene);
+    let mut stack = Stack::default();
+    let mut cost = Cost::default();
+    let from = Vec3::new(0.0, 1e-3, 0.0);
+    let up = Ray::new(from, Vec3::Y);
+    for method in [Method::Ordered, Method::Stackless] {
+        // The roof is 2 away: a light at 1.5 is not blocked, one at 2.5 is.
+        assert!(!tracer.occluded(method, &up, 1.5, &mut stack, &mut cost), "{method:?}");
+        assert!(tracer.occluded(method, &up, 2.5, &mut stack, &mut cost), "{method:?}");
+    }
+    // In an image: the floor under a light below the roof is lit; above the roof it is dark.
+    let lit = {
+        let mut s = settings(&scene, "down", Mode::Whitted, Method::Auto, 8, 8);
+        s.lights = vec![Light::new([0.0, 1.5, 0.0], [1.0; 3])];
+        render(&tracer, &s).unwrap()
+    };
+    let shadowed = {
+        let mut s = settings(&scene, "down", Mode::Whitted, Method::Auto, 8, 8);
+        s.lights = vec![Light::new([0.0, 2.5, 0.0], [1.0; 3])];
+        render(&tracer, &s).unwrap()
+    };
+    let brightness = |img: &Image| img.rgb.iter().map(|p| p[0] as u32).sum::<u32>();
+    assert!(brightness(&lit) > 4 * brightness(&shadowed), "{} vs {}", brightness(&lit), brightness(&shadowed));
+    assert_eq!(lit.rays.shadow, 64);
+}
+
+fn mirror_floor(kr: f32) -> SceneFile {
+    common::compile_toml(
+        &format!("mirror{}", (kr * 1000.0) as u32),
+        &format!(
+            r#"
+indirections = 3
+[material.m]
+kd = [0.3, 0.3, 0.3]
+kr = {kr}
+
+[[object]]
+type = "quad"
+size = [10.0, 10.0]
+material = "m"
+
+[[object]]
+type = "sphere"
+centre = [0.0, 0.5, 0.0]
+radius = 0.5
+
+[[camera]]
+name = "view"
+eye = [0.0, 1.0, 3.0]
+at = [0.0, 0.3, 0.0]
+
+[[light]]
+position = [1.0, 3.0, 2.0]
+"#
+        ),
+    )
+}
+
+#[test]
+fn the_bounce_stop_skips_only_rays_that_cannot_change_a_pixel() {
+    // kr = 0.001: a reflection adds at most 0.001 * (bound) < half an 8-bit step, so none is traced.
+    let faint = mirror_floor(0.001);
+    let s = settings(&faint, "view", Mode::Whitted, Method::Auto, 64, 48);
+    let img = render(&Tracer::new(&faint), &s).unwrap();
+    assert_eq!(img.rays.secondary, 0);
+    // Skipping them changes nothing: the image equals that of a floor that does not reflect.
+    let none = mirror_floor(0.0);
+    let base = render(&Tracer::new(&none), &settings(&none, "view", Mode::Whitted, Method::Auto, 64, 48)).unwrap();
+    assert_eq!(img.rgb, base.rgb);
+    // kr = 0.5 reflects, and at most `indirections` deep.
+    let strong = mirror_floor(0.5);
+    let img = render(&Tracer::new(&strong), &settings(&strong, "view", Mode::Whitted, Method::Auto, 64, 48)).unwrap();
+    assert!(img.rays.secondary > 0 && img.rays.secondary <= 3 * img.rays.primary);
+    let mut one = settings(&strong, "view", Mode::Whitted, Method::Auto, 64, 48);
+    one.max_indirections = 1;
+    let once = render(&Tracer::new(&strong), &one).unwrap();
+    assert!(once.rays.secondary <= once.rays.primary && once.rays.secondary < img.rays.secondary + 1);
+}
+
+#[test]
+fn bad_settings_are_errors() {
+    let scene = floor_and_roof();
+    let tracer = Tracer::new(&scene);
+    let mut s = settings(&scene, "down", Mode::Cast, Method::Auto, 0, 8);
+    assert!(render(&tracer, &s).is_err());
+    s.width = 8;
+    s.camera.at = s.camera.eye;
+    assert!(render(&tracer, &s).unwrap_err().to_string().contains("degenerate"));
+    let mut only_escape = scene.clone();
+    only_escape.child_pair = None;
+    let s = settings(&scene, "down", Mode::Cast, Method::Ordered, 8, 8);
+    assert!(render(&Tracer::new(&only_escape), &s).unwrap_err().to_string().contains("child-pair"));
+}
