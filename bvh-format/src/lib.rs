@@ -6,6 +6,7 @@
 //! file yields a typed [`FormatError`] and never panics.
 #![doc = include_str!("../FORMAT.md")]
 
+pub mod camera;
 mod error;
 pub mod layout;
 mod read;
@@ -71,6 +72,19 @@ impl SceneFile {
     /// A camera by name.
     pub fn camera(&self, name: &str) -> Option<&Camera> {
         self.cameras.iter().find(|c| c.name() == Some(name))
+    }
+
+    /// The bound behind the adaptive bounce stop (docs/shading.md): the most radiance one Whitted
+    /// hit can add before weighting, `max over materials of Ia kd + (sum of light colours)
+    /// (kd + ks)` and the background, and the largest `kr` or `kt` of the scene.
+    pub fn bounce_bound(&self, light_colours: &[[f32; 3]]) -> (f32, f32) {
+        let lights: [f32; 3] = light_colours.iter().fold([0.0; 3], |a, c| [a[0] + c[0], a[1] + c[1], a[2] + c[2]]);
+        let amb = self.settings.ambient;
+        let per_material =
+            self.materials.iter().flat_map(|m| (0..3).map(move |k| amb[k] * m.kd[k] + lights[k] * (m.kd[k] + m.ks[k])));
+        let bound = per_material.fold(self.settings.background.iter().copied().fold(0.0, f32::max), f32::max);
+        let k_max = self.materials.iter().map(|m| m.kr.max(m.kt)).fold(0.0, f32::max);
+        (bound, k_max)
     }
 
     /// Checks the whole scene as the reader would, without writing it: a writer calls this so that

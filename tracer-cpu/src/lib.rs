@@ -7,7 +7,9 @@
 //! - [`reference`]: the exact f64 brute-force closest hit tests compare against.
 //! - [`shade`] and [`render`]: ray casting and Whitted shading of whole images, with AOVs.
 
-pub mod camera;
+pub use bvh_format::camera;
+#[cfg(feature = "embree")]
+pub mod embree;
 pub mod geometry;
 pub mod packet;
 pub mod reference;

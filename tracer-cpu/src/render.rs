@@ -161,7 +161,8 @@ pub(crate) struct Shading<'a> {
 
 impl<'a> Shading<'a> {
     pub fn new(scene: &SceneFile, s: &'a RenderSettings) -> Self {
-        let colours: Vec<Vec3> = s.lights.iter().map(|l| Vec3::from(l.colour)).collect();
+        let colours: Vec<[f32; 3]> = s.lights.iter().map(|l| l.colour).collect();
+        let (bound, k_max) = scene.bounce_bound(&colours);
         let ambient = Vec3::from(scene.settings.ambient);
         let background = Vec3::from(scene.settings.background);
         Self {
@@ -170,8 +171,8 @@ impl<'a> Shading<'a> {
             max_indirections: s.max_indirections,
             ambient,
             background,
-            bound: shade::max_hit_radiance(&scene.materials, ambient, &colours, background),
-            k_max: scene.materials.iter().map(|m| m.kr.max(m.kt)).fold(0.0, f32::max),
+            bound,
+            k_max,
             // Secondary and shadow rays are incoherent: the SIMD packet path traces them one by one.
             method: if s.method == Method::Packet { Method::Ordered } else { s.method },
         }

@@ -101,16 +101,6 @@ pub fn secondary(m: &Material, s: &Surface, dir: Vec3) -> Option<Secondary> {
     None
 }
 
-/// The largest radiance one Whitted hit can add before weighting, per scene: the bound behind the
-/// adaptive bounce stop.
-pub fn max_hit_radiance(materials: &[Material], ambient: Vec3, light_colours: &[Vec3], background: Vec3) -> f32 {
-    let lights: Vec3 = light_colours.iter().copied().sum();
-    let per_material = materials
-        .iter()
-        .map(|m| (ambient * Vec3::from(m.kd) + lights * (Vec3::from(m.kd) + Vec3::from(m.ks))).max_element());
-    per_material.fold(background.max_element(), f32::max)
-}
-
 /// Whether a secondary ray of weight `w`, with `remaining` indirections left after it (itself
 /// included), can still change an 8-bit pixel: the most the chain can add is
 /// `w * bound * (1 + k + k^2 + ... )` over `remaining` terms, with `k` the largest kr or kt; below
