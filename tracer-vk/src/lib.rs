@@ -1,2 +1,18 @@
-//! The Vulkan compute tracer (DESIGN.md section 6). Not written yet: it is the subject of issues 4
-//! and 5. Nothing here renders; the crate exists so that the workspace has the layout of DESIGN.md.
+//! The Vulkan compute tracer (DESIGN.md section 6).
+//!
+//! - [`device`]: the Vulkan device layer (ash): devices, buffers, compute pipelines, recording
+//!   dispatches and reading back GPU timestamps.
+//! - [`shader`]: WGSL kernels to SPIR-V with naga, overrides resolved in the program.
+//! - [`error`]: [`VkError`], one sentence per failure.
+//!
+//! The kernels and the traversals are built on top of these.
+
+pub mod device;
+pub mod error;
+pub mod shader;
+
+/// The ash version the raw handles ([`Gpu::ash_device`], [`Recorder::raw`]) come from.
+pub use ash;
+pub use device::{Buffer, DeviceInfo, DeviceKind, Gpu, Pipeline, Recorder, Timings, ValidationLog, list_devices};
+pub use error::VkError;
+pub use shader::{translate, translate_with_subgroups};

@@ -1,0 +1,153 @@
+//! WGSL to SPIR-V inside the program (DESIGN.md section 6; device.md "naga 30").
+//!
+//! naga's SPIR-V writer has no specialization constants, so `override`s are resolved here, before
+//! writing: every distinct set of override values is its own SPIR-V module (about a millisecond).
+
+use naga::back::spv;
+use naga::valid::{Capabilities, ValidationFlags, Validator};
+
+use crate::error::VkError;
+
+/// What every kernel may use: push constants, which naga 30 calls immediates (`var<immediate>
+/// params: Params;` in WGSL; `var<push_constant>` is no longer accepted), bound by
+/// [`crate::Gpu::pipeline`]'s `push_bytes`.
+fn base_capabilities() -> Capabilities {
+    Capabilities::default() | Capabilities::IMMEDIATES
+}
+
+/// WGSL -> validated naga module -> overrides resolved -> SPIR-V 1.3 words for entry point `main`.
+/// Push constants are written `var<immediate> name: T;` (naga 30's spelling).
+pub fn translate(source: &str, label: &str, overrides: &[(&str, f64)]) -> Result<Vec<u32>, VkError> {
+    translate_with(source, label, overrides, base_capabilities())
+}
+
+/// As [`translate`], with subgroup builtins and operations allowed. naga 30 rejects the
+/// `enable subgroups;` directive, so the source must use them without it; the device must report
+/// `DeviceInfo::supports_subgroup_ops`.
+pub fn translate_with_subgroups(source: &str, label: &str, overrides: &[(&str, f64)]) -> Result<Vec<u32>, VkError> {
+    translate_with(
+        source,
+        label,
+        overrides,
+        base_capabilities() | Capabilities::SUBGROUP | Capabilities::SUBGROUP_BARRIER,
+    )
+}
+
+fn translate_with(
+    source: &str,
+    label: &str,
+    overrides: &[(&str, f64)],
+    caps: Capabilities,
+) -> Result<Vec<u32>, VkError> {
+    let fail = |message: String| VkError::Shader { label: label.to_string(), message };
+    let module = naga::front::wgsl::parse_str(source).map_err(|e| fail(e.emit_to_string(source)))?;
+    let info = Validator::new(ValidationFlags::all(), caps)
+        .validate(&module)
+        .map_err(|e| fail(with_causes(e.emit_to_string(source), e.as_inner())))?;
+
+    let mut constants = naga::back::PipelineConstants::default();
+    for &(name, value) in overrides {
+        constants.insert(name.to_string(), value);
+    }
+    let (module, info) = naga::back::pipeline_constants::process_overrides(
+        &module,
+        &info,
+        Some((naga::ShaderStage::Compute, "main")),
+        &constants,
+    )
+    .map_err(|e| {
+        let text = match &e {
+            naga::back::pipeline_constants::PipelineConstantError::ValidationError(v) => {
+                with_causes(v.emit_to_string(source), v.as_inner())
+            }
+            other => with_causes(format!("error: {other}"), other),
+        };
+        fail(text)
+    })?;
+
+    let options = spv::Options { lang_version: (1, 3), ..spv::Options::default() };
+    let pipeline = spv::PipelineOptions { shader_stage: naga::ShaderStage::Compute, entry_point: "main".to_string() };
+    spv::write_vec(&module, &info, &options, Some(&pipeline))
+        .map_err(|e| fail(with_causes(format!("error: SPIR-V writer: {e}"), &e)))
+}
+
+/// naga's validation errors nest ("Function [1] 'main' is invalid" <- "Expression [4] is invalid"
+/// <- the actual reason), and the rendered diagnostic names only the outermost. The innermost is
+/// the one a kernel author needs, so it is added to the first line (shown by `Display`), and causes
+/// the diagnostic does not already show follow it.
+fn with_causes(rendered: String, error: &dyn std::error::Error) -> String {
+    let mut chain = Vec::new();
+    let mut cause = error.source();
+    while let Some(c) = cause {
+        chain.push(c.to_string());
+        cause = c.source();
+    }
+    let Some(root) = chain.last() else { return rendered };
+    let (first, rest) = rendered.split_once('\n').unwrap_or((rendered.as_str(), ""));
+    let mut out = format!("{first}: {root}\n{rest}");
+    if !out.ends_with('\n') {
+        out.push('\n');
+    }
+    for c in chain.iter().filter(|c| !rendered.contains(c.as_str())) {
+        out.push_str("caused by: ");
+        out.push_str(c);
+        out.push('\n');
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DOUBLE: &str = r#"
+        override WG: u32 = 64u;
+        @group(0) @binding(0) var<storage, read_write> data: array<u32>;
+        @compute @workgroup_size(WG)
+        fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+            if id.x < arrayLength(&data) { data[id.x] = data[id.x] * 2u; }
+        }
+    "#;
+
+    #[test]
+    fn translates_with_override() {
+        let words = translate(DOUBLE, "double", &[("WG", 128.0)]).unwrap();
+        assert_eq!(words[0], 0x0723_0203, "SPIR-V magic number");
+        assert_eq!(words[1], 0x0001_0300, "SPIR-V 1.3");
+    }
+
+    #[test]
+    fn errors_are_one_line_in_display() {
+        let cases = [
+            ("fn main( {", &[][..]),
+            // Validation: u32 + f32 has no overload.
+            ("@compute @workgroup_size(1) fn main() { let a = 1u + 2.0f; }", &[][..]),
+            // An override the shader does not declare.
+            (DOUBLE, &[("NOPE", 1.0)][..]),
+            // A workgroup size of zero.
+            (DOUBLE, &[("WG", 0.0)][..]),
+        ];
+        for (src, ov) in cases {
+            let e = translate(src, "bad", ov).unwrap_err();
+            let VkError::Shader { ref message, .. } = e else { panic!("{e:?}") };
+            let shown = e.to_string();
+            assert!(!shown.contains('\n'), "{shown}");
+            assert!(shown.starts_with("shader `bad` did not compile: "), "{shown}");
+            assert!(message.len() >= shown.len() - 30, "{message}");
+            eprintln!("{shown}\n--- full:\n{message}");
+        }
+    }
+
+    #[test]
+    fn subgroups_need_the_capability() {
+        let src = r#"
+            @group(0) @binding(0) var<storage, read_write> data: array<u32>;
+            @compute @workgroup_size(64)
+            fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+                data[id.x] = subgroupAdd(data[id.x]);
+            }
+        "#;
+        assert!(translate(src, "sg", &[]).is_err());
+        translate_with_subgroups(src, "sg", &[]).unwrap();
+    }
+}
