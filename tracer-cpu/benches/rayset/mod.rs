@@ -1,0 +1,261 @@
+//! The ray sets and tracer runners shared by `benches/rays.rs` and `examples/ray_report.rs`, so
+//! that the criterion bench and the whole-run report measure exactly the same thing.
+//!
+//! A ray set is generated once per (scene, resolution) and then traced unchanged by every tracer:
+//! one slot per pixel (row-major), empty where the pixel has no ray of that kind, so that packet
+//! tracers can group the same 4 x 2 pixel blocks the renderer groups.
+#![allow(dead_code)]
+
+use bvh_format::SceneFile;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::path::Path;
+use std::time::Instant;
+use tracer_cpu::geometry::{Cost, Ray, offset_origin};
+use tracer_cpu::packet::{self, LANES, Rays};
+use tracer_cpu::traverse::Stack;
+use tracer_cpu::{CameraSpec, Method, Tracer, shade};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// From the "medium" camera, one per pixel.
+    Primary,
+    /// From each primary hit to the scene's first light, any hit ends it.
+    Shadow,
+    /// The mirror reflection of each primary ray at its hit.
+    Secondary,
+}
+
+impl Kind {
+    pub const ALL: [Kind; 3] = [Kind::Primary, Kind::Shadow, Kind::Secondary];
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::Primary => "primary",
+            Kind::Shadow => "shadow",
+            Kind::Secondary => "secondary",
+        }
+    }
+}
+
+/// One ray per pixel slot (with its `t_max`), or none.
+pub struct RaySet {
+    pub kind: Kind,
+    pub width: usize,
+    pub height: usize,
+    pub rays: Vec<Option<(Ray, f32)>>,
+    /// Rays present.
+    pub count: usize,
+}
+
+impl RaySet {
+    fn new(kind: Kind, width: usize, height: usize, rays: Vec<Option<(Ray, f32)>>) -> Self {
+        let count = rays.iter().filter(|r| r.is_some()).count();
+        Self { kind, width, height, rays, count }
+    }
+}
+
+/// Imports and compiles a scene with both node layouts and the default build parameters (what
+/// `tools::compile_default` does, without depending on the tools crate).
+pub fn load(path: &Path) -> Result<SceneFile, String> {
+    let scene = bvh_build::import::load(path, &Default::default()).map_err(|e| format!("{}: {e}", path.display()))?;
+    bvh_build::compile(&scene, &Default::default(), Default::default()).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// The primary, shadow and secondary ray sets of a scene at `width` x `height`. Primary hits are
+/// found with our ordered traversal; shadow and secondary origins are offset exactly as the
+/// renderer offsets them.
+pub fn generate(scene: &SceneFile, width: u32, height: u32) -> Result<[RaySet; 3], String> {
+    let cam = scene.camera("medium").ok_or("the scene has no camera named \"medium\"")?;
+    let frame = CameraSpec::from(cam).frame(width, height).map_err(|e| format!("camera: {e:?}"))?;
+    let light = Vec3::from(scene.lights.first().ok_or("the scene has no light")?.position);
+    let tracer = Tracer::new(scene);
+    let (w, h) = (width as usize, height as usize);
+    let per_pixel: Vec<_> = (0..w * h)
+        .into_par_iter()
+        .map_init(Stack::default, |stack, i| {
+            let ray = Ray::new(frame.eye, frame.direction((i % w) as u32, (i / w) as u32));
+            let hit = tracer.closest(Method::Ordered, &ray, 0.0, f32::INFINITY, stack, &mut Cost::default());
+            let Some(hit) = hit else { return (Some((ray, f32::INFINITY)), None, None) };
+            let k = hit.tri as usize;
+            let surf = shade::surface(&scene.triangles[k], &scene.normals[k], ray.origin, ray.dir, hit.t, hit.u, hit.v);
+            let to = light - surf.point;
+            let shadow = (to != Vec3::ZERO).then(|| {
+                let l = to.normalize();
+                let side = if surf.geometric.dot(l) >= 0.0 { surf.geometric } else { -surf.geometric };
+                let o = offset_origin(surf.point, side);
+                (Ray::new(o, l), (light - o).length())
+            });
+            let mirror = shade::reflect(ray.dir, surf.shading);
+            let secondary = (Ray::new(offset_origin(surf.point, surf.geometric), mirror), f32::INFINITY);
+            (Some((ray, f32::INFINITY)), shadow, Some(secondary))
+        })
+        .collect();
+    let (mut p, mut s, mut r) = (Vec::with_capacity(w * h), Vec::with_capacity(w * h), Vec::with_capacity(w * h));
+    for (a, b, c) in per_pixel {
+        p.push(a);
+        s.push(b);
+        r.push(c);
+    }
+    Ok([RaySet::new(Kind::Primary, w, h, p), RaySet::new(Kind::Shadow, w, h, s), RaySet::new(Kind::Secondary, w, h, r)])
+}
+
+/// A way of tracing a ray set.
+#[derive(Clone, Copy)]
+pub enum Engine<'a> {
+    /// Ours, one ray at a time (`Method::Ordered` or `Method::Stackless`).
+    Scalar(&'a Tracer<'a>, Method),
+    /// Ours, 8-wide AVX2 packets of 4 x 2 pixel blocks.
+    Packet(&'a Tracer<'a>),
+    /// Embree, `rtcIntersect1` / `rtcOccluded1`.
+    #[cfg(feature = "embree")]
+    Embree1(&'a tracer_cpu::embree::Scene),
+    /// Embree, `rtcIntersect8` / `rtcOccluded8` over the same 4 x 2 blocks.
+    #[cfg(feature = "embree")]
+    Embree8(&'a tracer_cpu::embree::Scene),
+}
+
+/// What a traced slot holds: the hit distance (closest hit) or 0 (occluded); +inf for a miss or
+/// an unblocked shadow ray; NaN where the slot has no ray.
+pub const NO_RAY: f32 = f32::NAN;
+
+/// Traces every ray of `set` into `out` on the current rayon pool, in chunks of two rows (one row
+/// of 4 x 2 blocks).
+pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
+    let w = set.width;
+    let any = set.kind == Kind::Shadow;
+    set.rays.par_chunks(2 * w).zip(out.par_chunks_mut(2 * w)).for_each_init(
+        || (Stack::default(), Vec::with_capacity(128)),
+        |(stack, pstack), (rays, out)| match engine {
+            Engine::Scalar(tracer, method) => {
+                let mut cost = Cost::default();
+                for (r, o) in rays.iter().zip(out.iter_mut()) {
+                    let Some((ray, t_max)) = r else { continue };
+                    *o = if any {
+                        if tracer.occluded(method, ray, *t_max, stack, &mut cost) { 0.0 } else { f32::INFINITY }
+                    } else {
+                        tracer.closest(method, ray, 0.0, *t_max, stack, &mut cost).map_or(f32::INFINITY, |h| h.t)
+                    };
+                }
+            }
+            Engine::Packet(tracer) => {
+                let nodes = tracer.scene.child_pair.as_deref().expect("the scene has the child-pair layout");
+                let tris = &tracer.scene.triangles;
+                blocks(rays, out, w, |p| {
+                    let res = if any {
+                        packet::trace::<true>(nodes, tris, p, pstack)
+                    } else {
+                        packet::trace::<false>(nodes, tris, p, pstack)
+                    };
+                    res.hits.map(|h| match h {
+                        Some(_) if any => 0.0,
+                        Some(h) => h.t,
+                        None => f32::INFINITY,
+                    })
+                });
+            }
+            #[cfg(feature = "embree")]
+            Engine::Embree1(scene) => {
+                for (r, o) in rays.iter().zip(out.iter_mut()) {
+                    let Some((ray, t_max)) = r else { continue };
+                    *o = if any {
+                        if scene.occluded1(ray, *t_max) { 0.0 } else { f32::INFINITY }
+                    } else {
+                        scene.intersect1(ray, 0.0, *t_max).map_or(f32::INFINITY, |h| h.0)
+                    };
+                }
+            }
+            #[cfg(feature = "embree")]
+            Engine::Embree8(scene) => blocks(rays, out, w, |p| {
+                if any {
+                    scene.occluded8(p).map(|b| if b { 0.0 } else { f32::INFINITY })
+                } else {
+                    scene.intersect8(p).map(|h| h.map_or(f32::INFINITY, |h| h.0))
+                }
+            }),
+        },
+    );
+}
+
+/// Groups the slots of (up to) two rows into 4 x 2 packets as the renderer does, skipping
+/// packets with no ray.
+fn blocks(rays: &[Option<(Ray, f32)>], out: &mut [f32], w: usize, mut f: impl FnMut(&Rays) -> [f32; LANES]) {
+    let h = rays.len() / w;
+    let idle = Ray::new(Vec3::ZERO, Vec3::Z);
+    for x0 in (0..w).step_by(4) {
+        let mut p = Rays { rays: [idle; LANES], valid: [false; LANES], t_max: [0.0; LANES] };
+        for i in 0..LANES {
+            let (x, dy) = (x0 + i % 4, i / 4);
+            if x < w
+                && dy < h
+                && let Some((r, t)) = rays[dy * w + x]
+            {
+                (p.rays[i], p.valid[i], p.t_max[i]) = (r, true, t);
+            }
+        }
+        if !p.valid.contains(&true) {
+            continue;
+        }
+        let res = f(&p);
+        for i in 0..LANES {
+            if p.valid[i] {
+                out[(i / 4) * w + x0 + i % 4] = res[i];
+            }
+        }
+    }
+}
+
+/// On how many of the rays two traced outputs agree (both miss or both unblocked, or both hit with
+/// `|t - t_ref| <= 1e-4 t_ref`), and how many rays there are.
+pub fn agreement(a: &[f32], reference: &[f32]) -> (usize, usize) {
+    let (mut n, mut same) = (0usize, 0usize);
+    for (&x, &r) in a.iter().zip(reference) {
+        if r.is_nan() {
+            continue;
+        }
+        n += 1;
+        if (x.is_infinite() && r.is_infinite()) || (x - r).abs() <= 1e-4 * r.abs() {
+            same += 1;
+        }
+    }
+    (same, n)
+}
+
+/// Times passes of several tracers interleaved (one pass of each per round), so that a change in
+/// the machine's load during the measurement hits all of them alike: at least `reps` rounds and
+/// enough to fill `min_seconds`, at most `max_rounds`. Returns each one's median pass in seconds.
+/// The caller warms up first.
+pub fn interleaved_medians(
+    reps: usize,
+    min_seconds: f64,
+    max_rounds: usize,
+    passes: &mut [&mut dyn FnMut()],
+) -> Vec<f64> {
+    let mut samples = vec![Vec::new(); passes.len()];
+    let mut round = 0usize;
+    let mut elapsed = 0.0;
+    loop {
+        for (p, s) in passes.iter_mut().zip(samples.iter_mut()) {
+            let start = Instant::now();
+            p();
+            let t = start.elapsed().as_secs_f64();
+            elapsed += t;
+            s.push(t);
+        }
+        round += 1;
+        if round >= max_rounds.max(1) || (round >= reps.max(1) && elapsed >= min_seconds) {
+            break;
+        }
+    }
+    samples.into_iter().map(median).collect()
+}
+
+fn median(mut t: Vec<f64>) -> f64 {
+    t.sort_by(f64::total_cmp);
+    let m = t.len() / 2;
+    if t.len() % 2 == 1 { t[m] } else { 0.5 * (t[m - 1] + t[m]) }
+}
+
+/// The scenes directory of this checkout.
+pub fn scenes_dir() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes")
+}

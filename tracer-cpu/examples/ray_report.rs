@@ -1,0 +1,391 @@
+//! The whole CPU ray-throughput report: primary, shadow and secondary rays per second on the
+//! bunny, the dragon and the million-triangle scene at 640 x 480 and 1920 x 1440, one thread and
+//! all threads, ours (ordered, stackless, AVX2 packets) against Embree (single rays, default and
+//! robust scene flags, and 8-ray packets) tracing the same rays on the same triangles. Writes
+//! `docs/cpu-benchmark.md` and prints the same markdown to stdout; progress goes to stderr.
+//!
+//! ```text
+//! cargo run --release -p tracer-cpu --features embree --example ray_report -- [options]
+//!   --scene NAME=PATH   a scene to measure (repeatable; default bunny, dragon and million from
+//!                       scenes/, or from the checkout's scenes/ when ./scenes does not exist)
+//!   --out PATH          where to write the markdown (default docs/cpu-benchmark.md; - for none)
+//!   --reps N            least timed rounds per measurement, the median is reported (default 5;
+//!                       scenes over 500k triangles at 1920 x 1440 use half, at least 2; quick
+//!                       cases run more rounds, up to 2 s)
+//!   --threads LIST      thread counts, e.g. 1,16 (default 1 and all)
+//!   --sizes LIST        e.g. 640x480,1920x1440 (the default)
+//! ```
+//!
+//! Built once, the binary runs anywhere with the Embree 3 shared library (libembree3-3 and its
+//! dependency libtbb12 on Debian and Ubuntu): copy it with `scenes/` and pass `--scene` paths.
+
+#[path = "../benches/rayset/mod.rs"]
+mod rayset;
+
+use rayset::{Engine, Kind, RaySet};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use tracer_cpu::embree::{self, Flags};
+use tracer_cpu::{Method, Tracer, packet};
+
+/// The tracers of the table, in column order.
+const ENGINES: [&str; 6] = ["ours ordered", "ours stackless", "ours packet", "Embree 1", "Embree 1 robust", "Embree 8"];
+const ORDERED: usize = 0;
+const PACKET: usize = 2;
+const EMBREE1: usize = 3;
+const ROBUST: usize = 4;
+const EMBREE8: usize = 5;
+/// Timed rounds go on at least this long per (ray set, thread count), so that the quick cases are
+/// not a handful of 30 ms samples on a shared machine ...
+const MIN_SECONDS: f64 = 2.0;
+/// ... nor more than this many rounds.
+const MAX_ROUNDS: usize = 25;
+
+struct Options {
+    scenes: Vec<(String, PathBuf)>,
+    out: Option<PathBuf>,
+    reps: usize,
+    threads: Vec<usize>,
+    sizes: Vec<(u32, u32)>,
+}
+
+fn parse_args() -> Result<Options, String> {
+    let all = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let dir = if Path::new("scenes").is_dir() { PathBuf::from("scenes") } else { rayset::scenes_dir() };
+    let mut o = Options {
+        scenes: Vec::new(),
+        out: Some(PathBuf::from("docs/cpu-benchmark.md")),
+        reps: 5,
+        threads: if all > 1 { vec![1, all] } else { vec![1] },
+        sizes: vec![(640, 480), (1920, 1440)],
+    };
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        let mut value = || args.next().ok_or_else(|| format!("{a} needs a value"));
+        match a.as_str() {
+            "--scene" => {
+                let v = value()?;
+                let (name, path) = v.split_once('=').ok_or("--scene takes NAME=PATH")?;
+                o.scenes.push((name.to_owned(), PathBuf::from(path)));
+            }
+            "--out" => {
+                let v = value()?;
+                o.out = (v != "-").then(|| PathBuf::from(v));
+            }
+            "--reps" => o.reps = value()?.parse().map_err(|_| "--reps takes a number")?,
+            "--threads" => {
+                o.threads = value()?
+                    .split(',')
+                    .map(|t| t.trim().parse().map_err(|_| format!("bad thread count {t:?}")))
+                    .collect::<Result<_, _>>()?
+            }
+            "--sizes" => {
+                o.sizes = value()?
+                    .split(',')
+                    .map(|s| {
+                        let (w, h) = s.split_once('x').ok_or(format!("bad size {s:?}"))?;
+                        Ok((
+                            w.parse().map_err(|_| format!("bad size {s:?}"))?,
+                            h.parse().map_err(|_| format!("bad size {s:?}"))?,
+                        ))
+                    })
+                    .collect::<Result<_, String>>()?
+            }
+            "-h" | "--help" => {
+                eprintln!("see the top of tracer-cpu/examples/ray_report.rs for the options");
+                std::process::exit(0);
+            }
+            _ => return Err(format!("unknown argument {a:?}")),
+        }
+    }
+    if o.scenes.is_empty() {
+        o.scenes =
+            ["bunny", "dragon", "million"].iter().map(|n| (n.to_string(), dir.join(format!("{n}.toml")))).collect();
+    }
+    Ok(o)
+}
+
+/// One measured (scene, size, kind, threads) line: Mrays/s per engine (None where it cannot run).
+struct Row {
+    scene: String,
+    size: (u32, u32),
+    kind: Kind,
+    rays: usize,
+    threads: usize,
+    mrays: [Option<f64>; ENGINES.len()],
+}
+
+/// Hit agreement of each engine with Embree's default single-ray results, per ray set.
+struct Agreement {
+    scene: String,
+    size: (u32, u32),
+    kind: Kind,
+    rays: usize,
+    agree: [Option<(usize, usize)>; ENGINES.len()],
+}
+
+fn sh(cmd: &str, args: &[&str]) -> String {
+    std::process::Command::new(cmd)
+        .args(args)
+        .output()
+        .ok()
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_owned())
+        .unwrap_or_default()
+}
+
+fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map_or("?".into(), |s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+}
+
+fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_owned())
+        })
+        .unwrap_or_else(|| "?".into())
+}
+
+fn main() {
+    let opts = parse_args().unwrap_or_else(|e| {
+        eprintln!("ray_report: {e}");
+        std::process::exit(2)
+    });
+    let started = Instant::now();
+    let load_before = loadavg();
+    let pools: Vec<_> = opts
+        .threads
+        .iter()
+        .map(|&n| (n, rayon::ThreadPoolBuilder::new().num_threads(n).build().expect("a thread pool")))
+        .collect();
+    let all_pool = &pools.last().expect("at least one thread count").1;
+    let mut rows = Vec::new();
+    let mut agreements = Vec::new();
+    let mut scene_lines = Vec::new();
+
+    for (name, path) in &opts.scenes {
+        let t = Instant::now();
+        let scene = rayset::load(path).unwrap_or_else(|e| {
+            eprintln!("ray_report: {e}");
+            std::process::exit(1)
+        });
+        let n_tris = scene.triangles.len();
+        eprintln!("{name}: {n_tris} triangles, compiled in {:.1} s", t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let em = embree::Scene::new(&scene.triangles, Flags::Default).expect("Embree builds the scene");
+        let em_robust = embree::Scene::new(&scene.triangles, Flags::Robust).expect("Embree builds the scene");
+        eprintln!("{name}: Embree's two BVHs built in {:.1} s (not timed below)", t.elapsed().as_secs_f64());
+        scene_lines.push(format!("{name} ({n_tris} triangles, {})", path.display()));
+        let tracer = Tracer::new(&scene);
+        let engines: [Option<Engine>; ENGINES.len()] = [
+            Some(Engine::Scalar(&tracer, Method::Ordered)),
+            scene.escape.is_some().then_some(Engine::Scalar(&tracer, Method::Stackless)),
+            packet::available().then_some(Engine::Packet(&tracer)),
+            Some(Engine::Embree1(&em)),
+            Some(Engine::Embree1(&em_robust)),
+            Some(Engine::Embree8(&em)),
+        ];
+
+        for &(w, h) in &opts.sizes {
+            let t = Instant::now();
+            let sets: [RaySet; 3] = all_pool.install(|| rayset::generate(&scene, w, h)).unwrap_or_else(|e| {
+                eprintln!("ray_report: {name}: {e}");
+                std::process::exit(1)
+            });
+            eprintln!("{name} {w}x{h}: ray sets generated in {:.1} s", t.elapsed().as_secs_f64());
+            let reps = if n_tris > 500_000 && w * h > 1_000_000 { big_reps(opts.reps) } else { opts.reps };
+            for set in &sets {
+                // One untimed pass of every engine on all threads gives the outputs to compare.
+                let outputs: Vec<Option<Vec<f32>>> = engines
+                    .iter()
+                    .map(|e| {
+                        e.map(|e| {
+                            let mut out = vec![rayset::NO_RAY; set.rays.len()];
+                            all_pool.install(|| rayset::trace(e, set, &mut out));
+                            out
+                        })
+                    })
+                    .collect();
+                let reference = outputs[EMBREE1].as_ref().expect("Embree always runs");
+                agreements.push(Agreement {
+                    scene: name.clone(),
+                    size: (w, h),
+                    kind: set.kind,
+                    rays: set.count,
+                    agree: std::array::from_fn(|i| outputs[i].as_ref().map(|o| rayset::agreement(o, reference))),
+                });
+                drop(outputs);
+                let mut outs: Vec<Vec<f32>> = engines.iter().map(|_| vec![rayset::NO_RAY; set.rays.len()]).collect();
+                for (threads, pool) in &pools {
+                    let mut passes: Vec<(usize, Box<dyn FnMut() + '_>)> = Vec::new();
+                    for ((i, e), out) in engines.iter().enumerate().zip(outs.iter_mut()) {
+                        let Some(e) = *e else { continue };
+                        passes.push((i, Box::new(move || pool.install(|| rayset::trace(e, set, out)))));
+                    }
+                    let mut refs: Vec<&mut dyn FnMut()> =
+                        passes.iter_mut().map(|(_, p)| &mut **p as &mut dyn FnMut()).collect();
+                    let medians = rayset::interleaved_medians(reps, MIN_SECONDS, MAX_ROUNDS, &mut refs);
+                    let mut mrays = [None; ENGINES.len()];
+                    for ((i, _), s) in passes.iter().zip(medians) {
+                        mrays[*i] = Some(set.count as f64 / s / 1e6);
+                    }
+                    eprintln!(
+                        "{name} {w}x{h} {:9} {threads:2} threads: {}",
+                        set.kind.name(),
+                        mrays.iter().map(|m| m.map_or("-".into(), |m| format!("{m:.2}"))).collect::<Vec<_>>().join(" ")
+                    );
+                    rows.push(Row {
+                        scene: name.clone(),
+                        size: (w, h),
+                        kind: set.kind,
+                        rays: set.count,
+                        threads: *threads,
+                        mrays,
+                    });
+                }
+            }
+        }
+    }
+
+    let md = markdown(&opts, &rows, &agreements, &scene_lines, &load_before, started.elapsed().as_secs_f64());
+    print!("{md}");
+    if let Some(out) = &opts.out {
+        if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+            let _ = std::fs::create_dir_all(dir);
+        }
+        match std::fs::write(out, &md) {
+            Ok(()) => eprintln!("wrote {}", out.display()),
+            Err(e) => eprintln!("ray_report: cannot write {}: {e}", out.display()),
+        }
+    }
+}
+
+/// Rounds for the big dense cases, whose passes take seconds: fewer keep the whole run short.
+fn big_reps(reps: usize) -> usize {
+    reps.div_ceil(2).max(2)
+}
+
+fn ratio(a: Option<f64>, b: Option<f64>) -> String {
+    match (a, b) {
+        (Some(a), Some(b)) if b > 0.0 => format!("{:.0}%", 100.0 * a / b),
+        _ => "-".into(),
+    }
+}
+
+fn markdown(
+    opts: &Options,
+    rows: &[Row],
+    agreements: &[Agreement],
+    scenes: &[String],
+    load_before: &str,
+    seconds: f64,
+) -> String {
+    let mut s = String::new();
+    let host = sh("hostname", &[]);
+    let date = sh("date", &["-u", "+%Y-%m-%d %H:%M UTC"]);
+    let nproc = std::thread::available_parallelism().map_or(0, |n| n.get());
+    let command: Vec<String> = std::env::args().collect();
+    let _ = writeln!(s, "## {} ({nproc} threads), {date}\n", cpu_model());
+    let _ = writeln!(s, "- Machine: `{host}`, CPU `{}`, `nproc` = {nproc}, {}", cpu_model(), simd_flags());
+    let _ = writeln!(s, "- Load average (1, 5, 15 min): {load_before} before, {} after", loadavg());
+    let _ = writeln!(s, "- Command: `{}` ({seconds:.0} s in all)", command.join(" "));
+    let _ = writeln!(
+        s,
+        "- Each figure: rays traced / median time of one pass over the whole ray set. Passes of the six \
+         tracers are interleaved round by round (so load changes hit all alike), after one untimed pass \
+         of each on all threads; at least {} rounds ({} for scenes over 500k triangles at 1920x1440) and \
+         at least {MIN_SECONDS} s of passes per row, at most {MAX_ROUNDS} rounds",
+        opts.reps,
+        big_reps(opts.reps)
+    );
+    let _ = writeln!(s, "- Scenes: {}\n", scenes.join("; "));
+
+    let _ = writeln!(s, "### Primary rays: ours / Embree single rays (target: packet >= 70%)\n");
+    let _ = writeln!(
+        s,
+        "| scene | size | threads | ours packet / Embree 1 | ours ordered / Embree 1 | ours packet / Embree 1 robust | ours packet / Embree 8 |"
+    );
+    let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|");
+    for r in rows.iter().filter(|r| r.kind == Kind::Primary) {
+        let _ = writeln!(
+            s,
+            "| {} | {}x{} | {} | {} | {} | {} | {} |",
+            r.scene,
+            r.size.0,
+            r.size.1,
+            r.threads,
+            ratio(r.mrays[PACKET], r.mrays[EMBREE1]),
+            ratio(r.mrays[ORDERED], r.mrays[EMBREE1]),
+            ratio(r.mrays[PACKET], r.mrays[ROBUST]),
+            ratio(r.mrays[PACKET], r.mrays[EMBREE8]),
+        );
+    }
+
+    let _ = writeln!(s, "\n### Throughput, million rays per second\n");
+    let _ = writeln!(
+        s,
+        "| scene | size | rays | kind | threads | {} | packet / Embree 1 | ordered / Embree 1 |",
+        ENGINES.join(" | ")
+    );
+    let _ = writeln!(s, "|---|---|---:|---|---:|{}---:|---:|", "---:|".repeat(ENGINES.len()));
+    for r in rows {
+        let cells: Vec<String> = r.mrays.iter().map(|m| m.map_or("-".into(), |m| format!("{m:.2}"))).collect();
+        let _ = writeln!(
+            s,
+            "| {} | {}x{} | {} | {} | {} | {} | {} | {} |",
+            r.scene,
+            r.size.0,
+            r.size.1,
+            r.rays,
+            r.kind.name(),
+            r.threads,
+            cells.join(" | "),
+            ratio(r.mrays[PACKET], r.mrays[EMBREE1]),
+            ratio(r.mrays[ORDERED], r.mrays[EMBREE1]),
+        );
+    }
+
+    let _ = writeln!(
+        s,
+        "\n### Hit agreement with Embree 1 (default flags)\n\nShare of rays with the same hit/miss \
+         (for shadow rays: blocked/unblocked) and, for hits, `|t - t_embree| <= 1e-4 t_embree`.\n"
+    );
+    let others: Vec<usize> = (0..ENGINES.len()).filter(|&i| i != EMBREE1).collect();
+    let _ = writeln!(
+        s,
+        "| scene | size | kind | rays | {} |",
+        others.iter().map(|&i| ENGINES[i]).collect::<Vec<_>>().join(" | ")
+    );
+    let _ = writeln!(s, "|---|---|---|---:|{}", "---:|".repeat(others.len()));
+    for a in agreements {
+        let cells: Vec<String> =
+            others.iter().map(|&i| a.agree[i].map_or("-".into(), |(same, n)| agree_cell(same, n))).collect();
+        let _ = writeln!(
+            s,
+            "| {} | {}x{} | {} | {} | {} |",
+            a.scene,
+            a.size.0,
+            a.size.1,
+            a.kind.name(),
+            a.rays,
+            cells.join(" | ")
+        );
+    }
+    s.push('\n');
+    s
+}
+
+fn agree_cell(same: usize, n: usize) -> String {
+    let pct = if n == 0 { 100.0 } else { 100.0 * same as f64 / n as f64 };
+    format!("{pct:.3}% ({} differ)", n - same)
+}
+
+fn simd_flags() -> String {
+    let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let flags = cpuinfo.lines().find(|l| l.starts_with("flags")).unwrap_or("");
+    let has = |f: &str| flags.split_whitespace().any(|x| x == f);
+    let list: Vec<&str> = ["avx2", "fma", "avx512f"].into_iter().filter(|f| has(f)).collect();
+    format!("SIMD: {}", if list.is_empty() { "none of avx2/fma/avx512f".into() } else { list.join(", ") })
+}

@@ -1,0 +1,239 @@
+//! Embree 3 over the very triangles a scene file stores, for the ray benchmark's comparison
+//! (`--features embree`, needs libembree-dev). Nothing in rendering uses it.
+//!
+//! Built on the `embree` crate's raw `sys` bindings (bindgen output for Embree 3, with layout
+//! tests) rather than its safe wrappers: those tie the committed scene to borrows of the scene and
+//! the device, which cannot live in one struct, and do not wrap `rtcIntersect8`/`rtcOccluded8`.
+
+use crate::geometry::Ray;
+use crate::packet::{LANES, Rays};
+use bvh_format::Triangle;
+use embree::sys::*;
+use std::ptr;
+
+/// Embree's scene flags that matter for the comparison.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Flags {
+    /// Embree's defaults: medium build quality, no flags.
+    Default,
+    /// `RTC_SCENE_FLAG_ROBUST`: no optimisations that lose accuracy (our traversal is
+    /// conservative too, so this is the like-for-like setting).
+    Robust,
+}
+
+/// A committed Embree scene of one triangle mesh, triangle `i` of the input being `primID` `i`.
+pub struct Scene {
+    device: RTCDevice,
+    scene: RTCScene,
+}
+
+// SAFETY: Embree allows any number of threads to trace a committed scene at once; nothing here
+// changes the scene after `new`, and the handles are released only in `drop`.
+unsafe impl Send for Scene {}
+unsafe impl Sync for Scene {}
+
+// The valid masks of rtcIntersect8/rtcOccluded8 must be 32-byte aligned.
+#[repr(C, align(32))]
+struct Valid([i32; LANES]);
+
+fn context(flags: RTCIntersectContextFlags) -> RTCIntersectContext {
+    // What the header's inline rtcInitIntersectContext does, with the flags chosen.
+    RTCIntersectContext { flags, filter: None, instID: [u32::MAX] }
+}
+
+fn rtc_ray(ray: &Ray, t_min: f32, t_max: f32) -> RTCRay {
+    RTCRay {
+        org_x: ray.origin.x,
+        org_y: ray.origin.y,
+        org_z: ray.origin.z,
+        tnear: t_min,
+        dir_x: ray.dir.x,
+        dir_y: ray.dir.y,
+        dir_z: ray.dir.z,
+        time: 0.0,
+        tfar: t_max,
+        mask: u32::MAX,
+        id: 0,
+        flags: 0,
+    }
+}
+
+impl Scene {
+    /// Builds Embree's BVH over `tris` (vertices `v0`, `v0 + e1`, `v0 + e2`, unshared).
+    pub fn new(tris: &[Triangle], flags: Flags) -> Result<Self, String> {
+        let n = tris.len();
+        // SAFETY: every handle is checked before use; the buffers Embree allocates are written
+        // within the sizes requested.
+        unsafe {
+            let device = rtcNewDevice(ptr::null());
+            if device.is_null() {
+                return Err(format!("Embree: rtcNewDevice failed ({:?})", rtcGetDeviceError(ptr::null_mut())));
+            }
+            let scene = rtcNewScene(device);
+            let this = Self { device, scene };
+            if flags == Flags::Robust {
+                rtcSetSceneFlags(scene, RTCSceneFlags::ROBUST);
+            }
+            let geom = rtcNewGeometry(device, RTCGeometryType::TRIANGLE);
+            // A 16-byte stride keeps every vertex readable as a whole SIMD word, as Embree prefers.
+            let verts = rtcSetNewGeometryBuffer(geom, RTCBufferType::VERTEX, 0, RTCFormat::FLOAT3, 16, 3 * n)
+                .cast::<[f32; 4]>();
+            let index =
+                rtcSetNewGeometryBuffer(geom, RTCBufferType::INDEX, 0, RTCFormat::UINT3, 12, n).cast::<[u32; 3]>();
+            if verts.is_null() || index.is_null() {
+                rtcReleaseGeometry(geom);
+                return Err(format!("Embree: cannot allocate buffers for {n} triangles"));
+            }
+            let verts = std::slice::from_raw_parts_mut(verts, 3 * n);
+            let index = std::slice::from_raw_parts_mut(index, n);
+            for (i, t) in tris.iter().enumerate() {
+                let v0 = [t.v0[0], t.v0[1], t.v0[2]];
+                let v1 = [v0[0] + t.e1[0], v0[1] + t.e1[1], v0[2] + t.e1[2]];
+                let v2 = [v0[0] + t.e2[0], v0[1] + t.e2[1], v0[2] + t.e2[2]];
+                for (k, v) in [v0, v1, v2].into_iter().enumerate() {
+                    verts[3 * i + k] = [v[0], v[1], v[2], 0.0];
+                }
+                let b = 3 * i as u32;
+                index[i] = [b, b + 1, b + 2];
+            }
+            rtcCommitGeometry(geom);
+            rtcAttachGeometry(scene, geom);
+            rtcReleaseGeometry(geom);
+            rtcCommitScene(scene);
+            match rtcGetDeviceError(device) {
+                RTCError::NONE => Ok(this),
+                e => Err(format!("Embree: building the scene failed ({e:?})")),
+            }
+        }
+    }
+
+    /// Closest hit in `[t_min, t_max]`: distance and triangle index.
+    #[inline]
+    pub fn intersect1(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f32, u32)> {
+        let mut ctx = context(RTCIntersectContextFlags::INCOHERENT);
+        let mut rh = RTCRayHit {
+            ray: rtc_ray(ray, t_min, t_max),
+            hit: RTCHit {
+                Ng_x: 0.0,
+                Ng_y: 0.0,
+                Ng_z: 0.0,
+                u: 0.0,
+                v: 0.0,
+                primID: u32::MAX,
+                geomID: u32::MAX,
+                instID: [u32::MAX],
+            },
+        };
+        // SAFETY: the scene is committed; `ctx` and `rh` are valid and aligned for the call.
+        unsafe { rtcIntersect1(self.scene, &mut ctx, &mut rh) };
+        (rh.hit.geomID != u32::MAX).then_some((rh.ray.tfar, rh.hit.primID))
+    }
+
+    /// Whether anything lies in `[0, t_max]`.
+    #[inline]
+    pub fn occluded1(&self, ray: &Ray, t_max: f32) -> bool {
+        let mut ctx = context(RTCIntersectContextFlags::INCOHERENT);
+        let mut r = rtc_ray(ray, 0.0, t_max);
+        // SAFETY: as in `intersect1`.
+        unsafe { rtcOccluded1(self.scene, &mut ctx, &mut r) };
+        r.tfar == f32::NEG_INFINITY
+    }
+
+    fn packet(rays: &Rays) -> (Valid, RTCRay8) {
+        let r = &rays.rays;
+        let valid = Valid(std::array::from_fn(|i| if rays.valid[i] { -1 } else { 0 }));
+        let ray = RTCRay8 {
+            org_x: std::array::from_fn(|i| r[i].origin.x),
+            org_y: std::array::from_fn(|i| r[i].origin.y),
+            org_z: std::array::from_fn(|i| r[i].origin.z),
+            tnear: [0.0; LANES],
+            dir_x: std::array::from_fn(|i| r[i].dir.x),
+            dir_y: std::array::from_fn(|i| r[i].dir.y),
+            dir_z: std::array::from_fn(|i| r[i].dir.z),
+            time: [0.0; LANES],
+            tfar: rays.t_max,
+            mask: [u32::MAX; LANES],
+            id: [0; LANES],
+            flags: [0; LANES],
+        };
+        (valid, ray)
+    }
+
+    /// Closest hits of a packet (`t_min` 0, like [`crate::packet::trace`]), coherent context.
+    #[inline]
+    pub fn intersect8(&self, rays: &Rays) -> [Option<(f32, u32)>; LANES] {
+        let mut ctx = context(RTCIntersectContextFlags::COHERENT);
+        let (valid, ray) = Self::packet(rays);
+        let mut rh = RTCRayHit8 {
+            ray,
+            hit: RTCHit8 {
+                Ng_x: [0.0; LANES],
+                Ng_y: [0.0; LANES],
+                Ng_z: [0.0; LANES],
+                u: [0.0; LANES],
+                v: [0.0; LANES],
+                primID: [u32::MAX; LANES],
+                geomID: [u32::MAX; LANES],
+                instID: [[u32::MAX; LANES]],
+            },
+        };
+        // SAFETY: the scene is committed; `valid` and `rh` have the alignment Embree needs.
+        unsafe { rtcIntersect8(valid.0.as_ptr(), self.scene, &mut ctx, &mut rh) };
+        std::array::from_fn(|i| {
+            (rays.valid[i] && rh.hit.geomID[i] != u32::MAX).then_some((rh.ray.tfar[i], rh.hit.primID[i]))
+        })
+    }
+
+    /// Occlusion of a packet in `[0, t_max]` per lane, coherent context.
+    #[inline]
+    pub fn occluded8(&self, rays: &Rays) -> [bool; LANES] {
+        let mut ctx = context(RTCIntersectContextFlags::COHERENT);
+        let (valid, mut ray) = Self::packet(rays);
+        // SAFETY: as in `intersect8`.
+        unsafe { rtcOccluded8(valid.0.as_ptr(), self.scene, &mut ctx, &mut ray) };
+        std::array::from_fn(|i| rays.valid[i] && ray.tfar[i] == f32::NEG_INFINITY)
+    }
+}
+
+impl Drop for Scene {
+    fn drop(&mut self) {
+        // SAFETY: both handles came from Embree in `new` and are released once.
+        unsafe {
+            rtcReleaseScene(self.scene);
+            rtcReleaseDevice(self.device);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    #[test]
+    fn embree_finds_the_same_triangle_and_distance() {
+        let tris = [
+            Triangle::from_vertices([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]),
+            Triangle::from_vertices([0.0, 0.0, -1.0], [1.0, 0.0, -1.0], [0.0, 1.0, -1.0]),
+        ];
+        for flags in [Flags::Default, Flags::Robust] {
+            let s = Scene::new(&tris, flags).unwrap();
+            let down = Ray::new(Vec3::new(0.25, 0.25, 1.0), Vec3::NEG_Z);
+            assert_eq!(s.intersect1(&down, 0.0, f32::INFINITY), Some((1.0, 0)));
+            assert_eq!(s.intersect1(&down, 1.5, f32::INFINITY), Some((2.0, 1)));
+            assert_eq!(s.intersect1(&Ray::new(Vec3::new(2.0, 2.0, 1.0), Vec3::NEG_Z), 0.0, f32::INFINITY), None);
+            assert!(s.occluded1(&down, 1.5));
+            assert!(!s.occluded1(&down, 0.5));
+            let mut p = Rays { rays: [down; LANES], valid: [true; LANES], t_max: [f32::INFINITY; LANES] };
+            p.valid[3] = false;
+            p.t_max[5] = 0.5;
+            let hits = s.intersect8(&p);
+            let occ = s.occluded8(&p);
+            for i in 0..LANES {
+                let want = p.valid[i] && i != 5;
+                assert_eq!(hits[i], want.then_some((1.0, 0)), "lane {i}");
+                assert_eq!(occ[i], want, "lane {i}");
+            }
+        }
+    }
+}
