@@ -10,6 +10,17 @@ fn write_rgb(path: &Path, width: u32, height: u32, rgb: &[[u8; 3]]) -> Result<()
         .map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
 
+/// An 8-bit RGB image from any tracer.
+pub struct Frame<'a> {
+    pub width: u32,
+    pub height: u32,
+    pub rgb: &'a [[u8; 3]],
+}
+
+pub fn write_frame_png(path: &Path, f: &Frame<'_>) -> Result<(), String> {
+    write_rgb(path, f.width, f.height, f.rgb)
+}
+
 pub fn write_png(path: &Path, img: &Image) -> Result<(), String> {
     write_rgb(path, img.width, img.height, &img.rgb)
 }

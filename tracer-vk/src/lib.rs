@@ -9,6 +9,8 @@
 
 pub mod device;
 pub mod error;
+pub mod kernels;
+pub mod render;
 pub mod shader;
 
 /// The ash version the raw handles ([`Gpu::ash_device`], [`Recorder::raw`]) come from.

@@ -1,0 +1,129 @@
+//! The same scenes rendered by the Vulkan tracer and the CPU tracer, diffed pixel by pixel.
+//!
+//! Runs on whatever Vulkan device is present (lavapipe in CI) with the Khronos validation layer
+//! on. Without a Vulkan loader or device these tests fail with the sentence that says what to
+//! install: a skipped GPU test must never pass.
+
+use bvh_format::{NO_TRIANGLE, SceneFile};
+use std::path::Path;
+use tracer_cpu::{CameraSpec, Method, Tracer};
+use tracer_vk::Gpu;
+use tracer_vk::kernels::Method as VkMethod;
+use tracer_vk::render::{Mode as VkMode, Renderer, Settings};
+
+fn compile(name: &str) -> SceneFile {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name);
+    let scene = bvh_build::import::load(&p, &Default::default()).expect("the scene imports");
+    bvh_build::compile(&scene, &Default::default(), Default::default()).expect("the scene compiles")
+}
+
+fn gpu() -> Gpu {
+    match Gpu::new(None, true) {
+        Ok(g) => g,
+        Err(e) => panic!("the cross-backend tests need a Vulkan device: {e}"),
+    }
+}
+
+struct Diff {
+    within_one: f64,
+    flip_mean: f32,
+    prim_differs: usize,
+    prim_ties: usize,
+}
+
+fn diff(cpu: &tracer_cpu::Image, gpu: &tracer_vk::render::Output) -> Diff {
+    let n = cpu.rgb.len();
+    let within =
+        cpu.rgb.iter().zip(&gpu.rgb).filter(|(a, b)| a.iter().zip(b.iter()).all(|(x, y)| x.abs_diff(*y) <= 1)).count();
+    let flat = |rgb: &[[u8; 3]]| rgb.iter().flatten().copied().collect::<Vec<u8>>();
+    let reference = nv_flip::FlipImageRgb8::with_data(cpu.width, cpu.height, &flat(&cpu.rgb));
+    let test = nv_flip::FlipImageRgb8::with_data(gpu.width, gpu.height, &flat(&gpu.rgb));
+    let error = nv_flip::flip(reference, test, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
+    let flip_mean = nv_flip::FlipPool::from_image(&error).mean();
+
+    // Triangle ids: a different triangle at the same distance is an exact tie or a shared edge
+    // (both backends round differently there); anything else is a real disagreement.
+    let aov = cpu.aov.as_ref().expect("the CPU render keeps AOVs");
+    let (mut differs, mut ties) = (0, 0);
+    for i in 0..n {
+        if aov.prim[i] == gpu.prim[i] {
+            continue;
+        }
+        let (a, b) = (aov.t[i], gpu.t[i]);
+        let both_hit = aov.prim[i] != NO_TRIANGLE && gpu.prim[i] != NO_TRIANGLE;
+        if both_hit && (a - b).abs() <= 1e-4 * a.abs().max(b.abs()) {
+            ties += 1;
+        } else {
+            differs += 1;
+        }
+    }
+    Diff { within_one: within as f64 / n as f64, flip_mean, prim_differs: differs, prim_ties: ties }
+}
+
+fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32, h: u32) {
+    let cam = CameraSpec::from(scene.camera(camera).expect("the camera exists"));
+    let tracer = Tracer::new(scene);
+    for (mode, vk_mode) in [(tracer_cpu::Mode::Cast, VkMode::Cast), (tracer_cpu::Mode::Whitted, VkMode::Whitted)] {
+        let cpu = tracer_cpu::render(
+            &tracer,
+            &tracer_cpu::RenderSettings {
+                width: w,
+                height: h,
+                camera: cam,
+                mode,
+                lights: scene.lights.clone(),
+                max_indirections: scene.settings.max_indirections,
+                method: Method::Ordered,
+                aovs: true,
+            },
+        )
+        .expect("the CPU renders");
+        for method in [VkMethod::Lst, VkMethod::Stackless] {
+            let mut r = Renderer::new(gpu, scene, method, (8, 8)).expect("the scene uploads");
+            let settings = Settings {
+                width: w,
+                height: h,
+                camera: cam,
+                mode: vk_mode,
+                lights: scene.lights.clone(),
+                max_indirections: scene.settings.max_indirections,
+            };
+            let out = r.render(&settings).expect("the GPU renders");
+            let d = diff(&cpu, &out);
+            let what = format!("{scene_name} {camera} {mode:?} {}", method.name());
+            println!(
+                "{what}: {:.4}% of pixels within 1/255, FLIP mean {:.5}, triangle ids: {} differ at equal distance (ties), {} otherwise; rays GPU {:?} CPU [{}, {}, {}]",
+                d.within_one * 100.0,
+                d.flip_mean,
+                d.prim_ties,
+                d.prim_differs,
+                out.rays,
+                cpu.rays.primary,
+                cpu.rays.shadow,
+                cpu.rays.secondary
+            );
+            assert!(d.within_one >= 0.999, "{what}: only {:.4}% of pixels within 1/255", d.within_one * 100.0);
+            assert!(d.flip_mean < 0.01, "{what}: FLIP mean {}", d.flip_mean);
+            assert_eq!(d.prim_differs, 0, "{what}: triangle ids differ beyond ties");
+            assert!(d.prim_ties * 1000 <= (w * h) as usize, "{what}: {} ties is too many to be ties", d.prim_ties);
+            assert_eq!(out.rays[0], cpu.rays.primary, "{what}: primary rays");
+        }
+    }
+    let messages = gpu.validation_messages();
+    assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
+}
+
+#[test]
+fn bunny_on_a_mirror_floor_matches_the_cpu() {
+    let gpu = gpu();
+    let scene = compile("bunny.toml");
+    compare("bunny", &scene, "medium", &gpu, 160, 120);
+}
+
+#[test]
+fn room_with_mirror_and_glass_matches_the_cpu() {
+    let gpu = gpu();
+    let scene = compile("room.toml");
+    compare("room", &scene, "medium", &gpu, 160, 120);
+    compare("room", &scene, "close-up", &gpu, 120, 90);
+}

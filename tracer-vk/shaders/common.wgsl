@@ -1,0 +1,274 @@
+// Shared by every kernel: the scene's data, the frame's state, and the intersection and shading
+// arithmetic of docs/shading.md. The host prepends the constants STACK_SIZE, WG_X and WG_Y and
+// strips the blocks between `//#if FEATURE` and `//#endif` for features the scene lacks.
+
+struct Node {
+    min: vec3<f32>,
+    count: u32,
+    max: vec3<f32>,
+    index: u32,
+}
+
+struct Tri {
+    v0: vec4<f32>,
+    e1: vec4<f32>,
+    e2: vec4<f32>,
+}
+
+struct TriNormals {
+    n0: vec4<f32>,
+    n1: vec4<f32>,
+    n2: vec4<f32>,
+}
+
+// Material as the file stores it: (kd, shininess), (ks, kr), (kt, ior, -, -).
+struct Material {
+    kd_n: vec4<f32>,
+    ks_kr: vec4<f32>,
+    kt_ior: vec4<f32>,
+}
+
+struct Light {
+    position: vec4<f32>,
+    colour: vec4<f32>,
+}
+
+struct Frame {
+    eye: vec4<f32>,
+    top_left: vec4<f32>,
+    h_step: vec4<f32>,
+    v_step: vec4<f32>,
+    ambient: vec4<f32>,
+    background: vec4<f32>,
+    // width, height, light count, max indirections
+    size: vec4<u32>,
+    // bounce-stop bound B, largest kr/kt, -, -
+    stop: vec4<f32>,
+}
+
+// The current ray of a pixel: origin (w: path weight), direction (w: 1 while the path is alive).
+struct PathRay {
+    origin: vec4<f32>,
+    dir: vec4<f32>,
+}
+
+struct HitRec {
+    t: f32,
+    tri: u32,
+    u: f32,
+    v: f32,
+}
+
+struct Aov {
+    normal: vec4<f32>,
+    t: f32,
+    prim: u32,
+    nodes: u32,
+    tris: u32,
+}
+
+// Which light a shade pass handles, and which bounce a bounce pass is.
+struct Pass {
+    light: u32,
+    depth: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+@group(0) @binding(0) var<storage, read> frame: Frame;
+@group(0) @binding(1) var<storage, read> nodes: array<Node>;
+@group(0) @binding(2) var<storage, read> tris: array<Tri>;
+@group(0) @binding(3) var<storage, read> normals: array<TriNormals>;
+@group(0) @binding(4) var<storage, read> material_ids: array<u32>;
+@group(0) @binding(5) var<storage, read> materials: array<Material>;
+@group(0) @binding(6) var<storage, read> lights: array<Light>;
+@group(0) @binding(7) var<storage, read> input_index: array<u32>;
+@group(0) @binding(8) var<storage, read_write> paths: array<PathRay>;
+@group(0) @binding(9) var<storage, read_write> hits: array<HitRec>;
+@group(0) @binding(10) var<storage, read_write> accum: array<vec4<f32>>;
+@group(0) @binding(11) var<storage, read_write> aovs: array<Aov>;
+@group(0) @binding(12) var<storage, read_write> image: array<u32>;
+// primary, shadow, secondary ray counts
+@group(0) @binding(13) var<storage, read_write> counters: array<atomic<u32>, 4>;
+@group(0) @binding(14) var<storage, read> pass_info: Pass;
+
+const NO_HIT: u32 = 0xffffffffu;
+const T_SLACK: f32 = 9.5367431640625e-7; // 2^-20
+
+// Work done by the current invocation's rays, for the cost AOV.
+var<private> cost_nodes: u32;
+var<private> cost_tris: u32;
+
+struct Ray {
+    o: vec3<f32>,
+    d: vec3<f32>,
+    inv: vec3<f32>,
+}
+
+fn make_ray(o: vec3<f32>, d: vec3<f32>) -> Ray {
+    return Ray(o, d, vec3<f32>(1.0) / d);
+}
+
+fn is_nan(x: f32) -> bool {
+    // Bit test: comparisons with themselves may be folded away by a driver's compiler.
+    return (bitcast<u32>(x) & 0x7fffffffu) > 0x7f800000u;
+}
+
+fn may_hold(near: f32, t: f32) -> bool {
+    return near <= t + abs(t) * T_SLACK;
+}
+
+// Slab test; returns the entry distance, or -1 for a miss. An axis with a NaN distance (origin in
+// the face's plane, direction parallel to it) is skipped, as on the CPU.
+fn slab(n: Node, r: Ray, t_max: f32) -> f32 {
+    let lo = (n.min - r.o) * r.inv;
+    let hi = (n.max - r.o) * r.inv;
+    var near = 0.0;
+    var far = t_max;
+    for (var a = 0u; a < 3u; a++) {
+        let t0 = lo[a];
+        let t1 = hi[a];
+        if is_nan(t0) || is_nan(t1) {
+            continue;
+        }
+        let enter = select(t0, t1, t1 < t0);
+        let exit = select(t1, t0, t0 > t1);
+        near = select(near, enter, enter > near);
+        far = select(far, exit, exit < far);
+    }
+    return select(-1.0, near, may_hold(near, far));
+}
+
+// Möller-Trumbore in the CPU's operation order; returns (t, u, v) or t = -1 for a miss.
+fn intersect(tri: Tri, r: Ray, t_min: f32, t_max: f32) -> vec3<f32> {
+    let d = r.d;
+    let e1 = tri.e1.xyz;
+    let e2 = tri.e2.xyz;
+    let p = vec3<f32>(d.y * e2.z - e2.y * d.z, d.z * e2.x - e2.z * d.x, d.x * e2.y - e2.x * d.y);
+    let det = e1.x * p.x + e1.y * p.y + e1.z * p.z;
+    if det == 0.0 {
+        return vec3<f32>(-1.0, 0.0, 0.0);
+    }
+    let inv = 1.0 / det;
+    let s = r.o - tri.v0.xyz;
+    let u = (s.x * p.x + s.y * p.y + s.z * p.z) * inv;
+    if u < 0.0 || u > 1.0 {
+        return vec3<f32>(-1.0, 0.0, 0.0);
+    }
+    let q = vec3<f32>(s.y * e1.z - e1.y * s.z, s.z * e1.x - e1.z * s.x, s.x * e1.y - e1.x * s.y);
+    let v = (d.x * q.x + d.y * q.y + d.z * q.z) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return vec3<f32>(-1.0, 0.0, 0.0);
+    }
+    let t = (e2.x * q.x + e2.y * q.y + e2.z * q.z) * inv;
+    if t > t_min && t <= t_max {
+        return vec3<f32>(t, u, v);
+    }
+    return vec3<f32>(-1.0, 0.0, 0.0);
+}
+
+// Tests a leaf's triangles against the best hit so far (nearer wins, then the lower index).
+fn intersect_leaf(n: Node, r: Ray, t_min: f32, best: ptr<function, HitRec>, any_hit: bool) -> bool {
+    for (var i = n.index; i < n.index + n.count; i++) {
+        cost_tris += 1u;
+        let h = intersect(tris[i], r, t_min, (*best).t);
+        if h.x >= 0.0 && (h.x < (*best).t || (h.x == (*best).t && i < (*best).tri)) {
+            *best = HitRec(h.x, i, h.y, h.z);
+            if any_hit {
+                return true;
+            }
+        }
+    }
+    return false;
+}
+
+// Moves a point off a surface along the unit normal n (Wächter and Binder 2019).
+fn offset_origin(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    let of_i = vec3<i32>(n * 256.0);
+    var p_i: vec3<f32>;
+    for (var a = 0u; a < 3u; a++) {
+        let bits = bitcast<i32>(p[a]);
+        p_i[a] = bitcast<f32>(select(bits + of_i[a], bits - of_i[a], p[a] < 0.0));
+    }
+    var out: vec3<f32>;
+    for (var a = 0u; a < 3u; a++) {
+        out[a] = select(p_i[a], p[a] + n[a] / 65536.0, abs(p[a]) < 1.0 / 32.0);
+    }
+    return out;
+}
+
+struct Surface {
+    point: vec3<f32>,
+    geometric: vec3<f32>,
+    shading: vec3<f32>,
+    front: bool,
+}
+
+fn surface_at(r: Ray, h: HitRec) -> Surface {
+    let tri = tris[h.tri];
+    let point = r.o + h.t * r.d;
+    let raw = cross(tri.e1.xyz, tri.e2.xyz);
+    let len = length(raw);
+    var ng = -r.d;
+    if len > 0.0 && len < 3.4e38 {
+        ng = raw / len;
+    }
+    let front = dot(r.d, ng) < 0.0;
+    let geometric = select(-ng, ng, front);
+    let nn = normals[h.tri];
+    let interp = (1.0 - h.u - h.v) * nn.n0.xyz + h.u * nn.n1.xyz + h.v * nn.n2.xyz;
+    let il = length(interp);
+    var shading = geometric;
+    if il > 0.0 && il < 3.4e38 {
+        shading = interp / il;
+        if dot(shading, geometric) < 0.0 {
+            shading = -shading;
+        }
+    }
+    return Surface(point, geometric, shading, front);
+}
+
+fn material_of(tri: u32) -> Material {
+    return materials[material_ids[tri]];
+}
+
+fn reflect_dir(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    return d - 2.0 * dot(d, n) * n;
+}
+
+// kd cos(theta) + ks cos(phi)^n for a light in direction l; zero when the light is behind.
+fn phong(m: Material, s: Surface, d: vec3<f32>, l: vec3<f32>) -> vec3<f32> {
+    let cos_t = dot(s.shading, l);
+    if cos_t <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let r = reflect_dir(-l, s.shading);
+    let cos_p = max(dot(r, -d), 0.0);
+    var spec = 1.0;
+    if m.kd_n.w > 0.0 {
+        spec = pow(cos_p, m.kd_n.w);
+    }
+    return m.kd_n.xyz * cos_t + m.ks_kr.xyz * spec;
+}
+
+fn worth_tracing(w: f32, remaining: u32) -> bool {
+    var chain = 0.0;
+    var f = 1.0;
+    for (var i = 0u; i < remaining; i++) {
+        chain += f;
+        f *= frame.stop.y;
+        if f < 1e-9 {
+            break;
+        }
+    }
+    return w * frame.stop.x * chain >= 0.5 / 255.0;
+}
+
+fn to_rgba8(c: vec3<f32>) -> u32 {
+    let q = vec3<u32>(clamp(c, vec3<f32>(0.0), vec3<f32>(1.0)) * 255.0 + 0.5);
+    return q.x | (q.y << 8u) | (q.z << 16u) | (255u << 24u);
+}
+
+fn primary_dir(x: u32, y: u32) -> vec3<f32> {
+    return normalize(frame.top_left.xyz + (f32(x) + 0.5) * frame.h_step.xyz + (f32(y) + 0.5) * frame.v_step.xyz);
+}

@@ -1,0 +1,171 @@
+//! Assembling and specialising the WGSL kernels: the common file, one traversal file and the
+//! pipeline stages, with per-scene constants prepended and unneeded shading features stripped.
+//!
+//! Specialisation is by generated constants, not naga's pipeline overrides: the per-invocation
+//! stack of LST is a function-scope array, which WGSL only lets a `const` size (naga rejects an
+//! `override`-sized one), and features left out of the text are truly absent from the SPIR-V.
+
+use crate::error::VkError;
+use crate::shader;
+
+const COMMON: &str = include_str!("../shaders/common.wgsl");
+const LST: &str = include_str!("../shaders/lst.wgsl");
+const STACKLESS: &str = include_str!("../shaders/stackless.wgsl");
+const STAGES: &str = include_str!("../shaders/stages.wgsl");
+
+/// GPU traversal methods (thesis 4.3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// Per-invocation stack over the child-pair layout (thesis 4.3.2).
+    Lst,
+    /// Escape-pointer walk, no stack (thesis 4.3.4).
+    Stackless,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Lst => "lst",
+            Method::Stackless => "stackless",
+        }
+    }
+}
+
+/// The kernels of the stream pipeline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Stage {
+    /// Ray casting: trace and shade in one kernel.
+    Cast,
+    /// Whitted: trace the primary rays.
+    Primary,
+    /// Whitted: one light (and the ambient term) at every live path's hit, shadow ray included.
+    Shade,
+    /// Whitted: trace one secondary ray per live path.
+    Bounce,
+    /// Whitted: accumulated radiance to 8 bits.
+    Convert,
+}
+
+impl Stage {
+    fn entry(self) -> &'static str {
+        match self {
+            Stage::Cast => "stage_cast",
+            Stage::Primary => "stage_primary",
+            Stage::Shade => "stage_shade",
+            Stage::Bounce => "stage_bounce",
+            Stage::Convert => "stage_convert",
+        }
+    }
+}
+
+/// What a scene needs from its kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Specialisation {
+    pub method: Method,
+    /// Entries of LST's stack: the file's max depth (at least 1).
+    pub stack_size: u32,
+    pub workgroup: (u32, u32),
+    /// Some material reflects (kr > 0).
+    pub reflection: bool,
+    /// Some material refracts (kt > 0).
+    pub refraction: bool,
+}
+
+/// Drops the lines between `//#if NAME` and `//#endif` when NAME is not enabled (no nesting).
+pub fn strip_features(src: &str, enabled: &[&str]) -> String {
+    let mut out = String::with_capacity(src.len());
+    let mut keep = true;
+    for line in src.lines() {
+        let t = line.trim();
+        if let Some(name) = t.strip_prefix("//#if ") {
+            keep = enabled.contains(&name.trim());
+            continue;
+        }
+        if t == "//#endif" {
+            keep = true;
+            continue;
+        }
+        if keep {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// The complete WGSL source of one kernel.
+pub fn source(stage: Stage, spec: &Specialisation) -> String {
+    let mut features = Vec::new();
+    if spec.reflection {
+        features.push("REFLECTION");
+    }
+    if spec.refraction {
+        features.push("REFRACTION");
+    }
+    let traversal = match spec.method {
+        Method::Lst => LST,
+        Method::Stackless => STACKLESS,
+    };
+    format!(
+        "const STACK_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n{}\n{}\n{}\n\
+         @compute @workgroup_size(WG_X, WG_Y)\n\
+         fn main(@builtin(global_invocation_id) gid: vec3<u32>) {{\n\
+         \x20   if gid.x >= frame.size.x || gid.y >= frame.size.y {{\n        return;\n    }}\n\
+         \x20   {}(gid.x, gid.y);\n}}\n",
+        spec.stack_size.max(1),
+        spec.workgroup.0,
+        spec.workgroup.1,
+        COMMON,
+        traversal,
+        strip_features(STAGES, &features),
+        stage.entry()
+    )
+}
+
+/// Translates one kernel to SPIR-V.
+pub fn compile(stage: Stage, spec: &Specialisation) -> Result<Vec<u32>, VkError> {
+    let label = format!("{} {:?} kernel", spec.method.name(), stage);
+    shader::translate(&source(stage, spec), &label, &[])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(method: Method, reflection: bool, refraction: bool) -> Specialisation {
+        Specialisation { method, stack_size: 23, workgroup: (8, 8), reflection, refraction }
+    }
+
+    #[test]
+    fn every_kernel_translates_for_every_specialisation() {
+        for method in [Method::Lst, Method::Stackless] {
+            for (r, t) in [(false, false), (true, false), (false, true), (true, true)] {
+                for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert] {
+                    let s = spec(method, r, t);
+                    if let Err(e) = compile(stage, &s) {
+                        panic!("{method:?} {stage:?} reflection {r} refraction {t}: {e:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn features_and_stack_size_follow_the_scene() {
+        let s = source(Stage::Bounce, &spec(Method::Lst, true, false));
+        assert!(s.contains("const STACK_SIZE: u32 = 23u;"));
+        assert!(s.contains("reflect_dir(r.d, s.shading)") && !s.contains("1.0 / m.kt_ior.y"));
+        let s = source(Stage::Bounce, &spec(Method::Lst, false, true));
+        assert!(s.contains("1.0 / m.kt_ior.y") && !s.contains("factor = m.ks_kr.w"));
+        let s = source(Stage::Bounce, &spec(Method::Lst, false, false));
+        assert!(!s.contains("1.0 / m.kt_ior.y") && !s.contains("factor = m.ks_kr.w"));
+        assert!(source(Stage::Primary, &spec(Method::Stackless, false, false)).contains("arrayLength(&nodes)"));
+    }
+
+    #[test]
+    fn stripping_keeps_everything_outside_blocks() {
+        let src = "a\n//#if X\nb\n//#endif\nc\n//#if Y\nd\n//#endif\n";
+        assert_eq!(strip_features(src, &["Y"]), "a\nc\nd\n");
+        assert_eq!(strip_features(src, &[]), "a\nc\n");
+    }
+}
