@@ -107,11 +107,7 @@ impl RenderArgs {
         if let (Some(eye), Some(at)) = (self.eye, self.at) {
             return Ok(CameraSpec { eye, at, up: self.up, fov_deg: self.fov.unwrap_or(45.0) });
         }
-        let c = scene.camera(&self.camera).ok_or_else(|| {
-            let names: Vec<&str> = scene.cameras.iter().filter_map(|c| c.name()).collect();
-            format!("the scene has no camera named {:?} (it has: {})", self.camera, names.join(", "))
-        })?;
-        let mut spec = CameraSpec::from(c);
+        let mut spec = stored_camera(scene, &self.camera)?;
         if let Some(f) = self.fov {
             spec.fov_deg = f;
         }
@@ -123,28 +119,43 @@ impl RenderArgs {
         if !self.lights.is_empty() {
             return self.lights.clone();
         }
-        let mut lights = scene.lights.clone();
-        if let Some(n) = self.light_count {
-            lights.truncate(n);
-            let (lo, hi) = scene.bounds();
-            let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
-            let centre = (lo + hi) * 0.5;
-            let radius = ((hi - lo).length() * 0.5).max(f32::MIN_POSITIVE);
-            let added = n.saturating_sub(lights.len());
-            for k in 0..added {
-                // Evenly spaced on a circle above the scene, dimmer as there are more of them.
-                let a = std::f32::consts::TAU * (k as f32 + 0.25) / added as f32;
-                let p = centre + Vec3::new(a.cos() * 2.0 * radius, 2.0 * radius, a.sin() * 2.0 * radius);
-                let c = 1.0 / n as f32;
-                lights.push(Light::new(p.to_array(), [c, c, c]));
-            }
+        match self.light_count {
+            Some(n) => lights_n(scene, n),
+            None => scene.lights.clone(),
         }
-        lights
     }
 
     pub fn indirections(&self, scene: &SceneFile) -> u32 {
         self.indirections.unwrap_or(scene.settings.max_indirections)
     }
+}
+
+/// A camera stored in the scene, by name.
+pub fn stored_camera(scene: &SceneFile, name: &str) -> Result<CameraSpec, String> {
+    let c = scene.camera(name).ok_or_else(|| {
+        let names: Vec<&str> = scene.cameras.iter().filter_map(|c| c.name()).collect();
+        format!("the scene has no camera named {name:?} (it has: {})", names.join(", "))
+    })?;
+    Ok(CameraSpec::from(c))
+}
+
+/// `n` lights: the scene's first ones, completed by lights evenly spaced on a circle above the
+/// scene (dimmer as there are more of them) when it has fewer.
+pub fn lights_n(scene: &SceneFile, n: usize) -> Vec<Light> {
+    let mut lights = scene.lights.clone();
+    lights.truncate(n);
+    let (lo, hi) = scene.bounds();
+    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+    let centre = (lo + hi) * 0.5;
+    let radius = ((hi - lo).length() * 0.5).max(f32::MIN_POSITIVE);
+    let added = n.saturating_sub(lights.len());
+    for k in 0..added {
+        let a = std::f32::consts::TAU * (k as f32 + 0.25) / added as f32;
+        let p = centre + Vec3::new(a.cos() * 2.0 * radius, 2.0 * radius, a.sin() * 2.0 * radius);
+        let c = 1.0 / n as f32;
+        lights.push(Light::new(p.to_array(), [c, c, c]));
+    }
+    lights
 }
 
 #[cfg(test)]

@@ -1,8 +1,9 @@
 //! `trace-vk`: renders a scene file with the Vulkan compute tracer on any Vulkan device.
 
 use clap::{Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
 use std::process::ExitCode;
-use tools::render_args::{RenderArgs, parse_res};
+use tools::render_args::{RenderArgs, lights_n, parse_res};
 use tracer_vk::kernels::Method;
 use tracer_vk::render::{Mode, Renderer, Settings};
 use tracer_vk::{Gpu, list_devices};
@@ -28,6 +29,9 @@ struct DeviceArgs {
 enum Command {
     /// List the Vulkan devices.
     Devices,
+    /// Time the thesis's evaluation matrix: scenes x cameras x sizes x modes x methods, GPU time
+    /// per frame from timestamp queries (median of --frames), written as CSV and Markdown.
+    Bench(Box<BenchArgs>),
     /// Render one image (and optionally a cost heatmap and AOVs).
     Render {
         #[command(flatten)]
@@ -43,6 +47,38 @@ enum Command {
     },
 }
 
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// Scenes: compiled .bvh files, meshes or scene descriptions [default: the built-in bunny].
+    scenes: Vec<PathBuf>,
+    /// Stored cameras to render from.
+    #[arg(long, value_delimiter = ',', default_value = "close-up,medium,wide")]
+    cameras: Vec<String>,
+    /// Image sizes.
+    #[arg(long, value_delimiter = ',', value_parser = parse_res, default_value = "640x480,1280x960,1920x1440")]
+    res: Vec<(u32, u32)>,
+    /// Modes: cast, or whitted with a light count (whitted1, whitted2, whitted4).
+    #[arg(long, value_delimiter = ',', default_value = "cast,whitted1,whitted2")]
+    modes: Vec<String>,
+    /// Traversals.
+    #[arg(long, value_delimiter = ',', value_enum, default_value = "lst,stackless")]
+    methods: Vec<MethodArg>,
+    /// Timed frames per setting (the median is reported).
+    #[arg(long, default_value_t = 50)]
+    frames: usize,
+    /// Untimed frames before the timed ones.
+    #[arg(long, default_value_t = 3)]
+    warmup: usize,
+    /// Workgroup shape (pixels).
+    #[arg(long, value_parser = parse_res, default_value = "8x8")]
+    workgroup: (u32, u32),
+    /// Write the table as CSV here (and as Markdown next to it, .md).
+    #[arg(long, default_value = "bench.csv")]
+    csv: PathBuf,
+    #[command(flatten)]
+    device: DeviceArgs,
+}
+
 #[derive(Clone, Copy, ValueEnum)]
 enum MethodArg {
     /// Local-memory stack, one ray per invocation (thesis 4.3.2).
@@ -54,6 +90,7 @@ enum MethodArg {
 fn main() -> ExitCode {
     let result = match Cli::parse().command {
         Command::Devices => devices(),
+        Command::Bench(b) => bench(&b),
         Command::Render { args, method, workgroup, device } => render(&args, method, workgroup, &device),
     };
     match result {
@@ -141,5 +178,136 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
         tools::output::write_aov(path, out.width, out.height, &aov)?;
         println!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", path.display());
     }
+    Ok(())
+}
+
+fn method_of(m: MethodArg) -> Method {
+    match m {
+        MethodArg::Lst => Method::Lst,
+        MethodArg::Stackless => Method::Stackless,
+    }
+}
+
+/// A mode of the bench matrix: ray casting, or Whitted with this many lights.
+fn parse_mode(s: &str) -> Result<(Mode, usize), String> {
+    match s {
+        "cast" => Ok((Mode::Cast, 0)),
+        _ => s
+            .strip_prefix("whitted")
+            .and_then(|n| n.parse::<usize>().ok())
+            .map(|n| (Mode::Whitted, n))
+            .ok_or_else(|| format!("{s:?} is not a mode (cast, whitted1, whitted2, ...)")),
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+}
+
+fn bench(b: &BenchArgs) -> Result<(), String> {
+    let modes: Vec<(Mode, usize)> = b.modes.iter().map(|m| parse_mode(m)).collect::<Result<_, _>>()?;
+    if b.frames == 0 {
+        return Err("--frames must be at least 1".to_owned());
+    }
+    let gpu = open(&b.device)?;
+    let scenes: Vec<Option<PathBuf>> =
+        if b.scenes.is_empty() { vec![None] } else { b.scenes.iter().cloned().map(Some).collect() };
+    let total = scenes.len() * b.cameras.len() * b.res.len() * modes.len() * b.methods.len();
+    let bar = indicatif::ProgressBar::new(total as u64).with_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}").expect("the template is valid"),
+    );
+    let header =
+        "scene,triangles,camera,width,height,mode,lights,method,median_ms,min_ms,primary,shadow,secondary,mrays_per_s";
+    let mut csv = vec![header.to_owned()];
+    let mut md = vec![
+        format!(
+            "Device: {} ({:?}, {}); {} frames per setting after {} warm-up frames, GPU time from timestamp queries.",
+            gpu.info().name,
+            gpu.info().kind,
+            gpu.info().driver,
+            b.frames,
+            b.warmup
+        ),
+        String::new(),
+        "| scene | camera | size | mode | method | median ms | Mrays/s | primary | shadow | secondary |".to_owned(),
+        "|---|---|---|---|---|---:|---:|---:|---:|---:|".to_owned(),
+    ];
+    for path in &scenes {
+        let name = path
+            .as_ref()
+            .and_then(|p| p.file_stem())
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "bunny (built-in)".to_owned());
+        bar.set_message(format!("loading {name}"));
+        let scene = tools::load_scene(path.as_deref())?;
+        for &m in &b.methods {
+            let method = method_of(m);
+            let mut renderer = Renderer::new(&gpu, &scene, method, b.workgroup).map_err(|e| e.to_string())?;
+            for cam in &b.cameras {
+                let camera = tools::render_args::stored_camera(&scene, cam)?;
+                for &(w, h) in &b.res {
+                    for &(mode, nl) in &modes {
+                        bar.set_message(format!(
+                            "{name} {cam} {w}x{h} {mode:?}{} {}",
+                            if nl > 0 { nl.to_string() } else { String::new() },
+                            method.name()
+                        ));
+                        let settings = Settings {
+                            width: w,
+                            height: h,
+                            camera,
+                            mode,
+                            lights: lights_n(&scene, nl),
+                            max_indirections: scene.settings.max_indirections,
+                        };
+                        let mut times = Vec::with_capacity(b.frames);
+                        let mut rays = [0u64; 3];
+                        for i in 0..b.warmup + b.frames {
+                            let out = renderer.render(&settings).map_err(|e| e.to_string())?;
+                            if i >= b.warmup {
+                                times.push(out.gpu_ms);
+                                rays = out.rays;
+                            }
+                        }
+                        let min = times.iter().copied().fold(f64::INFINITY, f64::min);
+                        let med = median(&mut times);
+                        let mrays = (rays[0] + rays[1] + rays[2]) as f64 / med / 1e3;
+                        let mode_name = match mode {
+                            Mode::Cast => "cast".to_owned(),
+                            Mode::Whitted => format!("whitted{nl}"),
+                        };
+                        csv.push(format!(
+                            "{name},{},{cam},{w},{h},{mode_name},{nl},{},{med:.4},{min:.4},{},{},{},{mrays:.1}",
+                            scene.triangles.len(),
+                            method.name(),
+                            rays[0],
+                            rays[1],
+                            rays[2]
+                        ));
+                        md.push(format!(
+                            "| {name} | {cam} | {w}x{h} | {mode_name} | {} | {med:.3} | {mrays:.0} | {} | {} | {} |",
+                            method.name(),
+                            rays[0],
+                            rays[1],
+                            rays[2]
+                        ));
+                        bar.inc(1);
+                    }
+                }
+            }
+        }
+    }
+    bar.finish_and_clear();
+    check_validation(&gpu)?;
+    let write = |p: &std::path::Path, lines: &[String]| {
+        std::fs::write(p, lines.join("\n") + "\n").map_err(|e| format!("cannot write {}: {e}", p.display()))
+    };
+    write(&b.csv, &csv)?;
+    let md_path = b.csv.with_extension("md");
+    write(&md_path, &md)?;
+    println!("{}", md.join("\n"));
+    println!("\n-> {} and {}", b.csv.display(), md_path.display());
     Ok(())
 }
