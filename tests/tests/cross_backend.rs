@@ -78,7 +78,7 @@ fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32,
             },
         )
         .expect("the CPU renders");
-        for method in [VkMethod::Lst, VkMethod::Stackless] {
+        for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst] {
             let mut r = Renderer::new(gpu, scene, method, (8, 8)).expect("the scene uploads");
             let settings = Settings {
                 width: w,
@@ -126,4 +126,40 @@ fn room_with_mirror_and_glass_matches_the_cpu() {
     let scene = compile("room.toml");
     compare("room", &scene, "medium", &gpu, 160, 120);
     compare("room", &scene, "close-up", &gpu, 120, 90);
+}
+
+/// A scene whose tree is deeper than a fixed 32-entry stack could hold: pairs of triangles at
+/// distances 8^-k from the origin, k = 0..40. The SAH peels them off one level at a time.
+fn deep_scene() -> SceneFile {
+    let mut scene = bvh_build::Scene::default();
+    for k in 0..40 {
+        let d = 8f32.powi(-k);
+        let s = 0.3 * d;
+        for sx in [1.0f32, -1.0] {
+            let c = glam::Vec3::new(sx * d, 0.0, 0.0);
+            let t = [c, c + glam::Vec3::new(s, 0.0, 0.0), c + glam::Vec3::new(0.0, s, 0.5 * s)];
+            let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
+            scene.positions.push(t);
+            scene.normals.push([n; 3]);
+            scene.material_ids.push(0);
+        }
+    }
+    scene.materials.push(bvh_format::Material::default());
+    scene.material_names.push("default".to_owned());
+    scene.cameras.push(bvh_format::Camera::new("medium", [0.3, 0.4, 2.0], [0.2, 0.0, 0.0], [0.0, 1.0, 0.0], 60.0));
+    scene.lights.push(bvh_format::Light::new([0.5, 1.0, 2.0], [1.0; 3]));
+    let params = bvh_format::BuildParams { max_leaf_size: 1, ..Default::default() };
+    bvh_build::compile(&scene, &params, Default::default()).expect("the deep scene compiles")
+}
+
+#[test]
+fn a_tree_deeper_than_32_levels_renders_with_stacks_sized_from_the_file() {
+    let scene = deep_scene();
+    let depth = scene.stats().max_depth;
+    assert!(depth > 32, "the scene is meant to be deeper than 32 levels, it is {depth}");
+    let gpu = gpu();
+    let r = Renderer::new(&gpu, &scene, VkMethod::Sst, (8, 8)).unwrap();
+    assert_eq!(r.specialisation().stack_size, depth, "the stacks hold exactly the file's depth");
+    println!("deep scene: {} triangles, depth {depth}", scene.triangles.len());
+    compare("deep", &scene, "medium", &gpu, 96, 64);
 }

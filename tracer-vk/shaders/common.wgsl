@@ -1,6 +1,6 @@
 // Shared by every kernel: the scene's data, the frame's state, and the intersection and shading
-// arithmetic of docs/shading.md. The host prepends the constants STACK_SIZE, WG_X and WG_Y and
-// strips the blocks between `//#if FEATURE` and `//#endif` for features the scene lacks.
+// arithmetic of docs/shading.md. The host prepends the constants STACK_SIZE, LEAF_SIZE, WG_X and
+// WG_Y and strips the blocks between `//#if FEATURE` and `//#endif` for features the scene lacks.
 
 struct Node {
     min: vec3<f32>,
@@ -94,6 +94,9 @@ struct Pass {
 
 const NO_HIT: u32 = 0xffffffffu;
 const T_SLACK: f32 = 9.5367431640625e-7; // 2^-20
+
+// This invocation's index in its workgroup (set by the entry point; SST needs it).
+var<private> lid: u32;
 
 // Work done by the current invocation's rays, for the cost AOV.
 var<private> cost_nodes: u32;

@@ -4,8 +4,11 @@
 // found) and the nearer one entered. STACK_SIZE is the file's max depth: the deepest path pushes
 // at most one node per level, so the stack cannot overflow.
 
-fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool) -> HitRec {
+fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec {
     var best = HitRec(t_max, NO_HIT, 0.0, 0.0);
+    if !enabled {
+        return best;
+    }
     var stack_node: array<u32, STACK_SIZE>;
     var stack_near: array<f32, STACK_SIZE>;
     var sp = 0u;

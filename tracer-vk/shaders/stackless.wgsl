@@ -2,8 +2,11 @@
 // layout front to back. A missed inner node jumps to its escape index (the first node after its
 // subtree); otherwise the walk goes on with the next node. No stack, fixed child order.
 
-fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool) -> HitRec {
+fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec {
     var best = HitRec(t_max, NO_HIT, 0.0, 0.0);
+    if !enabled {
+        return best;
+    }
     let count = arrayLength(&nodes);
     var i = 0u;
     while i < count {

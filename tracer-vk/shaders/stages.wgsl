@@ -2,6 +2,10 @@
 // is a single trace-and-shade kernel; Whitted ray tracing traces the primary rays, shades once per
 // light, then per indirection traces the secondary rays and shades again, and finally converts to
 // 8 bits. Each pass reads and writes per-pixel state (paths, hits, accum, aovs) in storage buffers.
+//
+// Every invocation of a workgroup calls `trace` exactly once per stage, with `active` false when
+// its pixel lies outside the image or has nothing to trace: SST walks the tree with the whole
+// workgroup and needs every invocation at its barriers.
 
 const MAX_T: f32 = 3.40282347e38;
 
@@ -27,10 +31,13 @@ fn record_primary(p: u32, r: Ray, h: HitRec) -> bool {
     return true;
 }
 
-fn stage_cast(x: u32, y: u32) {
+fn stage_cast(x: u32, y: u32, valid: bool) {
     let p = pixel_index(x, y);
     let r = make_ray(frame.eye.xyz, primary_dir(x, y));
-    let h = trace(r, 0.0, MAX_T, false);
+    let h = trace(r, 0.0, MAX_T, false, valid);
+    if !valid {
+        return;
+    }
     atomicAdd(&counters[0], 1u);
     var c = frame.background.xyz;
     if record_primary(p, r, h) {
@@ -40,10 +47,13 @@ fn stage_cast(x: u32, y: u32) {
     image[p] = to_rgba8(c);
 }
 
-fn stage_primary(x: u32, y: u32) {
+fn stage_primary(x: u32, y: u32, valid: bool) {
     let p = pixel_index(x, y);
     let r = make_ray(frame.eye.xyz, primary_dir(x, y));
-    let h = trace(r, 0.0, MAX_T, false);
+    let h = trace(r, 0.0, MAX_T, false, valid);
+    if !valid {
+        return;
+    }
     atomicAdd(&counters[0], 1u);
     hits[p] = h;
     let alive = record_primary(p, r, h);
@@ -53,37 +63,52 @@ fn stage_primary(x: u32, y: u32) {
 
 // One light (pass_info.light) at the current hit of every live path; the first pass also adds the
 // ambient term. The shadow ray is traced here.
-fn stage_shade(x: u32, y: u32) {
-    let p = pixel_index(x, y);
+fn stage_shade(x: u32, y: u32, valid: bool) {
+    // Out-of-image invocations read pixel 0 and write nothing.
+    let p = select(0u, pixel_index(x, y), valid);
     let path = paths[p];
-    if path.dir.w == 0.0 {
-        return;
-    }
+    let live = valid && path.dir.w != 0.0;
     let r = make_ray(path.origin.xyz, path.dir.xyz);
     let h = hits[p];
-    let s = surface_at(r, h);
-    let m = material_of(h.tri);
     var add = vec3<f32>(0.0);
-    if pass_info.light == 0u {
-        add = frame.ambient.xyz * m.kd_n.xyz;
-    }
-    if pass_info.light < frame.size.z {
-        let light = lights[pass_info.light];
-        let to = light.position.xyz - s.point;
-        let tl = length(to);
-        var l = vec3<f32>(0.0);
-        if tl > 0.0 {
-            l = to / tl;
+    var shadow = make_ray(vec3<f32>(0.0), vec3<f32>(0.0, 0.0, 1.0));
+    var shadow_t = 0.0;
+    var wants_shadow = false;
+    var term = vec3<f32>(0.0);
+    var colour = vec3<f32>(0.0);
+    if live {
+        let s = surface_at(r, h);
+        let m = material_of(h.tri);
+        if pass_info.light == 0u {
+            add = frame.ambient.xyz * m.kd_n.xyz;
         }
-        let term = phong(m, s, r.d, l);
-        if any(term != vec3<f32>(0.0)) {
-            let side = select(-s.geometric, s.geometric, dot(s.geometric, l) >= 0.0);
-            let o = offset_origin(s.point, side);
-            atomicAdd(&counters[1], 1u);
-            let blocked = trace(make_ray(o, l), 0.0, length(light.position.xyz - o), true).tri != NO_HIT;
-            if !blocked {
-                add += light.colour.xyz * term;
+        if pass_info.light < frame.size.z {
+            let light = lights[pass_info.light];
+            colour = light.colour.xyz;
+            let to = light.position.xyz - s.point;
+            let tl = length(to);
+            var l = vec3<f32>(0.0);
+            if tl > 0.0 {
+                l = to / tl;
             }
+            term = phong(m, s, r.d, l);
+            if any(term != vec3<f32>(0.0)) {
+                let side = select(-s.geometric, s.geometric, dot(s.geometric, l) >= 0.0);
+                let o = offset_origin(s.point, side);
+                shadow = make_ray(o, l);
+                shadow_t = length(light.position.xyz - o);
+                wants_shadow = true;
+            }
+        }
+    }
+    let blocked = trace(shadow, 0.0, shadow_t, true, wants_shadow).tri != NO_HIT;
+    if !live {
+        return;
+    }
+    if wants_shadow {
+        atomicAdd(&counters[1], 1u);
+        if !blocked {
+            add += colour * term;
         }
     }
     accum[p] += vec4<f32>(path.origin.w * add, 0.0);
@@ -93,50 +118,57 @@ fn stage_shade(x: u32, y: u32) {
 
 // The secondary ray of every live path whose material reflects or refracts (pass_info.depth rays
 // already traced), if it can still change the pixel; its closest hit replaces the path's hit.
-fn stage_bounce(x: u32, y: u32) {
-    let p = pixel_index(x, y);
+fn stage_bounce(x: u32, y: u32, valid: bool) {
+    let p = select(0u, pixel_index(x, y), valid);
     let path = paths[p];
-    if path.dir.w == 0.0 {
-        return;
-    }
+    let live = valid && path.dir.w != 0.0;
     let r = make_ray(path.origin.xyz, path.dir.xyz);
     let h = hits[p];
-    let s = surface_at(r, h);
-    let m = material_of(h.tri);
-    var dir = vec3<f32>(0.0);
-    var same_side = true;
-    var factor = 0.0;
+    var dir = vec3<f32>(0.0, 0.0, 1.0);
+    var o = vec3<f32>(0.0);
+    var w = 0.0;
+    var go = false;
+    if live {
+        let s = surface_at(r, h);
+        let m = material_of(h.tri);
+        var same_side = true;
+        var factor = 0.0;
 //#if REFLECTION
-    if m.ks_kr.w > 0.0 {
-        dir = reflect_dir(r.d, s.shading);
-        factor = m.ks_kr.w;
-    }
+        if m.ks_kr.w > 0.0 {
+            dir = reflect_dir(r.d, s.shading);
+            factor = m.ks_kr.w;
+        }
 //#endif
 //#if REFRACTION
-    if m.kt_ior.x > 0.0 {
-        let eta = select(m.kt_ior.y, 1.0 / m.kt_ior.y, s.front);
-        let cos_i = -dot(r.d, s.shading);
-        let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
-        if k >= 0.0 {
-            dir = normalize(eta * r.d + (eta * cos_i - sqrt(k)) * s.shading);
-            same_side = false;
-        } else {
-            // Total internal reflection.
-            dir = reflect_dir(r.d, s.shading);
+        if m.kt_ior.x > 0.0 {
+            let eta = select(m.kt_ior.y, 1.0 / m.kt_ior.y, s.front);
+            let cos_i = -dot(r.d, s.shading);
+            let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+            if k >= 0.0 {
+                dir = normalize(eta * r.d + (eta * cos_i - sqrt(k)) * s.shading);
+                same_side = false;
+            } else {
+                // Total internal reflection.
+                dir = reflect_dir(r.d, s.shading);
+            }
+            factor = m.kt_ior.x;
         }
-        factor = m.kt_ior.x;
-    }
 //#endif
-    let remaining = frame.size.w - pass_info.depth;
-    let w = path.origin.w * factor;
-    if factor <= 0.0 || remaining == 0u || !worth_tracing(w, remaining) {
+        let remaining = frame.size.w - pass_info.depth;
+        w = path.origin.w * factor;
+        go = factor > 0.0 && remaining > 0u && worth_tracing(w, remaining);
+        o = offset_origin(s.point, select(-s.geometric, s.geometric, same_side));
+    }
+    let nr = make_ray(o, dir);
+    let nh = trace(nr, 0.0, MAX_T, false, go);
+    if !live {
+        return;
+    }
+    if !go {
         paths[p].dir.w = 0.0;
         return;
     }
-    let o = offset_origin(s.point, select(-s.geometric, s.geometric, same_side));
-    let nr = make_ray(o, dir);
     atomicAdd(&counters[2], 1u);
-    let nh = trace(nr, 0.0, MAX_T, false);
     aovs[p].nodes += cost_nodes;
     aovs[p].tris += cost_tris;
     if nh.tri == NO_HIT {
@@ -148,7 +180,10 @@ fn stage_bounce(x: u32, y: u32) {
     paths[p] = PathRay(vec4<f32>(o, w), vec4<f32>(dir, 1.0));
 }
 
-fn stage_convert(x: u32, y: u32) {
+fn stage_convert(x: u32, y: u32, valid: bool) {
+    if !valid {
+        return;
+    }
     let p = pixel_index(x, y);
     image[p] = to_rgba8(accum[p].xyz);
 }

@@ -11,6 +11,7 @@ use crate::shader;
 const COMMON: &str = include_str!("../shaders/common.wgsl");
 const LST: &str = include_str!("../shaders/lst.wgsl");
 const STACKLESS: &str = include_str!("../shaders/stackless.wgsl");
+const SST: &str = include_str!("../shaders/sst.wgsl");
 const STAGES: &str = include_str!("../shaders/stages.wgsl");
 
 /// GPU traversal methods (thesis 4.3).
@@ -20,6 +21,8 @@ pub enum Method {
     Lst,
     /// Escape-pointer walk, no stack (thesis 4.3.4).
     Stackless,
+    /// Workgroup-shared stack, one path per workgroup (thesis 4.3.3).
+    Sst,
 }
 
 impl Method {
@@ -27,6 +30,7 @@ impl Method {
         match self {
             Method::Lst => "lst",
             Method::Stackless => "stackless",
+            Method::Sst => "sst",
         }
     }
 }
@@ -62,8 +66,10 @@ impl Stage {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Specialisation {
     pub method: Method,
-    /// Entries of LST's stack: the file's max depth (at least 1).
+    /// Entries of LST's and SST's stacks: the file's max depth (at least 1).
     pub stack_size: u32,
+    /// Most triangles in one leaf (SST caches a leaf in workgroup memory).
+    pub leaf_size: u32,
     pub workgroup: (u32, u32),
     /// Some material reflects (kr > 0).
     pub reflection: bool,
@@ -105,14 +111,17 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
     let traversal = match spec.method {
         Method::Lst => LST,
         Method::Stackless => STACKLESS,
+        Method::Sst => SST,
     };
     format!(
-        "const STACK_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n{}\n{}\n{}\n\
+        "const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n\
+         {}\n{}\n{}\n\
          @compute @workgroup_size(WG_X, WG_Y)\n\
-         fn main(@builtin(global_invocation_id) gid: vec3<u32>) {{\n\
-         \x20   if gid.x >= frame.size.x || gid.y >= frame.size.y {{\n        return;\n    }}\n\
-         \x20   {}(gid.x, gid.y);\n}}\n",
+         fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) li: u32) {{\n\
+         \x20   lid = li;\n\
+         \x20   {}(gid.x, gid.y, gid.x < frame.size.x && gid.y < frame.size.y);\n}}\n",
         spec.stack_size.max(1),
+        spec.leaf_size.max(1),
         spec.workgroup.0,
         spec.workgroup.1,
         COMMON,
@@ -120,6 +129,13 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
         strip_features(STAGES, &features),
         stage.entry()
     )
+}
+
+/// Workgroup memory an SST kernel needs: the stack of whole nodes, the two children, the leaf
+/// cache, the votes and a few words of control state.
+pub fn sst_shared_bytes(spec: &Specialisation) -> u64 {
+    let wg = spec.workgroup.0 as u64 * spec.workgroup.1 as u64;
+    32 * spec.stack_size.max(1) as u64 + 2 * 32 + 48 * spec.leaf_size.max(1) as u64 + 4 * wg + 4 * 4 + 4 + 32 + 4 * 3
 }
 
 /// Translates one kernel to SPIR-V.
@@ -133,12 +149,12 @@ mod tests {
     use super::*;
 
     fn spec(method: Method, reflection: bool, refraction: bool) -> Specialisation {
-        Specialisation { method, stack_size: 23, workgroup: (8, 8), reflection, refraction }
+        Specialisation { method, stack_size: 23, leaf_size: 8, workgroup: (8, 8), reflection, refraction }
     }
 
     #[test]
     fn every_kernel_translates_for_every_specialisation() {
-        for method in [Method::Lst, Method::Stackless] {
+        for method in [Method::Lst, Method::Stackless, Method::Sst] {
             for (r, t) in [(false, false), (true, false), (false, true), (true, true)] {
                 for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert] {
                     let s = spec(method, r, t);

@@ -61,6 +61,14 @@ pub enum RenderError {
     MissingLayout { method: &'static str, layout: &'static str },
     #[error("{0} lights are more than the kernels address")]
     TooManyLights(usize),
+    #[error("a {x} x {y} workgroup is empty or larger than the device's {limit} invocations")]
+    Workgroup { x: u32, y: u32, limit: u64 },
+    #[error("SST needs a workgroup of a power-of-two size for its vote reduction, not {x} x {y}")]
+    SstWorkgroup { x: u32, y: u32 },
+    #[error(
+        "SST needs {needed} bytes of workgroup memory for a tree {depth} deep with leaves of up to {leaf} triangles, more than the device's {limit}; use LST, or rebuild with a smaller --max-leaf-size"
+    )]
+    SharedMemory { depth: u32, leaf: u32, needed: u64, limit: u64 },
 }
 
 #[repr(C)]
@@ -114,25 +122,44 @@ const BINDINGS: u32 = 15;
 
 impl<'g> Renderer<'g> {
     /// Uploads the scene (only the node layout `method` reads) and specialises the kernels:
-    /// LST's stack holds exactly the file's max depth; reflection and refraction code is present
-    /// only when some material needs it.
+    /// LST's and SST's stacks hold exactly the file's max depth, SST's leaf cache its largest
+    /// leaf; reflection and refraction code is present only when some material needs it.
     pub fn new(gpu: &'g Gpu, scene: &'g SceneFile, method: Method, workgroup: (u32, u32)) -> Result<Self, RenderError> {
         let nodes = match method {
-            Method::Lst => {
-                scene.child_pair.as_deref().ok_or(RenderError::MissingLayout { method: "LST", layout: "child-pair" })?
-            }
+            Method::Lst | Method::Sst => scene
+                .child_pair
+                .as_deref()
+                .ok_or(RenderError::MissingLayout { method: method.name(), layout: "child-pair" })?,
             Method::Stackless => scene
                 .escape
                 .as_deref()
                 .ok_or(RenderError::MissingLayout { method: "stackless", layout: "escape-pointer" })?,
         };
+        let stats = scene.stats();
         let spec = Specialisation {
             method,
-            stack_size: scene.stats().max_depth.max(1),
+            stack_size: stats.max_depth.max(1),
+            leaf_size: (stats.leaf_sizes.len().max(2) - 1) as u32,
             workgroup,
             reflection: scene.materials.iter().any(|m| m.kr > 0.0),
             refraction: scene.materials.iter().any(|m| m.kt > 0.0),
         };
+        let (wx, wy) = workgroup;
+        let invocations = wx as u64 * wy as u64;
+        let limit = gpu.info().max_workgroup_invocations as u64;
+        if wx == 0 || wy == 0 || invocations > limit {
+            return Err(RenderError::Workgroup { x: wx, y: wy, limit });
+        }
+        if method == Method::Sst {
+            if !invocations.is_power_of_two() {
+                return Err(RenderError::SstWorkgroup { x: wx, y: wy });
+            }
+            let needed = kernels::sst_shared_bytes(&spec);
+            let limit = gpu.info().max_shared_memory as u64;
+            if needed > limit {
+                return Err(RenderError::SharedMemory { depth: spec.stack_size, leaf: spec.leaf_size, needed, limit });
+            }
+        }
         Ok(Self {
             gpu,
             scene,

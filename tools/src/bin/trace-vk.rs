@@ -61,7 +61,7 @@ struct BenchArgs {
     #[arg(long, value_delimiter = ',', default_value = "cast,whitted1,whitted2")]
     modes: Vec<String>,
     /// Traversals.
-    #[arg(long, value_delimiter = ',', value_enum, default_value = "lst,stackless")]
+    #[arg(long, value_delimiter = ',', value_enum, default_value = "lst,stackless,sst")]
     methods: Vec<MethodArg>,
     /// Timed frames per setting (the median is reported).
     #[arg(long, default_value_t = 50)]
@@ -85,6 +85,8 @@ enum MethodArg {
     Lst,
     /// Escape-pointer walk without a stack (thesis 4.3.4).
     Stackless,
+    /// Workgroup-shared stack: each workgroup walks one path for all its rays (thesis 4.3.3).
+    Sst,
 }
 
 fn main() -> ExitCode {
@@ -147,10 +149,7 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
         lights: args.lights(&scene),
         max_indirections: args.indirections(&scene),
     };
-    let method = match method {
-        MethodArg::Lst => Method::Lst,
-        MethodArg::Stackless => Method::Stackless,
-    };
+    let method = method_of(method);
     let gpu = open(device)?;
     let mut renderer = Renderer::new(&gpu, &scene, method, workgroup).map_err(|e| e.to_string())?;
     let out = renderer.render(&settings).map_err(|e| e.to_string())?;
@@ -185,6 +184,7 @@ fn method_of(m: MethodArg) -> Method {
     match m {
         MethodArg::Lst => Method::Lst,
         MethodArg::Stackless => Method::Stackless,
+        MethodArg::Sst => Method::Sst,
     }
 }
 
