@@ -138,7 +138,7 @@ fn deep_scene() -> SceneFile {
         for sx in [1.0f32, -1.0] {
             let c = glam::Vec3::new(sx * d, 0.0, 0.0);
             let t = [c, c + glam::Vec3::new(s, 0.0, 0.0), c + glam::Vec3::new(0.0, s, 0.5 * s)];
-            let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
+            let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or(glam::Vec3::Z);
             scene.positions.push(t);
             scene.normals.push([n; 3]);
             scene.material_ids.push(0);
@@ -146,7 +146,9 @@ fn deep_scene() -> SceneFile {
     }
     scene.materials.push(bvh_format::Material::default());
     scene.material_names.push("default".to_owned());
-    scene.cameras.push(bvh_format::Camera::new("medium", [0.3, 0.4, 2.0], [0.2, 0.0, 0.0], [0.0, 1.0, 0.0], 60.0));
+    // At the origin, where the chain of ever smaller pairs ends: every primary ray starts inside
+    // all the nested boxes and walks the whole depth of the tree.
+    scene.cameras.push(bvh_format::Camera::new("medium", [0.0; 3], [0.2, 0.1, 1.0], [0.0, 1.0, 0.0], 100.0));
     scene.lights.push(bvh_format::Light::new([0.5, 1.0, 2.0], [1.0; 3]));
     let params = bvh_format::BuildParams { max_leaf_size: 1, ..Default::default() };
     bvh_build::compile(&scene, &params, Default::default()).expect("the deep scene compiles")
@@ -158,8 +160,14 @@ fn a_tree_deeper_than_32_levels_renders_with_stacks_sized_from_the_file() {
     let depth = scene.stats().max_depth;
     assert!(depth > 32, "the scene is meant to be deeper than 32 levels, it is {depth}");
     let gpu = gpu();
-    let r = Renderer::new(&gpu, &scene, VkMethod::Sst, (8, 8)).unwrap();
+    let mut r = Renderer::new(&gpu, &scene, VkMethod::Lst, (8, 8)).unwrap();
     assert_eq!(r.specialisation().stack_size, depth, "the stacks hold exactly the file's depth");
+    let cam = CameraSpec::from(&scene.cameras[0]);
+    let out = r
+        .render(&Settings { width: 96, height: 64, camera: cam, mode: VkMode::Cast, lights: vec![], max_indirections: 0 })
+        .unwrap();
+    let deepest = out.nodes.iter().copied().max().unwrap_or(0);
+    assert!(deepest > 2 * 33, "some ray must walk below level 32 (most nodes tested by one ray: {deepest})");
     println!("deep scene: {} triangles, depth {depth}", scene.triangles.len());
     compare("deep", &scene, "medium", &gpu, 96, 64);
 }
