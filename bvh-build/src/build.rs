@@ -66,7 +66,8 @@ pub struct PrimRef {
     pub min: [f32; 3],
     pub id: u32,
     pub max: [f32; 3],
-    _pad: u32,
+    /// Half the surface area of the triangle's box (f32; only compared against node areas).
+    pub area: f32,
 }
 
 impl PrimRef {
@@ -88,11 +89,10 @@ pub fn prim_refs(positions: &[[glam::Vec3; 3]]) -> Vec<PrimRef> {
     positions
         .par_iter()
         .enumerate()
-        .map(|(i, t)| PrimRef {
-            min: t[0].min(t[1]).min(t[2]).into(),
-            id: i as u32,
-            max: t[0].max(t[1]).max(t[2]).into(),
-            _pad: 0,
+        .map(|(i, t)| {
+            let (min, max) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+            let d = max - min;
+            PrimRef { min: min.into(), id: i as u32, max: max.into(), area: d.x * d.y + d.y * d.z + d.z * d.x }
         })
         .collect()
 }
@@ -368,6 +368,26 @@ mod tests {
         let b = build_tree(&tris, &params(Strategy::Sweep, 16, 4)).unwrap();
         assert_eq!(a.nodes, b.nodes);
         assert_eq!(a.order, b.order);
+    }
+
+    #[test]
+    fn a_floor_under_small_objects_is_split_off_as_the_sweep_does() {
+        // Two floor triangles whose box centres lie among the objects' lowest centroids: no bin
+        // plane separates them, the large-triangle candidate does.
+        let mut tris = soup(4000);
+        for t in &mut tris {
+            for v in t.iter_mut() {
+                *v = *v * 0.02 + Vec3::new(-0.1, 0.0, -0.1);
+            }
+        }
+        let y = tris.iter().flatten().map(|v| v.y).fold(f32::INFINITY, f32::min);
+        let (a, b, c, d) =
+            (Vec3::new(-1.0, y, -1.0), Vec3::new(1.0, y, -1.0), Vec3::new(1.0, y, 1.0), Vec3::new(-1.0, y, 1.0));
+        tris.push([a, b, c]);
+        tris.push([a, c, d]);
+        let sweep = check(&tris, &params(Strategy::Sweep, 16, 8)).sah_cost;
+        let binned = check(&tris, &params(Strategy::Binned, 16, 8)).sah_cost;
+        assert!(binned <= sweep * 1.02, "binned {binned} vs sweep {sweep}");
     }
 
     #[test]
