@@ -208,8 +208,14 @@ impl<'g> Renderer<'g> {
         Ok(())
     }
 
-    /// Renders one frame.
+    /// Renders one frame and reads back the image and the AOVs.
     pub fn render(&mut self, s: &Settings) -> Result<Output, RenderError> {
+        self.render_frame(s, true)
+    }
+
+    /// Renders one frame; without `readback` only the ray counts and GPU times come back (the
+    /// per-pixel vectors of the output are empty), as benchmarks want.
+    pub fn render_frame(&mut self, s: &Settings, readback: bool) -> Result<Output, RenderError> {
         if s.width == 0 || s.height == 0 {
             return Err(RenderError::EmptyImage);
         }
@@ -309,10 +315,10 @@ impl<'g> Renderer<'g> {
             Ok(())
         })?;
 
-        let image: Vec<u32> = g.download_as(&t.image)?;
-        let aovs: Vec<[u32; 8]> = g.download_as(&t.aovs)?;
         let counts: Vec<u32> = g.download_as(&counters)?;
-        let n = (s.width * s.height) as usize;
+        let (image, aovs): (Vec<u32>, Vec<[u32; 8]>) =
+            if readback { (g.download_as(&t.image)?, g.download_as(&t.aovs)?) } else { (Vec::new(), Vec::new()) };
+        let n = if readback { (s.width * s.height) as usize } else { 0 };
         let f32_of = |u: u32| f32::from_bits(u);
         Ok(Output {
             width: s.width,

@@ -265,7 +265,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                         let mut times = Vec::with_capacity(b.frames);
                         let mut rays = [0u64; 3];
                         for i in 0..b.warmup + b.frames {
-                            let out = renderer.render(&settings).map_err(|e| e.to_string())?;
+                            let out = renderer.render_frame(&settings, false).map_err(|e| e.to_string())?;
                             if i >= b.warmup {
                                 times.push(out.gpu_ms);
                                 rays = out.rays;
