@@ -353,7 +353,10 @@ fn main() {
         std::process::exit(2);
     });
     let load_before = load_average();
-    let scenes_dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    // BVH_SCENES_DIR lets a carried binary find the scenes on another machine.
+    let scenes_dir = std::env::var_os("BVH_SCENES_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenes"));
     let mut rows = Vec::new();
     for scene in &args.scenes {
         let file = SCENES.iter().find(|s| s.0 == scene.as_str()).expect("checked in parse_args").1;

@@ -9,10 +9,20 @@ pub struct SweepSah {
     pub costs: Costs,
 }
 
+/// A primitive's sort key on one axis: centroid component, input id (for ties), and its place
+/// in the node's slice. 12 bytes, so three sorts per node move little memory.
+#[derive(Clone, Copy)]
+struct Key {
+    c: f32,
+    id: u32,
+    at: u32,
+}
+
 #[derive(Default)]
 struct Scratch {
-    sorted: [Vec<PrimRef>; 3],
+    sorted: [Vec<Key>; 3],
     right_area: Vec<f64>,
+    copy: Vec<PrimRef>,
 }
 
 thread_local! {
@@ -39,17 +49,17 @@ fn sweep_with(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: b
     for axis in 0..3 {
         let order = &mut s.sorted[axis];
         order.clear();
-        order.extend_from_slice(prims);
+        order.extend(prims.iter().enumerate().map(|(i, p)| Key { c: p.centroid()[axis], id: p.id, at: i as u32 }));
         // Ties broken by input index so that the result does not depend on the current order.
-        order.sort_unstable_by(|a, b| a.centroid()[axis].total_cmp(&b.centroid()[axis]).then(a.id.cmp(&b.id)));
+        order.sort_unstable_by(|a, b| a.c.total_cmp(&b.c).then(a.id.cmp(&b.id)));
         let mut acc = Aabb::EMPTY;
         for i in (1..n).rev() {
-            acc.grow(&order[i].aabb());
+            acc.grow(&prims[order[i].at as usize].aabb());
             s.right_area[i] = acc.half_area();
         }
         let mut left = Aabb::EMPTY;
         for i in 1..n {
-            left.grow(&order[i - 1].aabb());
+            left.grow(&prims[order[i - 1].at as usize].aabb());
             let cost = costs.split_cost(parent_area, left.half_area(), i, s.right_area[i], n - i);
             if best.is_none_or(|(b, _, _)| cost < b) {
                 best = Some((cost, axis, i));
@@ -60,7 +70,11 @@ fn sweep_with(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: b
     if may_leaf && cost >= costs.leaf_cost(n) {
         return None;
     }
-    prims.copy_from_slice(&s.sorted[axis]);
+    s.copy.clear();
+    s.copy.extend_from_slice(prims);
+    for (dst, k) in prims.iter_mut().zip(&s.sorted[axis]) {
+        *dst = s.copy[k.at as usize];
+    }
     Some(Split { mid, left: bounds_of(&prims[..mid]), right: bounds_of(&prims[mid..]) })
 }
 

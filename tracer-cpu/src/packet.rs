@@ -114,6 +114,7 @@ mod avx2 {
     /// distance becomes NaN in both, which the last two comparisons then ignore, as the scalar
     /// path skips it.
     #[target_feature(enable = "avx2")]
+    #[inline]
     fn slab(node: &Node, p: &Packet, t_max: __m256) -> (__m256, __m256) {
         let mut near = _mm256_setzero_ps();
         let mut far = t_max;
@@ -131,6 +132,7 @@ mod avx2 {
 
     /// [`crate::geometry::may_hold`], 8-wide: `near <= t + |t| * T_SLACK`.
     #[target_feature(enable = "avx2")]
+    #[inline]
     fn may_hold(near: __m256, t: __m256) -> __m256 {
         let abs = _mm256_andnot_ps(splat(-0.0), t);
         _mm256_cmp_ps::<_CMP_LE_OQ>(near, add(t, mul(abs, splat(T_SLACK))))
@@ -154,6 +156,7 @@ mod avx2 {
 
     /// Möller-Trumbore with the scalar path's operations; returns (hit mask, t, u, v).
     #[target_feature(enable = "avx2")]
+    #[inline]
     fn intersect(tri: &Triangle, pk: &Packet, t_min: __m256, t_max: __m256) -> (__m256, __m256, __m256, __m256) {
         let (o, d) = (&pk.o, &pk.d);
         let e1 = [splat(tri.e1[0]), splat(tri.e1[1]), splat(tri.e1[2])];
@@ -188,12 +191,14 @@ mod avx2 {
 
     /// Adds 1 to the counters of the lanes in `mask`.
     #[target_feature(enable = "avx2")]
+    #[inline]
     fn count(acc: __m256i, mask: __m256) -> __m256i {
         // An all-ones lane is -1.
         _mm256_sub_epi32(acc, _mm256_castps_si256(mask))
     }
 
     #[target_feature(enable = "avx2")]
+    #[inline]
     fn any(mask: __m256) -> bool {
         _mm256_movemask_ps(mask) != 0
     }
