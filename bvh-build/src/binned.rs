@@ -160,10 +160,12 @@ impl BinnedSah {
         }
 
         // In-place partition by bin, gathering the children's centroid bounds on the way.
+        // Only the split axis matters here; the scalar arithmetic equals `bin_index`'s lane.
+        let (lo_a, scale_a) = (lo[axis], scale[axis]);
         let (mut i, mut j) = (0usize, n);
         while i < j {
             let c = prims[i].centroid();
-            if bin_index(c, lo, scale, k - 1)[axis] < plane {
+            if ((((c[axis] - lo_a) * scale_a) as usize).min(k - 1)) < plane {
                 left.centroids.grow_point(c);
                 i += 1;
             } else {
