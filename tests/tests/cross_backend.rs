@@ -164,10 +164,55 @@ fn a_tree_deeper_than_32_levels_renders_with_stacks_sized_from_the_file() {
     assert_eq!(r.specialisation().stack_size, depth, "the stacks hold exactly the file's depth");
     let cam = CameraSpec::from(&scene.cameras[0]);
     let out = r
-        .render(&Settings { width: 96, height: 64, camera: cam, mode: VkMode::Cast, lights: vec![], max_indirections: 0 })
+        .render(&Settings {
+            width: 96,
+            height: 64,
+            camera: cam,
+            mode: VkMode::Cast,
+            lights: vec![],
+            max_indirections: 0,
+        })
         .unwrap();
     let deepest = out.nodes.iter().copied().max().unwrap_or(0);
     assert!(deepest > 2 * 33, "some ray must walk below level 32 (most nodes tested by one ray: {deepest})");
     println!("deep scene: {} triangles, depth {depth}", scene.triangles.len());
     compare("deep", &scene, "medium", &gpu, 96, 64);
+}
+
+#[test]
+fn an_sst_stack_or_leaf_beyond_shared_memory_is_a_clear_error() {
+    // One leaf of 1,000 identical triangles: SST's leaf cache alone would need 48,000 bytes of
+    // workgroup memory, more than lavapipe's 32 KiB or an H100's 48 KiB.
+    let mut scene = bvh_build::Scene::default();
+    let t = [glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y];
+    scene.positions = vec![t; 1000];
+    scene.normals = vec![[glam::Vec3::Z; 3]; 1000];
+    scene.material_ids = vec![0; 1000];
+    scene.materials.push(bvh_format::Material::default());
+    scene.material_names.push("default".to_owned());
+    let params = bvh_format::BuildParams { max_leaf_size: 1000, ..Default::default() };
+    let file = bvh_build::compile(&scene, &params, Default::default()).unwrap();
+    let gpu = gpu();
+    let e = Renderer::new(&gpu, &file, VkMethod::Sst, (8, 8)).err().expect("SST must refuse this scene");
+    let msg = e.to_string();
+    assert!(msg.contains("workgroup memory") && msg.contains("use LST"), "{msg}");
+    assert!(!msg.contains('\n'));
+    // LST renders it.
+    assert!(Renderer::new(&gpu, &file, VkMethod::Lst, (8, 8)).is_ok());
+}
+
+#[test]
+fn a_frame_beyond_the_storage_buffer_range_fails_naming_the_limit() {
+    let gpu = gpu();
+    let limit = gpu.info().max_storage_buffer_range;
+    let scene = compile("room.toml");
+    let mut r = Renderer::new(&gpu, &scene, VkMethod::Lst, (8, 8)).unwrap();
+    // 32 bytes of path state per pixel: a square image just past the limit.
+    let side = ((limit / 32) as f64).sqrt() as u32 + 2;
+    let cam = CameraSpec::from(scene.camera("medium").unwrap());
+    let s =
+        Settings { width: side, height: side, camera: cam, mode: VkMode::Cast, lights: vec![], max_indirections: 0 };
+    let msg = r.render(&s).err().expect("the frame cannot fit").to_string();
+    assert!(msg.contains("maxStorageBufferRange"), "{msg}");
+    assert!(!msg.contains('\n'));
 }
