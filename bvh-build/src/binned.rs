@@ -159,24 +159,38 @@ impl BinnedSah {
             right.aabb.grow(&b.bounds);
         }
 
-        // In-place partition by bin, gathering the children's centroid bounds on the way.
         // Only the split axis matters here; the scalar arithmetic equals `bin_index`'s lane.
         let (lo_a, scale_a) = (lo[axis], scale[axis]);
-        let (mut i, mut j) = (0usize, n);
-        while i < j {
-            let c = prims[i].centroid();
-            if ((((c[axis] - lo_a) * scale_a) as usize).min(k - 1)) < plane {
-                left.centroids.grow_point(c);
-                i += 1;
-            } else {
-                j -= 1;
-                right.centroids.grow_point(c);
-                prims.swap(i, j);
-            }
-        }
-        debug_assert!(i > 0 && i < n);
-        Some(Split { mid: i, left, right })
+        let mid = partition(prims, &mut left, &mut right, |_, c| {
+            ((((c[axis] - lo_a) * scale_a) as usize).min(k - 1)) < plane
+        });
+        debug_assert!(mid > 0 && mid < n);
+        Some(Split { mid, left, right })
     }
+}
+
+/// Moves the primitives for which `goes_left(prim, centroid)` holds to the front, in place, and
+/// grows each side's centroid bounds on the way; returns how many went left.
+#[inline(always)]
+fn partition(
+    prims: &mut [PrimRef],
+    left: &mut NodeBounds,
+    right: &mut NodeBounds,
+    goes_left: impl Fn(&PrimRef, Vec3A) -> bool,
+) -> usize {
+    let (mut i, mut j) = (0usize, prims.len());
+    while i < j {
+        let c = prims[i].centroid();
+        if goes_left(&prims[i], c) {
+            left.centroids.grow_point(c);
+            i += 1;
+        } else {
+            j -= 1;
+            right.centroids.grow_point(c);
+            prims.swap(i, j);
+        }
+    }
+    i
 }
 
 impl BinnedSah {
@@ -208,19 +222,8 @@ impl BinnedSah {
         }
         let mut left = NodeBounds { aabb: big_bounds, centroids: Aabb::EMPTY };
         let mut right = NodeBounds { aabb: rest, centroids: Aabb::EMPTY };
-        let (mut i, mut j) = (0usize, n);
-        while i < j {
-            let c = prims[i].centroid();
-            if prims[i].area >= big {
-                left.centroids.grow_point(c);
-                i += 1;
-            } else {
-                j -= 1;
-                right.centroids.grow_point(c);
-                prims.swap(i, j);
-            }
-        }
-        Some(Split { mid: i, left, right })
+        let mid = partition(prims, &mut left, &mut right, |p, _| p.area >= big);
+        Some(Split { mid, left, right })
     }
 }
 

@@ -212,7 +212,7 @@ fn a_frame_beyond_the_storage_buffer_range_fails_naming_the_limit() {
     let cam = CameraSpec::from(scene.camera("medium").unwrap());
     let s =
         Settings { width: side, height: side, camera: cam, mode: VkMode::Cast, lights: vec![], max_indirections: 0 };
-    let msg = r.render(&s).err().expect("the frame cannot fit").to_string();
+    let msg = r.render(&s).expect_err("the frame cannot fit").to_string();
     assert!(msg.contains("maxStorageBufferRange"), "{msg}");
     assert!(!msg.contains('\n'));
 }
