@@ -78,7 +78,7 @@ fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32,
             },
         )
         .expect("the CPU renders");
-        for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst] {
+        for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup] {
             let mut r = Renderer::new(gpu, scene, method, (8, 8)).expect("the scene uploads");
             let settings = Settings {
                 width: w,

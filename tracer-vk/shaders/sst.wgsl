@@ -3,11 +3,20 @@
 // and a leaf's triangles are loaded cooperatively into workgroup memory; every ray records in a
 // 4-entry hit code whether it hit neither, the left, the right or both children; when both are
 // needed, each ray that hit both votes -1 (left first) or +1 (right first), a parallel reduction
-// sums the votes, and the majority decides which child comes first. The other goes on a stack of
+// sums the votes (or, in the subgroup variant, subgroupAdd and one barrier), and the majority
+// decides which child comes first. The other goes on a stack of
 // whole nodes in workgroup memory. Rays that miss the child taken go inactive until the next pop,
 // which re-activates all of them. STACK_SIZE is the file's max depth; LEAF_SIZE its largest leaf.
 
 const WG_SIZE: u32 = WG_X * WG_Y;
+
+//#if VOTE_SUBGROUP
+// Set by the entry point: this invocation's lane in its subgroup, the subgroup's index in the
+// workgroup, and the number of subgroups.
+var<private> sg_lane: u32;
+var<private> sg_id: u32;
+var<private> sg_count: u32;
+//#endif
 
 var<workgroup> sst_stack: array<Node, STACK_SIZE>;
 var<workgroup> sst_children: array<Node, 2>;
@@ -90,6 +99,7 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
                 }
                 atomicStore(&sst_hitcode[code], 1u);
             }
+//#if VOTE_REDUCTION
             sst_votes[lid] = vote;
             workgroupBarrier();
             // Parallel reduction of the votes (WG_SIZE is a power of two).
@@ -99,6 +109,21 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
                 }
                 workgroupBarrier();
             }
+//#endif
+//#if VOTE_SUBGROUP
+            // Each subgroup sums its votes in registers; one barrier, then lid 0 adds the few
+            // partial sums.
+            let partial = subgroupAdd(vote);
+            if sg_lane == 0u {
+                sst_votes[sg_id] = partial;
+            }
+            workgroupBarrier();
+            if lid == 0u {
+                for (var i = 1u; i < sg_count; i++) {
+                    sst_votes[0] += sst_votes[i];
+                }
+            }
+//#endif
             if lid == 0u {
                 let both = atomicLoad(&sst_hitcode[3]) != 0u;
                 let left = both || atomicLoad(&sst_hitcode[1]) != 0u;

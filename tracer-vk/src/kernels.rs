@@ -23,6 +23,8 @@ pub enum Method {
     Stackless,
     /// Workgroup-shared stack, one path per workgroup (thesis 4.3.3).
     Sst,
+    /// SST voting with subgroup operations instead of a workgroup-memory reduction.
+    SstSubgroup,
 }
 
 impl Method {
@@ -31,6 +33,7 @@ impl Method {
             Method::Lst => "lst",
             Method::Stackless => "stackless",
             Method::Sst => "sst",
+            Method::SstSubgroup => "sst-subgroup",
         }
     }
 }
@@ -108,26 +111,45 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
     if spec.refraction {
         features.push("REFRACTION");
     }
+    features.push(if spec.method == Method::SstSubgroup { "VOTE_SUBGROUP" } else { "VOTE_REDUCTION" });
     let traversal = match spec.method {
         Method::Lst => LST,
         Method::Stackless => STACKLESS,
-        Method::Sst => SST,
+        Method::Sst | Method::SstSubgroup => SST,
+    };
+    // naga accepts the subgroup builtins only in one-dimensional workgroups: the subgroup variant
+    // runs WG_X * WG_Y invocations in a line and maps them onto the same WG_X x WG_Y pixel block.
+    let entry = if spec.method == Method::SstSubgroup {
+        format!(
+            "@compute @workgroup_size(WG_X * WG_Y)\n\
+             fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32,\n\
+             \x20       @builtin(subgroup_invocation_id) sgl: u32, @builtin(subgroup_id) sgi: u32,\n\
+             \x20       @builtin(num_subgroups) sgn: u32) {{\n\
+             \x20   lid = li;\n    sg_lane = sgl;\n    sg_id = sgi;\n    sg_count = sgn;\n\
+             \x20   let x = wg.x * WG_X + li % WG_X;\n    let y = wg.y * WG_Y + li / WG_X;\n\
+             \x20   {}(x, y, x < frame.size.x && y < frame.size.y);\n}}\n",
+            stage.entry()
+        )
+    } else {
+        format!(
+            "@compute @workgroup_size(WG_X, WG_Y)\n\
+             fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) li: u32) {{\n\
+             \x20   lid = li;\n\
+             \x20   {}(gid.x, gid.y, gid.x < frame.size.x && gid.y < frame.size.y);\n}}\n",
+            stage.entry()
+        )
     };
     format!(
         "const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n\
-         {}\n{}\n{}\n\
-         @compute @workgroup_size(WG_X, WG_Y)\n\
-         fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) li: u32) {{\n\
-         \x20   lid = li;\n\
-         \x20   {}(gid.x, gid.y, gid.x < frame.size.x && gid.y < frame.size.y);\n}}\n",
+         {}\n{}\n{}\n{}",
         spec.stack_size.max(1),
         spec.leaf_size.max(1),
         spec.workgroup.0,
         spec.workgroup.1,
         COMMON,
-        traversal,
+        strip_features(traversal, &features),
         strip_features(STAGES, &features),
-        stage.entry()
+        entry
     )
 }
 
@@ -141,7 +163,11 @@ pub fn sst_shared_bytes(spec: &Specialisation) -> u64 {
 /// Translates one kernel to SPIR-V.
 pub fn compile(stage: Stage, spec: &Specialisation) -> Result<Vec<u32>, VkError> {
     let label = format!("{} {:?} kernel", spec.method.name(), stage);
-    shader::translate(&source(stage, spec), &label, &[])
+    if spec.method == Method::SstSubgroup {
+        shader::translate_with_subgroups(&source(stage, spec), &label, &[])
+    } else {
+        shader::translate(&source(stage, spec), &label, &[])
+    }
 }
 
 #[cfg(test)]
@@ -154,7 +180,7 @@ mod tests {
 
     #[test]
     fn every_kernel_translates_for_every_specialisation() {
-        for method in [Method::Lst, Method::Stackless, Method::Sst] {
+        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
             for (r, t) in [(false, false), (true, false), (false, true), (true, true)] {
                 for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert] {
                     let s = spec(method, r, t);

@@ -63,6 +63,8 @@ pub enum RenderError {
     TooManyLights(usize),
     #[error("a {x} x {y} workgroup is empty or larger than the device's {limit} invocations")]
     Workgroup { x: u32, y: u32, limit: u64 },
+    #[error("{0} lacks the subgroup operations the sst-subgroup traversal votes with; use sst")]
+    NoSubgroups(String),
     #[error("SST needs a workgroup of a power-of-two size for its vote reduction, not {x} x {y}")]
     SstWorkgroup { x: u32, y: u32 },
     #[error(
@@ -126,7 +128,7 @@ impl<'g> Renderer<'g> {
     /// leaf; reflection and refraction code is present only when some material needs it.
     pub fn new(gpu: &'g Gpu, scene: &'g SceneFile, method: Method, workgroup: (u32, u32)) -> Result<Self, RenderError> {
         let nodes = match method {
-            Method::Lst | Method::Sst => scene
+            Method::Lst | Method::Sst | Method::SstSubgroup => scene
                 .child_pair
                 .as_deref()
                 .ok_or(RenderError::MissingLayout { method: method.name(), layout: "child-pair" })?,
@@ -150,7 +152,10 @@ impl<'g> Renderer<'g> {
         if wx == 0 || wy == 0 || invocations > limit {
             return Err(RenderError::Workgroup { x: wx, y: wy, limit });
         }
-        if method == Method::Sst {
+        if method == Method::SstSubgroup && !gpu.info().supports_subgroup_ops {
+            return Err(RenderError::NoSubgroups(gpu.info().name.clone()));
+        }
+        if matches!(method, Method::Sst | Method::SstSubgroup) {
             if !invocations.is_power_of_two() {
                 return Err(RenderError::SstWorkgroup { x: wx, y: wy });
             }

@@ -87,6 +87,8 @@ enum MethodArg {
     Stackless,
     /// Workgroup-shared stack: each workgroup walks one path for all its rays (thesis 4.3.3).
     Sst,
+    /// SST whose majority vote uses subgroup operations instead of a workgroup-memory reduction.
+    SstSubgroup,
 }
 
 fn main() -> ExitCode {
@@ -185,6 +187,7 @@ fn method_of(m: MethodArg) -> Method {
         MethodArg::Lst => Method::Lst,
         MethodArg::Stackless => Method::Stackless,
         MethodArg::Sst => Method::Sst,
+        MethodArg::SstSubgroup => Method::SstSubgroup,
     }
 }
 
