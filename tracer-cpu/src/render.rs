@@ -109,25 +109,32 @@ impl<'a> Tracer<'a> {
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Hit> {
-        let tris = &self.scene.triangles;
-        match (method, self.child_pair, self.escape) {
-            (Method::Stackless, _, Some(esc)) => traverse::escape::<false>(esc, tris, ray, t_min, t_max, cost),
-            (_, Some(cp), _) => traverse::child_pair::<false>(cp, tris, ray, t_min, t_max, stack, cost),
-            (_, None, Some(esc)) => traverse::escape::<false>(esc, tris, ray, t_min, t_max, cost),
-            (_, None, None) => None,
-        }
+        self.trace::<false>(method, ray, t_min, t_max, stack, cost)
     }
 
     /// Whether anything lies in `(0, t_max]` along the ray.
     pub fn occluded(&self, method: Method, ray: &Ray, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> bool {
+        self.trace::<true>(method, ray, 0.0, t_max, stack, cost).is_some()
+    }
+
+    /// The scalar traversal `method` names, on the layout it reads (or whichever is present).
+    fn trace<const ANY: bool>(
+        &self,
+        method: Method,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Hit> {
         let tris = &self.scene.triangles;
         match (method, self.child_pair, self.escape) {
-            (Method::Stackless, _, Some(esc)) => traverse::escape::<true>(esc, tris, ray, 0.0, t_max, cost),
-            (_, Some(cp), _) => traverse::child_pair::<true>(cp, tris, ray, 0.0, t_max, stack, cost),
-            (_, None, Some(esc)) => traverse::escape::<true>(esc, tris, ray, 0.0, t_max, cost),
+            (Method::Stackless, _, Some(esc)) | (_, None, Some(esc)) => {
+                traverse::escape::<ANY>(esc, tris, ray, t_min, t_max, cost)
+            }
+            (_, Some(cp), _) => traverse::child_pair::<ANY>(cp, tris, ray, t_min, t_max, stack, cost),
             (_, None, None) => None,
         }
-        .is_some()
     }
 
     fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
