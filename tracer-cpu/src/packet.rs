@@ -342,6 +342,9 @@ pub(crate) fn render_rows(
     let h = rows.len() / w;
     let mut pstack = Vec::with_capacity(128);
     let lights = sh.lights;
+    let shadow_lights = if sh.mode == crate::Mode::Whitted { lights.len() } else { 0 };
+    // Lane-major, so each lane hands shade_pixel one slice; allocated once for all packets.
+    let mut shadowed = vec![false; LANES * shadow_lights];
     let mut x0 = 0usize;
     while x0 < w {
         let lane_xy = |i: usize| (x0 + i % 4, i / 4);
@@ -357,10 +360,10 @@ pub(crate) fn render_rows(
         let primary = trace::<false>(nodes, tris, &Rays { rays, valid, t_max: [f32::INFINITY; LANES] }, &mut pstack);
 
         // Shadow rays of the primary hits, one packet per light.
-        let mut shadowed = vec![[false; LANES]; if sh.mode == crate::Mode::Whitted { lights.len() } else { 0 }];
+        shadowed.fill(false);
         let mut extra = [Cost::default(); LANES];
         let mut shadow_rays = [0u64; LANES];
-        for (li, light) in lights.iter().enumerate().take(shadowed.len()) {
+        for (li, light) in lights.iter().enumerate().take(shadow_lights) {
             let mut srays = Rays { rays, valid: [false; LANES], t_max: [0.0; LANES] };
             for i in 0..LANES {
                 let Some(hit) = primary.hits[i].filter(|_| valid[i]) else { continue };
@@ -376,7 +379,7 @@ pub(crate) fn render_rows(
             }
             let res = trace::<true>(nodes, tris, &srays, &mut pstack);
             for i in 0..LANES {
-                shadowed[li][i] = res.hits[i].is_some();
+                shadowed[i * shadow_lights + li] = res.hits[i].is_some();
                 extra[i] += res.cost[i];
             }
         }
@@ -388,8 +391,8 @@ pub(crate) fn render_rows(
             let (x, dy) = lane_xy(i);
             let mut cost = primary.cost[i];
             cost += extra[i];
-            let per_light: Vec<bool> = shadowed.iter().map(|s| s[i]).collect();
-            let mut s = shade_pixel(tracer, sh, rays[i], primary.hits[i], cost, Some(&per_light), stack);
+            let per_light = &shadowed[i * shadow_lights..(i + 1) * shadow_lights];
+            let mut s = shade_pixel(tracer, sh, rays[i], primary.hits[i], cost, Some(per_light), stack);
             s.rays.shadow += shadow_rays[i];
             rows[dy * w + x] = s;
         }
