@@ -1,24 +1,13 @@
 //! Writing what a tracer produced: the image as PNG, the traversal cost as a false-colour PNG, and
 //! the AOVs as one OpenEXR file.
 
+use render_spec::{Aovs, Image};
 use std::path::Path;
-use tracer_cpu::{Aovs, Image};
 
 fn write_rgb(path: &Path, width: u32, height: u32, rgb: &[[u8; 3]]) -> Result<(), String> {
     let bytes: Vec<u8> = rgb.iter().flatten().copied().collect();
     image::save_buffer(path, &bytes, width, height, image::ExtendedColorType::Rgb8)
         .map_err(|e| format!("cannot write {}: {e}", path.display()))
-}
-
-/// An 8-bit RGB image from any tracer.
-pub struct Frame<'a> {
-    pub width: u32,
-    pub height: u32,
-    pub rgb: &'a [[u8; 3]],
-}
-
-pub fn write_frame_png(path: &Path, f: &Frame<'_>) -> Result<(), String> {
-    write_rgb(path, f.width, f.height, f.rgb)
 }
 
 pub fn write_png(path: &Path, img: &Image) -> Result<(), String> {

@@ -3,8 +3,8 @@
 use bvh_format::{Light, SceneFile};
 use clap::{Args, ValueEnum};
 use glam::Vec3;
+use render_spec::{CameraSpec, Mode, Settings};
 use std::path::PathBuf;
-use tracer_cpu::{CameraSpec, Mode};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum ModeArg {
@@ -95,6 +95,19 @@ pub fn parse_light(s: &str) -> Result<Light, String> {
 }
 
 impl RenderArgs {
+    /// The settings both tracers take; AOVs are kept when an AOV file or a heatmap is asked for.
+    pub fn settings(&self, scene: &SceneFile) -> Result<Settings, String> {
+        Ok(Settings {
+            width: self.res.0,
+            height: self.res.1,
+            camera: self.camera(scene)?,
+            mode: self.mode(),
+            lights: self.lights(scene),
+            max_indirections: self.indirections(scene),
+            aovs: self.aov.is_some() || self.heatmap.is_some(),
+        })
+    }
+
     pub fn mode(&self) -> Mode {
         match self.mode {
             ModeArg::Cast => Mode::Cast,

@@ -7,8 +7,6 @@
 // its pixel lies outside the image or has nothing to trace: SST walks the tree with the whole
 // workgroup and needs every invocation at its barriers.
 
-const MAX_T: f32 = 3.40282347e38;
-
 fn pixel_index(x: u32, y: u32) -> u32 {
     return y * frame.size.x + x;
 }
@@ -17,9 +15,9 @@ fn record_primary(p: u32, r: Ray, h: HitRec) -> bool {
     var a: Aov;
     a.nodes = cost_nodes;
     a.tris = cost_tris;
-    if h.tri == NO_HIT {
+    if h.tri == NO_TRIANGLE {
         a.t = bitcast<f32>(0x7f800000u);
-        a.prim = NO_HIT;
+        a.prim = NO_TRIANGLE;
         a.normal = vec4<f32>(0.0);
         aovs[p] = a;
         return false;
@@ -34,7 +32,7 @@ fn record_primary(p: u32, r: Ray, h: HitRec) -> bool {
 fn stage_cast(x: u32, y: u32, valid: bool) {
     let p = pixel_index(x, y);
     let r = make_ray(frame.eye.xyz, primary_dir(x, y));
-    let h = trace(r, 0.0, MAX_T, false, valid);
+    let h = trace(r, 0.0, F32_MAX, false, valid);
     if !valid {
         return;
     }
@@ -50,7 +48,7 @@ fn stage_cast(x: u32, y: u32, valid: bool) {
 fn stage_primary(x: u32, y: u32, valid: bool) {
     let p = pixel_index(x, y);
     let r = make_ray(frame.eye.xyz, primary_dir(x, y));
-    let h = trace(r, 0.0, MAX_T, false, valid);
+    let h = trace(r, 0.0, F32_MAX, false, valid);
     if !valid {
         return;
     }
@@ -101,7 +99,7 @@ fn stage_shade(x: u32, y: u32, valid: bool) {
             }
         }
     }
-    let blocked = trace(shadow, 0.0, shadow_t, true, wants_shadow).tri != NO_HIT;
+    let blocked = trace(shadow, 0.0, shadow_t, true, wants_shadow).tri != NO_TRIANGLE;
     if !live {
         return;
     }
@@ -160,7 +158,7 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
         o = offset_origin(s.point, select(-s.geometric, s.geometric, same_side));
     }
     let nr = make_ray(o, dir);
-    let nh = trace(nr, 0.0, MAX_T, false, go);
+    let nh = trace(nr, 0.0, F32_MAX, false, go);
     if !live {
         return;
     }
@@ -171,7 +169,7 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
     atomicAdd(&counters[2], 1u);
     aovs[p].nodes += cost_nodes;
     aovs[p].tris += cost_tris;
-    if nh.tri == NO_HIT {
+    if nh.tri == NO_TRIANGLE {
         accum[p] += vec4<f32>(w * frame.background.xyz, 0.0);
         paths[p].dir.w = 0.0;
         return;

@@ -5,60 +5,28 @@
 use crate::device::{Buffer, Gpu, Pipeline};
 use crate::error::VkError;
 use crate::kernels::{self, Method, Specialisation, Stage};
-use bvh_format::camera::CameraSpec;
 use bvh_format::{Light, SceneFile};
 use bytemuck::{Pod, Zeroable};
+use render_spec::{Aovs, BounceStop, Image, Mode, RayCounts, RenderError, Settings};
 use std::collections::HashMap;
-
-/// Ray casting or Whitted ray tracing.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Mode {
-    Cast,
-    Whitted,
-}
-
-/// What to render.
-#[derive(Clone, Debug)]
-pub struct Settings {
-    pub width: u32,
-    pub height: u32,
-    pub camera: CameraSpec,
-    pub mode: Mode,
-    pub lights: Vec<Light>,
-    pub max_indirections: u32,
-}
 
 /// A rendered frame.
 #[derive(Clone, Debug)]
 pub struct Output {
-    pub width: u32,
-    pub height: u32,
-    pub rgb: Vec<[u8; 3]>,
-    /// Per pixel: primary hit distance (+inf on a miss), shading normal, input triangle
-    /// (`NO_TRIANGLE` on a miss), nodes and triangles tested over all of the pixel's rays.
-    pub t: Vec<f32>,
-    pub normal: Vec<[f32; 3]>,
-    pub prim: Vec<u32>,
-    pub nodes: Vec<u32>,
-    pub tris: Vec<u32>,
-    /// Primary, shadow and secondary rays traced.
-    pub rays: [u64; 3],
+    pub image: Image,
     /// GPU time of the whole frame and of each pass, from timestamp queries.
     pub gpu_ms: f64,
     pub passes: Vec<(String, f64)>,
 }
 
-/// Why a frame cannot be rendered.
+/// Why a frame cannot be rendered: the mistakes every tracer reports alike, or what only the
+/// Vulkan tracer can run into.
 #[derive(Debug, thiserror::Error)]
-pub enum RenderError {
+pub enum VkRenderError {
+    #[error(transparent)]
+    Settings(#[from] RenderError),
     #[error(transparent)]
     Vulkan(#[from] VkError),
-    #[error("the image must be at least 1 x 1 pixels")]
-    EmptyImage,
-    #[error("the camera is degenerate or its field of view is outside 0 to 180 degrees")]
-    Camera,
-    #[error("the {method} traversal needs the {layout} layout, which the scene file does not contain")]
-    MissingLayout { method: &'static str, layout: &'static str },
     #[error("{0} lights are more than the kernels address")]
     TooManyLights(usize),
     #[error("a {x} x {y} workgroup is empty or larger than the device's {limit} invocations")]
@@ -126,7 +94,12 @@ impl<'g> Renderer<'g> {
     /// Uploads the scene (only the node layout `method` reads) and specialises the kernels:
     /// LST's and SST's stacks hold exactly the file's max depth, SST's leaf cache its largest
     /// leaf; reflection and refraction code is present only when some material needs it.
-    pub fn new(gpu: &'g Gpu, scene: &'g SceneFile, method: Method, workgroup: (u32, u32)) -> Result<Self, RenderError> {
+    pub fn new(
+        gpu: &'g Gpu,
+        scene: &'g SceneFile,
+        method: Method,
+        workgroup: (u32, u32),
+    ) -> Result<Self, VkRenderError> {
         let nodes = match method {
             Method::Lst | Method::Sst | Method::SstSubgroup => scene
                 .child_pair
@@ -150,19 +123,24 @@ impl<'g> Renderer<'g> {
         let invocations = wx as u64 * wy as u64;
         let limit = gpu.info().max_workgroup_invocations as u64;
         if wx == 0 || wy == 0 || invocations > limit {
-            return Err(RenderError::Workgroup { x: wx, y: wy, limit });
+            return Err(VkRenderError::Workgroup { x: wx, y: wy, limit });
         }
         if method == Method::SstSubgroup && !gpu.info().supports_subgroup_ops {
-            return Err(RenderError::NoSubgroups(gpu.info().name.clone()));
+            return Err(VkRenderError::NoSubgroups(gpu.info().name.clone()));
         }
         if matches!(method, Method::Sst | Method::SstSubgroup) {
             if !invocations.is_power_of_two() {
-                return Err(RenderError::SstWorkgroup { x: wx, y: wy });
+                return Err(VkRenderError::SstWorkgroup { x: wx, y: wy });
             }
             let needed = kernels::sst_shared_bytes(&spec);
             let limit = gpu.info().max_shared_memory as u64;
             if needed > limit {
-                return Err(RenderError::SharedMemory { depth: spec.stack_size, leaf: spec.leaf_size, needed, limit });
+                return Err(VkRenderError::SharedMemory {
+                    depth: spec.stack_size,
+                    leaf: spec.leaf_size,
+                    needed,
+                    limit,
+                });
             }
         }
         Ok(Self {
@@ -214,19 +192,16 @@ impl<'g> Renderer<'g> {
     }
 
     /// Renders one frame and reads back the image and the AOVs.
-    pub fn render(&mut self, s: &Settings) -> Result<Output, RenderError> {
+    pub fn render(&mut self, s: &Settings) -> Result<Output, VkRenderError> {
         self.render_frame(s, true)
     }
 
     /// Renders one frame; without `readback` only the ray counts and GPU times come back (the
-    /// per-pixel vectors of the output are empty), as benchmarks want.
-    pub fn render_frame(&mut self, s: &Settings, readback: bool) -> Result<Output, RenderError> {
-        if s.width == 0 || s.height == 0 {
-            return Err(RenderError::EmptyImage);
-        }
-        let f = s.camera.frame(s.width, s.height).map_err(|_| RenderError::Camera)?;
+    /// image's pixels are empty and it has no AOVs), as benchmarks want.
+    pub fn render_frame(&mut self, s: &Settings, readback: bool) -> Result<Output, VkRenderError> {
+        let f = s.frame()?;
         if s.lights.len() > u32::MAX as usize / 2 {
-            return Err(RenderError::TooManyLights(s.lights.len()));
+            return Err(VkRenderError::TooManyLights(s.lights.len()));
         }
         let whitted = s.mode == Mode::Whitted;
         // Bounces only where a material can spawn one: no scene pays for what it lacks.
@@ -245,8 +220,7 @@ impl<'g> Renderer<'g> {
         }
         self.targets(s.width, s.height)?;
 
-        let colours: Vec<[f32; 3]> = s.lights.iter().map(|l| l.colour).collect();
-        let (bound, k_max) = self.scene.bounce_bound(&colours);
+        let stop = BounceStop::new(self.scene, &s.lights);
         let v4 = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
         let a3 = |v: [f32; 3]| [v[0], v[1], v[2], 0.0];
         let frame = FrameData {
@@ -257,7 +231,7 @@ impl<'g> Renderer<'g> {
             ambient: a3(self.scene.settings.ambient),
             background: a3(self.scene.settings.background),
             size: [s.width, s.height, s.lights.len() as u32, indirections],
-            stop: [bound, k_max, 0.0, 0.0],
+            stop: [stop.bound, stop.k_max, 0.0, 0.0],
         };
         let g = self.gpu;
         let frame_buf = g.create_buffer_with(std::slice::from_ref(&frame), "frame")?;
@@ -321,20 +295,29 @@ impl<'g> Renderer<'g> {
         })?;
 
         let counts: Vec<u32> = g.download_as(&counters)?;
-        let (image, aovs): (Vec<u32>, Vec<[u32; 8]>) =
-            if readback { (g.download_as(&t.image)?, g.download_as(&t.aovs)?) } else { (Vec::new(), Vec::new()) };
-        let n = if readback { (s.width * s.height) as usize } else { 0 };
-        let f32_of = |u: u32| f32::from_bits(u);
+        let n = s.pixels() as usize;
+        let rgb = if readback {
+            let image: Vec<u32> = g.download_as(&t.image)?;
+            image[..n].iter().map(|&p| [p as u8, (p >> 8) as u8, (p >> 16) as u8]).collect()
+        } else {
+            Vec::new()
+        };
+        let aov = if readback && s.aovs {
+            let aovs: Vec<[u32; 8]> = g.download_as(&t.aovs)?;
+            let f32_of = |u: u32| f32::from_bits(u);
+            Some(Aovs {
+                normal: aovs[..n].iter().map(|a| [f32_of(a[0]), f32_of(a[1]), f32_of(a[2])]).collect(),
+                t: aovs[..n].iter().map(|a| f32_of(a[4])).collect(),
+                prim: aovs[..n].iter().map(|a| a[5]).collect(),
+                nodes: aovs[..n].iter().map(|a| a[6]).collect(),
+                tris: aovs[..n].iter().map(|a| a[7]).collect(),
+            })
+        } else {
+            None
+        };
+        let rays = RayCounts { primary: counts[0] as u64, shadow: counts[1] as u64, secondary: counts[2] as u64 };
         Ok(Output {
-            width: s.width,
-            height: s.height,
-            rgb: image[..n].iter().map(|&p| [p as u8, (p >> 8) as u8, (p >> 16) as u8]).collect(),
-            normal: aovs[..n].iter().map(|a| [f32_of(a[0]), f32_of(a[1]), f32_of(a[2])]).collect(),
-            t: aovs[..n].iter().map(|a| f32_of(a[4])).collect(),
-            prim: aovs[..n].iter().map(|a| a[5]).collect(),
-            nodes: aovs[..n].iter().map(|a| a[6]).collect(),
-            tris: aovs[..n].iter().map(|a| a[7]).collect(),
-            rays: [counts[0] as u64, counts[1] as u64, counts[2] as u64],
+            image: Image { width: s.width, height: s.height, rgb, aov, rays },
             gpu_ms: timings.total_ms,
             passes: timings.intervals,
         })

@@ -4,7 +4,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
 use std::time::Instant;
 use tools::render_args::RenderArgs;
-use tracer_cpu::{Method, RenderSettings, Tracer};
+use tracer_cpu::{Method, Tracer};
 
 #[derive(Parser)]
 #[command(name = "trace-cpu", version, about = "Ray cast or Whitted ray trace a BVH scene file on the CPU.")]
@@ -50,20 +50,12 @@ fn main() -> ExitCode {
 
 fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Result<(), String> {
     let scene = tools::load_scene(args.scene.as_deref())?;
-    let settings = RenderSettings {
-        width: args.res.0,
-        height: args.res.1,
-        camera: args.camera(&scene)?,
-        mode: args.mode(),
-        lights: args.lights(&scene),
-        max_indirections: args.indirections(&scene),
-        method: match method {
-            MethodArg::Auto => Method::Auto,
-            MethodArg::Packet => Method::Packet,
-            MethodArg::Ordered => Method::Ordered,
-            MethodArg::Stackless => Method::Stackless,
-        },
-        aovs: args.aov.is_some() || args.heatmap.is_some(),
+    let settings = args.settings(&scene)?;
+    let method = match method {
+        MethodArg::Auto => Method::Auto,
+        MethodArg::Packet => Method::Packet,
+        MethodArg::Ordered => Method::Ordered,
+        MethodArg::Stackless => Method::Stackless,
     };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.unwrap_or(0))
@@ -71,17 +63,17 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
         .map_err(|e| format!("cannot start the worker threads: {e}"))?;
     let tracer = Tracer::new(&scene);
     let t0 = Instant::now();
-    let image = pool.install(|| tracer_cpu::render(&tracer, &settings)).map_err(|e| e.to_string())?;
+    let image = pool.install(|| tracer_cpu::render(&tracer, &settings, method)).map_err(|e| e.to_string())?;
     let ms = t0.elapsed().as_secs_f64() * 1e3;
     tools::output::write_png(&args.output, &image)?;
     let r = image.rays;
-    let total = r.primary + r.shadow + r.secondary;
+    let total = r.total();
     println!(
         "{}x{} {:?} with {:?} on {} threads: {:.1} ms, rays: {} primary, {} shadow, {} secondary ({:.2} Mrays/s) -> {}",
         image.width,
         image.height,
         settings.mode,
-        settings.method.resolve(),
+        method.resolve(),
         pool.current_num_threads(),
         ms,
         r.primary,

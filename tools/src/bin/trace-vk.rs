@@ -1,11 +1,12 @@
 //! `trace-vk`: renders a scene file with the Vulkan compute tracer on any Vulkan device.
 
 use clap::{Parser, Subcommand, ValueEnum};
+use render_spec::{Mode, Settings};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use tools::render_args::{RenderArgs, lights_n, parse_res};
 use tracer_vk::kernels::Method;
-use tracer_vk::render::{Mode, Renderer, Settings};
+use tracer_vk::render::Renderer;
 use tracer_vk::{Gpu, list_devices};
 
 #[derive(Parser)]
@@ -140,44 +141,38 @@ fn check_validation(gpu: &Gpu) -> Result<(), String> {
 
 fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &DeviceArgs) -> Result<(), String> {
     let scene = tools::load_scene(args.scene.as_deref())?;
-    let settings = Settings {
-        width: args.res.0,
-        height: args.res.1,
-        camera: args.camera(&scene)?,
-        mode: match args.mode() {
-            tracer_cpu::Mode::Cast => Mode::Cast,
-            tracer_cpu::Mode::Whitted => Mode::Whitted,
-        },
-        lights: args.lights(&scene),
-        max_indirections: args.indirections(&scene),
-    };
+    let settings = args.settings(&scene)?;
     let method = method_of(method);
     let gpu = open(device)?;
     let mut renderer = Renderer::new(&gpu, &scene, method, workgroup).map_err(|e| e.to_string())?;
     let out = renderer.render(&settings).map_err(|e| e.to_string())?;
     check_validation(&gpu)?;
-    let image = tools::output::Frame { width: out.width, height: out.height, rgb: &out.rgb };
-    tools::output::write_frame_png(&args.output, &image)?;
-    let [p, s, sec] = out.rays;
+    let image = &out.image;
+    tools::output::write_png(&args.output, image)?;
+    let r = image.rays;
     println!(
-        "{}x{} {:?} with {} on {}: {:.3} ms GPU, rays: {p} primary, {s} shadow, {sec} secondary ({:.1} Mrays/s) -> {}",
-        out.width,
-        out.height,
+        "{}x{} {:?} with {} on {}: {:.3} ms GPU, rays: {} primary, {} shadow, {} secondary ({:.1} Mrays/s) -> {}",
+        image.width,
+        image.height,
         settings.mode,
         method.name(),
         gpu.info().name,
         out.gpu_ms,
-        (p + s + sec) as f64 / out.gpu_ms / 1e3,
+        r.primary,
+        r.shadow,
+        r.secondary,
+        r.total() as f64 / out.gpu_ms / 1e3,
         args.output.display()
     );
-    let aov = tracer_cpu::Aovs { t: out.t, normal: out.normal, prim: out.prim, nodes: out.nodes, tris: out.tris };
-    if let Some(path) = &args.heatmap {
-        let max = tools::output::write_heatmap(path, out.width, out.height, &aov)?;
-        println!("heatmap: nodes visited per pixel, 0 (blue) to {max} (red) -> {}", path.display());
-    }
-    if let Some(path) = &args.aov {
-        tools::output::write_aov(path, out.width, out.height, &aov)?;
-        println!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", path.display());
+    if let Some(aov) = &image.aov {
+        if let Some(path) = &args.heatmap {
+            let max = tools::output::write_heatmap(path, image.width, image.height, aov)?;
+            println!("heatmap: nodes visited per pixel, 0 (blue) to {max} (red) -> {}", path.display());
+        }
+        if let Some(path) = &args.aov {
+            tools::output::write_aov(path, image.width, image.height, aov)?;
+            println!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", path.display());
+        }
     }
     Ok(())
 }
@@ -264,19 +259,20 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                             mode,
                             lights: lights_n(&scene, nl),
                             max_indirections: scene.settings.max_indirections,
+                            aovs: false,
                         };
                         let mut times = Vec::with_capacity(b.frames);
-                        let mut rays = [0u64; 3];
+                        let mut rays = render_spec::RayCounts::default();
                         for i in 0..b.warmup + b.frames {
                             let out = renderer.render_frame(&settings, false).map_err(|e| e.to_string())?;
                             if i >= b.warmup {
                                 times.push(out.gpu_ms);
-                                rays = out.rays;
+                                rays = out.image.rays;
                             }
                         }
                         let min = times.iter().copied().fold(f64::INFINITY, f64::min);
                         let med = median(&mut times);
-                        let mrays = (rays[0] + rays[1] + rays[2]) as f64 / med / 1e3;
+                        let mrays = rays.total() as f64 / med / 1e3;
                         let mode_name = match mode {
                             Mode::Cast => "cast".to_owned(),
                             Mode::Whitted => format!("whitted{nl}"),
@@ -285,16 +281,16 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                             "{name},{},{cam},{w},{h},{mode_name},{nl},{},{med:.4},{min:.4},{},{},{},{mrays:.1}",
                             scene.triangles.len(),
                             method.name(),
-                            rays[0],
-                            rays[1],
-                            rays[2]
+                            rays.primary,
+                            rays.shadow,
+                            rays.secondary
                         ));
                         md.push(format!(
                             "| {name} | {cam} | {w}x{h} | {mode_name} | {} | {med:.3} | {mrays:.0} | {} | {} | {} |",
                             method.name(),
-                            rays[0],
-                            rays[1],
-                            rays[2]
+                            rays.primary,
+                            rays.shadow,
+                            rays.secondary
                         ));
                         bar.inc(1);
                     }
