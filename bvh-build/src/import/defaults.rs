@@ -122,7 +122,7 @@ mod tests {
         let names: Vec<_> = cams.iter().map(|c| c.name().unwrap()).collect();
         assert_eq!(names, CAMERA_NAMES);
         let r = 3f32.sqrt();
-        for (cam, fill) in cams.iter().zip([CLOSE_UP_FILL, MEDIUM_FILL, WIDE_FILL]) {
+        for (cam, fill) in cams.iter().zip([MEDIUM_FILL, CLOSE_UP_FILL, WIDE_FILL]) {
             let (eye, at) = (Vec3::from(cam.eye), Vec3::from(cam.at));
             assert_eq!(at, Vec3::new(0.0, 1.0, 0.0));
             assert!(eye.z > 0.0 && eye.y > at.y, "front and above");
