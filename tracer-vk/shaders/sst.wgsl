@@ -80,11 +80,12 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
             }
             pop = true;
         } else {
-            if lid < 2u {
-                sst_children[lid] = nodes[node.index + lid];
+            // Loops, not `lid < 2u`: a workgroup may have fewer invocations than entries.
+            for (var i = lid; i < 2u; i += WG_SIZE) {
+                sst_children[i] = nodes[node.index + i];
             }
-            if lid < 4u {
-                atomicStore(&sst_hitcode[lid], 0u);
+            for (var i = lid; i < 4u; i += WG_SIZE) {
+                atomicStore(&sst_hitcode[i], 0u);
             }
             workgroupBarrier();
             var code = 0u;

@@ -117,28 +117,26 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
         Method::Stackless => STACKLESS,
         Method::Sst | Method::SstSubgroup => SST,
     };
-    // naga accepts the subgroup builtins only in one-dimensional workgroups: the subgroup variant
-    // runs WG_X * WG_Y invocations in a line and maps them onto the same WG_X x WG_Y pixel block.
-    let entry = if spec.method == Method::SstSubgroup {
-        format!(
-            "@compute @workgroup_size(WG_X * WG_Y)\n\
-             fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32,\n\
-             \x20       @builtin(subgroup_invocation_id) sgl: u32, @builtin(subgroup_id) sgi: u32,\n\
-             \x20       @builtin(num_subgroups) sgn: u32) {{\n\
-             \x20   lid = li;\n    sg_lane = sgl;\n    sg_id = sgi;\n    sg_count = sgn;\n\
-             \x20   let x = wg.x * WG_X + li % WG_X;\n    let y = wg.y * WG_Y + li / WG_X;\n\
-             \x20   {}(x, y, x < frame.size.x && y < frame.size.y);\n}}\n",
-            stage.entry()
+    // Every kernel runs its WG_X x WG_Y pixel block as a line of WG_X * WG_Y invocations. naga
+    // accepts the subgroup builtins only in one-dimensional workgroups, and lavapipe (whose
+    // subgroups are 8 wide) loses whole rows of SST's workgroups when a two-dimensional one is
+    // narrower than 8: `--workgroup 4x4` traced a quarter of its rays.
+    let (params, subgroup_setup) = if spec.method == Method::SstSubgroup {
+        (
+            ",\n        @builtin(subgroup_invocation_id) sgl: u32, @builtin(subgroup_id) sgi: u32, @builtin(num_subgroups) sgn: u32",
+            "    sg_lane = sgl;\n    sg_id = sgi;\n    sg_count = sgn;\n",
         )
     } else {
-        format!(
-            "@compute @workgroup_size(WG_X, WG_Y)\n\
-             fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) li: u32) {{\n\
-             \x20   lid = li;\n\
-             \x20   {}(gid.x, gid.y, gid.x < frame.size.x && gid.y < frame.size.y);\n}}\n",
-            stage.entry()
-        )
+        ("", "")
     };
+    let entry = format!(
+        "@compute @workgroup_size(WG_X * WG_Y)\n\
+         fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32{params}) {{\n\
+         \x20   lid = li;\n{subgroup_setup}\
+         \x20   let x = wg.x * WG_X + li % WG_X;\n    let y = wg.y * WG_Y + li / WG_X;\n\
+         \x20   {}(x, y, x < frame.size.x && y < frame.size.y);\n}}\n",
+        stage.entry()
+    );
     format!(
         "const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n\
          {}\n{}\n{}\n{}",
