@@ -655,8 +655,16 @@ impl Gpu {
 
     /// The whole buffer's contents.
     pub fn download(&self, buf: &Buffer) -> Result<Vec<u8>, VkError> {
+        self.download_prefix(buf, buf.size)
+    }
+
+    /// The first `bytes` of the buffer (a tile's pixels in a buffer sized for the largest tile).
+    pub fn download_prefix(&self, buf: &Buffer, bytes: u64) -> Result<Vec<u8>, VkError> {
         self.check_buffer(buf)?;
-        let mut out = vec![0u8; buf.size as usize];
+        if bytes > buf.size {
+            return Err(VkError::Usage(format!("buffer `{}` holds {} bytes, not {bytes}", buf.label, buf.size)));
+        }
+        let mut out = vec![0u8; bytes as usize];
         let mut guard = self.lock()?;
         let state = &mut *guard.state;
         for (i, chunk) in out.chunks_mut(STAGING_CHUNK as usize).enumerate() {
@@ -690,6 +698,12 @@ impl Gpu {
         let bytes = self.download(buf)?;
         let whole = bytes.len() - bytes.len() % size_of::<T>().max(1);
         Ok(bytemuck::pod_collect_to_vec(&bytes[..whole]))
+    }
+
+    /// The first `count` elements of the buffer as `T`s.
+    pub fn download_prefix_as<T: bytemuck::Pod>(&self, buf: &Buffer, count: usize) -> Result<Vec<T>, VkError> {
+        let bytes = self.download_prefix(buf, (count * size_of::<T>()) as u64)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
 
     /// A compute pipeline from SPIR-V words with entry point `main`, `bindings` storage buffers at
