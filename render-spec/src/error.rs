@@ -9,6 +9,8 @@ pub enum RenderError {
     DegenerateCamera,
     #[error("the field of view must lie between 0 and 180 degrees, not {0}")]
     FieldOfView(f32),
+    #[error("{0} indirections are more than the {max} a frame may trace", max = crate::settings::MAX_INDIRECTIONS)]
+    TooManyIndirections(u32),
     #[error(
         "the {method} traversal needs the {layout} layout, which the scene file does not contain (compile it with --layout both)"
     )]
@@ -25,6 +27,7 @@ mod tests {
             RenderError::EmptyImage,
             RenderError::DegenerateCamera,
             RenderError::FieldOfView(180.0),
+            RenderError::TooManyIndirections(2000),
             RenderError::MissingLayout { method: "stackless", layout: "escape-pointer" },
         ] {
             let s = e.to_string();

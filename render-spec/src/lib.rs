@@ -20,4 +20,4 @@ pub use camera::{CameraSpec, Frame};
 pub use constants::NO_TRIANGLE;
 pub use error::RenderError;
 pub use image::{Aovs, Image, RayCounts};
-pub use settings::{Mode, Settings};
+pub use settings::{MAX_INDIRECTIONS, Mode, Settings};

@@ -13,6 +13,11 @@ pub enum Mode {
     Whitted,
 }
 
+/// The most indirections a frame may ask for. Paths end earlier in every scene whose reflective
+/// and refractive materials lose light; only perfect mirrors facing each other go on to the limit,
+/// at a cost that grows with it.
+pub const MAX_INDIRECTIONS: u32 = 1024;
+
 /// What to render; how (the traversal method, the device) is each tracer's own choice.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Settings {
@@ -22,17 +27,21 @@ pub struct Settings {
     pub mode: Mode,
     /// Lights for Whitted mode (ray casting always uses one white light at the eye).
     pub lights: Vec<Light>,
-    /// Longest chain of secondary rays.
+    /// Longest chain of secondary rays, at most [`MAX_INDIRECTIONS`].
     pub max_indirections: u32,
     /// Return the per-pixel outputs ([`crate::Aovs`]) besides the colour.
     pub aovs: bool,
 }
 
 impl Settings {
-    /// Checks the image size and the camera, and precomputes the camera for this image.
+    /// Checks the image size, the indirections and the camera, and precomputes the camera for
+    /// this image.
     pub fn frame(&self) -> Result<Frame, RenderError> {
         if self.width == 0 || self.height == 0 {
             return Err(RenderError::EmptyImage);
+        }
+        if self.max_indirections > MAX_INDIRECTIONS {
+            return Err(RenderError::TooManyIndirections(self.max_indirections));
         }
         self.camera.frame(self.width, self.height).map_err(|e| match e {
             CameraError::Degenerate => RenderError::DegenerateCamera,

@@ -226,7 +226,7 @@ pub(crate) fn shade_pixel(
 /// thread count.
 pub fn render(tracer: &Tracer<'_>, settings: &Settings, method: Method) -> Result<Image, RenderError> {
     let frame = settings.frame()?;
-    let method = method.resolve();
+    let method = method.resolve(tracer.scene);
     tracer.layout_for(method)?;
     let (w, h) = (settings.width as usize, settings.height as usize);
     let sh = Shading::new(tracer.scene, settings, method);

@@ -1,10 +1,13 @@
 //! `trace-vk`: renders a scene file with the Vulkan compute tracer on any Vulkan device.
 
 use clap::{Parser, Subcommand, ValueEnum};
-use render_spec::{Mode, Settings};
+use render_spec::{Mode, RayCounts, Settings};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use tools::render_args::{RenderArgs, lights_n, parse_res};
+use tools::cli::{Progress, duration, rays_per_second};
+use tools::output::{self, Frame, Heatmap, Kind};
+use tools::render_args::{RenderArgs, lights_n, parse_count, parse_res, parse_workgroup};
+use tools::say;
 use tracer_vk::kernels::Method;
 use tracer_vk::render::Renderer;
 use tracer_vk::{Gpu, list_devices};
@@ -19,7 +22,7 @@ struct Cli {
 #[derive(clap::Args, Clone)]
 struct DeviceArgs {
     /// Vulkan device index (see `trace-vk devices`) [default: the first discrete GPU, else any].
-    #[arg(long)]
+    #[arg(long, value_parser = parse_device, allow_hyphen_values = true)]
     device: Option<usize>,
     /// Enable the Khronos validation layer and fail on any message it reports.
     #[arg(long)]
@@ -41,7 +44,7 @@ enum Command {
         #[arg(long, value_enum, default_value = "lst")]
         method: MethodArg,
         /// Workgroup shape (pixels).
-        #[arg(long, value_parser = parse_res, default_value = "8x8")]
+        #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
         workgroup: (u32, u32),
         #[command(flatten)]
         device: DeviceArgs,
@@ -53,28 +56,28 @@ struct BenchArgs {
     /// Scenes: compiled .bvh files, meshes or scene descriptions [default: the built-in bunny].
     scenes: Vec<PathBuf>,
     /// Stored cameras to render from.
-    #[arg(long, value_delimiter = ',', default_value = "close-up,medium,wide")]
+    #[arg(long, value_delimiter = ',', default_value = "close-up,medium,wide", allow_hyphen_values = true)]
     cameras: Vec<String>,
     /// Image sizes.
-    #[arg(long, value_delimiter = ',', value_parser = parse_res, default_value = "640x480,1280x960,1920x1440")]
+    #[arg(long, value_delimiter = ',', value_parser = parse_res, default_value = "640x480,1280x960,1920x1440", allow_hyphen_values = true)]
     res: Vec<(u32, u32)>,
     /// Modes: cast, or whitted with a light count (whitted1, whitted2, whitted4).
-    #[arg(long, value_delimiter = ',', default_value = "cast,whitted1,whitted2")]
-    modes: Vec<String>,
+    #[arg(long, value_delimiter = ',', value_parser = parse_mode, default_value = "cast,whitted1,whitted2", allow_hyphen_values = true)]
+    modes: Vec<(Mode, usize)>,
     /// Traversals.
     #[arg(long, value_delimiter = ',', value_enum, default_value = "lst,stackless,sst")]
     methods: Vec<MethodArg>,
-    /// Timed frames per setting (the median is reported).
-    #[arg(long, default_value_t = 50)]
+    /// Timed frames per setting, 1 to 100000 (the median is reported).
+    #[arg(long, default_value_t = 50, value_parser = parse_frames, allow_hyphen_values = true)]
     frames: usize,
-    /// Untimed frames before the timed ones.
-    #[arg(long, default_value_t = 3)]
+    /// Untimed frames before the timed ones, 0 to 100000.
+    #[arg(long, default_value_t = 3, value_parser = parse_warmup, allow_hyphen_values = true)]
     warmup: usize,
     /// Workgroup shape (pixels).
-    #[arg(long, value_parser = parse_res, default_value = "8x8")]
+    #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
     workgroup: (u32, u32),
     /// Write the table as CSV here (and as Markdown next to it, .md).
-    #[arg(long, default_value = "bench.csv")]
+    #[arg(long, default_value = "bench.csv", allow_hyphen_values = true)]
     csv: PathBuf,
     #[command(flatten)]
     device: DeviceArgs,
@@ -92,25 +95,31 @@ enum MethodArg {
     SstSubgroup,
 }
 
+fn parse_device(s: &str) -> Result<usize, String> {
+    parse_count(s, 0, 1 << 16, "the device index").map(|n| n as usize)
+}
+
+fn parse_frames(s: &str) -> Result<usize, String> {
+    parse_count(s, 1, 100_000, "the number of frames").map(|n| n as usize)
+}
+
+fn parse_warmup(s: &str) -> Result<usize, String> {
+    parse_count(s, 0, 100_000, "the number of warm-up frames").map(|n| n as usize)
+}
+
 fn main() -> ExitCode {
-    let result = match Cli::parse().command {
+    let command = tools::cli::parse::<Cli>().command;
+    tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
         Command::Render { args, method, workgroup, device } => render(&args, method, workgroup, &device),
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    })
 }
 
 fn devices() -> Result<(), String> {
     let list = list_devices().map_err(|e| e.to_string())?;
     for d in list {
-        println!(
+        say!(
             "{}: {} ({:?}, Vulkan {}.{}.{}, {}), subgroup {}, shared memory {} KiB, storage buffer range {} MiB, device-local memory {} MiB",
             d.index,
             d.name,
@@ -140,39 +149,49 @@ fn check_validation(gpu: &Gpu) -> Result<(), String> {
 }
 
 fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &DeviceArgs) -> Result<(), String> {
-    let scene = tools::load_scene(args.scene.as_deref())?;
-    let settings = args.settings(&scene)?;
+    let outputs = args.check()?;
+    let loaded = tools::load_scene(args.scene.as_deref())?;
+    let scene = &loaded.file;
+    let settings = args.settings(scene)?;
     let method = method_of(method);
     let gpu = open(device)?;
-    let mut renderer = Renderer::new(&gpu, &scene, method, workgroup).map_err(|e| e.to_string())?;
+    let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
     let out = renderer.render(&settings).map_err(|e| e.to_string())?;
     check_validation(&gpu)?;
+
+    // Every file first, the report after: a reader that stops early cannot cut the writing short.
     let image = &out.image;
-    tools::output::write_png(&args.output, image)?;
+    output::write_image(&outputs.image, &Frame { width: image.width, height: image.height, rgb: &image.rgb })
+        .map_err(|e| e.to_string())?;
     let r = image.rays;
-    println!(
-        "{}x{} {:?} with {} on {}: {:.3} ms GPU, rays: {} primary, {} shadow, {} secondary ({:.1} Mrays/s) -> {}",
+    let mut lines = vec![format!(
+        "{}x{} {:?} with {} on {}: {} GPU{}, rays: {} primary, {} shadow, {} secondary ({}) -> {}",
         image.width,
         image.height,
         settings.mode,
         method.name(),
         gpu.info().name,
-        out.gpu_ms,
+        duration(out.gpu_ms / 1e3),
+        loaded.timing_note(),
         r.primary,
         r.shadow,
         r.secondary,
-        r.total() as f64 / out.gpu_ms / 1e3,
-        args.output.display()
-    );
+        rays_per_second(r.total(), out.gpu_ms / 1e3),
+        outputs.image.path.display()
+    )];
     if let Some(aov) = &image.aov {
-        if let Some(path) = &args.heatmap {
-            let max = tools::output::write_heatmap(path, image.width, image.height, aov)?;
-            println!("heatmap: nodes visited per pixel, 0 (blue) to {max} (red) -> {}", path.display());
+        if let Some(o) = &outputs.heatmap {
+            let h = Heatmap::new(image.width, image.height, &aov.nodes, args.heatmap_max);
+            output::write_heatmap(o, &h).map_err(|e| e.to_string())?;
+            lines.push(tools::render_args::heatmap_line(&h, o));
         }
-        if let Some(path) = &args.aov {
-            tools::output::write_aov(path, image.width, image.height, aov)?;
-            println!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", path.display());
+        if let Some(o) = &outputs.aov {
+            output::write_aov(o, image.width, image.height, aov).map_err(|e| e.to_string())?;
+            lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", o.path.display()));
         }
+    }
+    for line in lines {
+        say!("{line}");
     }
     Ok(())
 }
@@ -190,11 +209,11 @@ fn method_of(m: MethodArg) -> Method {
 fn parse_mode(s: &str) -> Result<(Mode, usize), String> {
     match s {
         "cast" => Ok((Mode::Cast, 0)),
-        _ => s
-            .strip_prefix("whitted")
-            .and_then(|n| n.parse::<usize>().ok())
-            .map(|n| (Mode::Whitted, n))
-            .ok_or_else(|| format!("{s:?} is not a mode (cast, whitted1, whitted2, ...)")),
+        _ => match s.strip_prefix("whitted") {
+            Some(n) => parse_count(n, 0, tools::render_args::MAX_LIGHTS as u64, "the light count after \"whitted\"")
+                .map(|n| (Mode::Whitted, n as usize)),
+            None => Err(format!("{s:?} is not a mode (cast, whitted1, whitted2, ...)")),
+        },
     }
 }
 
@@ -205,17 +224,16 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
-    let modes: Vec<(Mode, usize)> = b.modes.iter().map(|m| parse_mode(m)).collect::<Result<_, _>>()?;
-    if b.frames == 0 {
-        return Err("--frames must be at least 1".to_owned());
-    }
+    let md_path = b.csv.with_extension("md");
+    let checked =
+        output::check(&[("--csv", &b.csv, Kind::Table), ("--csv (its Markdown copy)", &md_path, Kind::Markdown)], &[])
+            .map_err(|e| e.to_string())?;
+    let modes = &b.modes;
     let gpu = open(&b.device)?;
     let scenes: Vec<Option<PathBuf>> =
         if b.scenes.is_empty() { vec![None] } else { b.scenes.iter().cloned().map(Some).collect() };
     let total = scenes.len() * b.cameras.len() * b.res.len() * modes.len() * b.methods.len();
-    let bar = indicatif::ProgressBar::new(total as u64).with_style(
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}").expect("the template is valid"),
-    );
+    let bar = Progress::new(total as u64, "{bar:40} {pos}/{len} settings ({elapsed}, {eta} left) {msg}", false);
     let header =
         "scene,triangles,camera,width,height,mode,lights,method,median_ms,min_ms,primary,shadow,secondary,mrays_per_s";
     let mut csv = vec![header.to_owned()];
@@ -229,7 +247,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
             b.warmup
         ),
         String::new(),
-        "| scene | camera | size | mode | method | median ms | Mrays/s | primary | shadow | secondary |".to_owned(),
+        "| scene | camera | size | mode | method | median ms | rays/s | primary | shadow | secondary |".to_owned(),
         "|---|---|---|---|---|---:|---:|---:|---:|---:|".to_owned(),
     ];
     for path in &scenes {
@@ -239,14 +257,14 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "bunny (built-in)".to_owned());
         bar.set_message(format!("loading {name}"));
-        let scene = tools::load_scene(path.as_deref())?;
+        let scene = tools::load_scene(path.as_deref())?.file;
         for &m in &b.methods {
             let method = method_of(m);
             let mut renderer = Renderer::new(&gpu, &scene, method, b.workgroup).map_err(|e| e.to_string())?;
             for cam in &b.cameras {
                 let camera = tools::render_args::stored_camera(&scene, cam)?;
                 for &(w, h) in &b.res {
-                    for &(mode, nl) in &modes {
+                    for &(mode, nl) in modes {
                         bar.set_message(format!(
                             "{name} {cam} {w}x{h} {mode:?}{} {}",
                             if nl > 0 { nl.to_string() } else { String::new() },
@@ -257,12 +275,12 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                             height: h,
                             camera,
                             mode,
-                            lights: lights_n(&scene, nl),
+                            lights: lights_n(&scene, nl, &camera),
                             max_indirections: scene.settings.max_indirections,
                             aovs: false,
                         };
                         let mut times = Vec::with_capacity(b.frames);
-                        let mut rays = render_spec::RayCounts::default();
+                        let mut rays = RayCounts::default();
                         for i in 0..b.warmup + b.frames {
                             let out = renderer.render_frame(&settings, false).map_err(|e| e.to_string())?;
                             if i >= b.warmup {
@@ -272,13 +290,14 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                         }
                         let min = times.iter().copied().fold(f64::INFINITY, f64::min);
                         let med = median(&mut times);
-                        let mrays = rays.total() as f64 / med / 1e3;
+                        let all_rays = rays.total();
+                        let mrays = all_rays as f64 / med / 1e3;
                         let mode_name = match mode {
                             Mode::Cast => "cast".to_owned(),
                             Mode::Whitted => format!("whitted{nl}"),
                         };
                         csv.push(format!(
-                            "{name},{},{cam},{w},{h},{mode_name},{nl},{},{med:.4},{min:.4},{},{},{},{mrays:.1}",
+                            "{name},{},{cam},{w},{h},{mode_name},{nl},{},{med:.4},{min:.4},{},{},{},{mrays:.4}",
                             scene.triangles.len(),
                             method.name(),
                             rays.primary,
@@ -286,8 +305,9 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                             rays.secondary
                         ));
                         md.push(format!(
-                            "| {name} | {cam} | {w}x{h} | {mode_name} | {} | {med:.3} | {mrays:.0} | {} | {} | {} |",
+                            "| {name} | {cam} | {w}x{h} | {mode_name} | {} | {med:.3} | {} | {} | {} | {} |",
                             method.name(),
+                            rays_per_second(all_rays, med / 1e3),
                             rays.primary,
                             rays.shadow,
                             rays.secondary
@@ -298,15 +318,11 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
             }
         }
     }
-    bar.finish_and_clear();
+    bar.finish();
     check_validation(&gpu)?;
-    let write = |p: &std::path::Path, lines: &[String]| {
-        std::fs::write(p, lines.join("\n") + "\n").map_err(|e| format!("cannot write {}: {e}", p.display()))
-    };
-    write(&b.csv, &csv)?;
-    let md_path = b.csv.with_extension("md");
-    write(&md_path, &md)?;
-    println!("{}", md.join("\n"));
-    println!("\n-> {} and {}", b.csv.display(), md_path.display());
+    output::write_text(&checked[0], &(csv.join("\n") + "\n")).map_err(|e| e.to_string())?;
+    output::write_text(&checked[1], &(md.join("\n") + "\n")).map_err(|e| e.to_string())?;
+    say!("{}", md.join("\n"));
+    say!("\n-> {} and {}", b.csv.display(), md_path.display());
     Ok(())
 }
