@@ -31,7 +31,7 @@ mod tests {
             RenderError::MissingLayout { method: "stackless", layout: "escape-pointer" },
         ] {
             let s = e.to_string();
-            assert!(!s.contains('\n') && !s.ends_with('.') && s.starts_with(char::is_lowercase), "{s}");
+            assert!(!s.contains('\n') && !s.ends_with('.') && !s.starts_with(char::is_uppercase), "{s}");
         }
     }
 }
