@@ -129,6 +129,42 @@ pub struct Renderer<'g> {
 
 const BINDINGS: u32 = 14;
 
+/// The kernels' storage buffers by binding number, as common.wgsl names them; `render_tile` binds
+/// its buffers in this order (a test holds common.wgsl to it).
+const BINDING_NAMES: [&str; BINDINGS as usize] = [
+    "frame",
+    "nodes",
+    "tris",
+    "normals",
+    "material_ids",
+    "materials",
+    "lights",
+    "input_index",
+    "paths",
+    "hits",
+    "accum",
+    "aovs",
+    "image",
+    "counters",
+];
+
+/// Bytes per pixel of the per-pixel buffers: `PathRay`, `HitRec`, the accumulated colour, `Aov`
+/// and the packed RGBA8 image of common.wgsl (a test holds them to naga's layout).
+const PATH_BYTES: u64 = 32;
+const HIT_BYTES: u64 = 16;
+const ACCUM_BYTES: u64 = 16;
+const AOV_BYTES: u64 = 32;
+const IMAGE_BYTES: u64 = 4;
+
+/// Where `Aov`'s fields lie in its eight 32-bit words (a test holds them to naga's layout).
+mod aov_word {
+    pub const NORMAL: usize = 0;
+    pub const T: usize = 4;
+    pub const PRIM: usize = 5;
+    pub const NODES: usize = 6;
+    pub const TRIS: usize = 7;
+}
+
 /// What one frame's passes gave, summed over tiles and submissions.
 #[derive(Default)]
 struct Tally {
@@ -159,7 +195,7 @@ struct HostFrame {
 impl HostFrame {
     fn new(width: u32, height: u32, image: bool, aovs: bool) -> Result<Self, VkRenderError> {
         let n = width as usize * height as usize;
-        let bytes = n as u64 * (4 * image as u64 + 32 * aovs as u64);
+        let bytes = n as u64 * (IMAGE_BYTES * image as u64 + AOV_BYTES * aovs as u64);
         let fail = |_| VkRenderError::HostMemory { width, height, bytes };
         let mut f = HostFrame { width, image: Vec::new(), aovs: Vec::new() };
         if image {
@@ -286,11 +322,11 @@ impl<'g> Renderer<'g> {
         let g = self.gpu;
         self.targets = Some(Targets {
             pixels,
-            paths: g.create_buffer(pixels * 32, "paths")?,
-            hits: g.create_buffer(pixels * 16, "hits")?,
-            accum: g.create_buffer(pixels * 16, "accumulated colour")?,
-            aovs: g.create_buffer(pixels * 32, "AOVs")?,
-            image: g.create_buffer(pixels * 4, "image")?,
+            paths: g.create_buffer(pixels * PATH_BYTES, "paths")?,
+            hits: g.create_buffer(pixels * HIT_BYTES, "hits")?,
+            accum: g.create_buffer(pixels * ACCUM_BYTES, "accumulated colour")?,
+            aovs: g.create_buffer(pixels * AOV_BYTES, "AOVs")?,
+            image: g.create_buffer(pixels * IMAGE_BYTES, "image")?,
         });
         Ok(())
     }
@@ -395,11 +431,11 @@ impl<'g> Renderer<'g> {
         let f32_of = |u: u32| f32::from_bits(u);
         let a = &host.aovs;
         let aov = aovs.then(|| Aovs {
-            normal: a.iter().map(|a| [f32_of(a[0]), f32_of(a[1]), f32_of(a[2])]).collect(),
-            t: a.iter().map(|a| f32_of(a[4])).collect(),
-            prim: a.iter().map(|a| a[5]).collect(),
-            nodes: a.iter().map(|a| a[6]).collect(),
-            tris: a.iter().map(|a| a[7]).collect(),
+            normal: a.iter().map(|a| std::array::from_fn(|k| f32_of(a[aov_word::NORMAL + k]))).collect(),
+            t: a.iter().map(|a| f32_of(a[aov_word::T])).collect(),
+            prim: a.iter().map(|a| a[aov_word::PRIM]).collect(),
+            nodes: a.iter().map(|a| a[aov_word::NODES]).collect(),
+            tris: a.iter().map(|a| a[aov_word::TRIS]).collect(),
         });
         Ok(Output {
             image: Image {
@@ -434,6 +470,7 @@ impl<'g> Renderer<'g> {
         let t = self.targets.as_ref().expect("the targets were made before the tiles");
         let (wx, wy) = self.spec.workgroup;
         let groups = [tile.width.div_ceil(wx), tile.height.div_ceil(wy), 1];
+        // In the order of BINDING_NAMES.
         let buffers: [&Buffer; BINDINGS as usize] = [
             frame_buf,
             &self.nodes,
@@ -551,4 +588,187 @@ fn fits<T>(info: &crate::device::DeviceInfo, what: &'static str, data: &[T]) -> 
         return Err(VkRenderError::SceneTooLarge { what, bytes, limit_name, limit, fits });
     }
     Ok(())
+}
+
+/// The layout contract between the Rust records and common.wgsl, read from naga's own layout of a
+/// kernel module: every shared struct's size, array stride and field offsets, and the binding table.
+#[cfg(test)]
+mod layout_contract {
+    use super::*;
+    use bvh_format::{Material, Node, Triangle, TriangleNormals};
+    use naga::proc::Layouter;
+    use std::mem::{offset_of, size_of};
+
+    /// A kernel with every feature present, so that every struct and binding is declared.
+    fn module() -> naga::Module {
+        let spec = Specialisation {
+            method: Method::Lst,
+            stack_size: 23,
+            leaf_size: 8,
+            workgroup: (8, 8),
+            reflection: true,
+            refraction: true,
+        };
+        naga::front::wgsl::parse_str(&kernels::source(Stage::Bounce, &spec)).expect("the kernel parses")
+    }
+
+    /// (size, array stride, alignment, [(field, offset)]) of the WGSL struct `name`.
+    fn wgsl_struct(m: &naga::Module, l: &Layouter, name: &str) -> (u32, u32, u32, Vec<(String, u32)>) {
+        let (h, ty) =
+            m.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).unwrap_or_else(|| panic!("no {name}"));
+        let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is not a struct") };
+        let fields = members.iter().map(|f| (f.name.clone().unwrap_or_default(), f.offset)).collect();
+        (*span, l[h].to_stride(), l[h].alignment.round_up(1), fields)
+    }
+
+    /// Asserts that the WGSL struct `name` is `size` bytes, strides by `size` in an array (so a
+    /// Rust slice uploads as is) and has exactly `fields` at those byte offsets.
+    fn check(m: &naga::Module, l: &Layouter, name: &str, size: usize, fields: &[(&str, usize)]) {
+        let (span, stride, align, wgsl) = wgsl_struct(m, l, name);
+        assert_eq!(span as usize, size, "{name}: {span} bytes in WGSL, {size} in Rust");
+        assert_eq!(stride as usize, size, "{name}: array stride {stride} in WGSL (alignment {align}), {size} in Rust");
+        let wgsl: Vec<(&str, usize)> = wgsl.iter().map(|(n, o)| (n.as_str(), *o as usize)).collect();
+        assert_eq!(wgsl, fields, "{name}: fields and offsets (WGSL left, Rust right)");
+    }
+
+    #[test]
+    fn every_record_shared_with_wgsl_has_the_rust_size_and_offsets() {
+        let m = module();
+        let mut l = Layouter::default();
+        l.update(m.to_ctx()).expect("naga lays the module out");
+        check(
+            &m,
+            &l,
+            "Node",
+            size_of::<Node>(),
+            &[
+                ("min", offset_of!(Node, min)),
+                ("count", offset_of!(Node, count)),
+                ("max", offset_of!(Node, max)),
+                ("index", offset_of!(Node, index)),
+            ],
+        );
+        check(
+            &m,
+            &l,
+            "Tri",
+            size_of::<Triangle>(),
+            &[("v0", offset_of!(Triangle, v0)), ("e1", offset_of!(Triangle, e1)), ("e2", offset_of!(Triangle, e2))],
+        );
+        let n = offset_of!(TriangleNormals, n);
+        check(&m, &l, "TriNormals", size_of::<TriangleNormals>(), &[("n0", n), ("n1", n + 16), ("n2", n + 32)]);
+        check(
+            &m,
+            &l,
+            "Material",
+            size_of::<Material>(),
+            &[
+                ("kd_n", offset_of!(Material, kd)),
+                ("ks_kr", offset_of!(Material, ks)),
+                ("kt_ior", offset_of!(Material, kt)),
+            ],
+        );
+        assert_eq!(offset_of!(Material, shininess), offset_of!(Material, kd) + 12, "shininess is kd_n.w");
+        assert_eq!(offset_of!(Material, kr), offset_of!(Material, ks) + 12, "kr is ks_kr.w");
+        assert_eq!(offset_of!(Material, ior), offset_of!(Material, kt) + 4, "ior is kt_ior.y");
+        check(
+            &m,
+            &l,
+            "Light",
+            size_of::<Light>(),
+            &[("position", offset_of!(Light, position)), ("colour", offset_of!(Light, colour))],
+        );
+        check(
+            &m,
+            &l,
+            "Frame",
+            size_of::<FrameData>(),
+            &[
+                ("eye", offset_of!(FrameData, eye)),
+                ("top_left", offset_of!(FrameData, top_left)),
+                ("h_step", offset_of!(FrameData, h_step)),
+                ("v_step", offset_of!(FrameData, v_step)),
+                ("ambient", offset_of!(FrameData, ambient)),
+                ("background", offset_of!(FrameData, background)),
+                ("size", offset_of!(FrameData, size)),
+                ("stop", offset_of!(FrameData, stop)),
+                ("tile", offset_of!(FrameData, tile)),
+            ],
+        );
+        let pad = offset_of!(PassData, pad);
+        check(
+            &m,
+            &l,
+            "Pass",
+            size_of::<PassData>(),
+            &[
+                ("light", offset_of!(PassData, light)),
+                ("depth", offset_of!(PassData, depth)),
+                ("pad0", pad),
+                ("pad1", pad + 4),
+            ],
+        );
+        assert_eq!(size_of::<PassData>(), kernels::PASS_BYTES as usize, "the push-constant range");
+        // Per-pixel records the host only sizes and reads back as words.
+        let size = |name: &str| wgsl_struct(&m, &l, name).1 as u64;
+        assert_eq!(size("PathRay"), PATH_BYTES);
+        assert_eq!(size("HitRec"), HIT_BYTES);
+        assert_eq!(size("Aov"), AOV_BYTES);
+        let w = |k: usize| 4 * k;
+        check(
+            &m,
+            &l,
+            "Aov",
+            AOV_BYTES as usize,
+            &[
+                ("normal", w(aov_word::NORMAL)),
+                ("t", w(aov_word::T)),
+                ("prim", w(aov_word::PRIM)),
+                ("nodes", w(aov_word::NODES)),
+                ("tris", w(aov_word::TRIS)),
+            ],
+        );
+    }
+
+    #[test]
+    fn the_binding_table_matches_the_rust_side() {
+        let m = module();
+        let mut l = Layouter::default();
+        l.update(m.to_ctx()).expect("naga lays the module out");
+        let mut bound: Vec<(u32, String, u32)> = m
+            .global_variables
+            .iter()
+            .filter_map(|(_, g)| {
+                let b = g.binding.as_ref()?;
+                assert_eq!(b.group, 0, "{:?} is outside group 0", g.name);
+                assert!(matches!(g.space, naga::AddressSpace::Storage { .. }), "{:?} is not a storage buffer", g.name);
+                // The element stride of an array buffer, the size of a single record.
+                let stride = match &m.types[g.ty].inner {
+                    naga::TypeInner::Array { stride, .. } => *stride,
+                    _ => l[g.ty].size,
+                };
+                Some((b.binding, g.name.clone().unwrap_or_default(), stride))
+            })
+            .collect();
+        bound.sort();
+        let names: Vec<&str> = bound.iter().map(|(_, n, _)| n.as_str()).collect();
+        assert_eq!(names, BINDING_NAMES, "binding names in order (WGSL left)");
+        let numbers: Vec<u32> = bound.iter().map(|(b, _, _)| *b).collect();
+        assert_eq!(numbers, (0..BINDINGS).collect::<Vec<_>>(), "bindings are 0..{BINDINGS} without gaps");
+        let stride = |name: &str| bound.iter().find(|(_, n, _)| n == name).expect("bound").2 as u64;
+        assert_eq!(stride("frame"), size_of::<FrameData>() as u64);
+        assert_eq!(stride("nodes"), size_of::<Node>() as u64);
+        assert_eq!(stride("tris"), size_of::<Triangle>() as u64);
+        assert_eq!(stride("normals"), size_of::<TriangleNormals>() as u64);
+        assert_eq!(stride("material_ids"), 4);
+        assert_eq!(stride("materials"), size_of::<Material>() as u64);
+        assert_eq!(stride("lights"), size_of::<Light>() as u64);
+        assert_eq!(stride("input_index"), 4);
+        assert_eq!(stride("paths"), PATH_BYTES);
+        assert_eq!(stride("hits"), HIT_BYTES);
+        assert_eq!(stride("accum"), ACCUM_BYTES);
+        assert_eq!(stride("aovs"), AOV_BYTES);
+        assert_eq!(stride("image"), IMAGE_BYTES);
+        assert_eq!(stride("counters"), 4);
+    }
 }
