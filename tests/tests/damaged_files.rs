@@ -506,6 +506,10 @@ fn forged_header_statistics() {
             FormatError::DepthMismatch { layout: LayoutKind::ChildPair, header: depth, actual: truth.max_depth };
         assert_eq!(e, expected);
     }
+    for sah in [truth.sah_cost * 1.01, truth.sah_cost * 0.99, 0.0, f32::NAN, f32::INFINITY] {
+        let e = forge(|b| edit_header(b, |h| Header { sah_cost: sah, ..h }));
+        assert!(matches!(e, FormatError::SahCostMismatch { layout: LayoutKind::ChildPair, .. }), "{sah}: {e:?}");
+    }
     let e = forge(|b| edit_header(b, |h| Header { leaf_count: truth.leaf_count + 1, ..h }));
     assert!(matches!(e, FormatError::LeafCountMismatch { .. }), "{e:?}");
     let e = forge(|b| edit_header(b, |h| Header { triangle_count: 299, ..h }));
@@ -628,4 +632,19 @@ fn names_with_nul_bytes_are_rejected_not_rewritten() {
     s.material_names[0] = "a\0b".to_owned();
     assert_eq!(s.validate(), Err(FormatError::BadNames));
     assert!(bvh_format::write(&s).is_err());
+}
+
+#[test]
+fn an_invalid_scene_is_not_written_and_the_message_blames_the_scene_not_a_file() {
+    let dir = std::env::temp_dir().join(format!("bvh-invalid-write-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("out.bvh");
+    let mut s = scene(40, Layouts::default());
+    s.triangles[0].v0[0] = f32::NAN;
+    let e = bvh_format::write_file(&s, &path).unwrap_err();
+    assert!(matches!(e, bvh_format::FileError::InvalidScene { .. }), "{e:?}");
+    let msg = e.to_string();
+    assert!(msg.starts_with("the scene was not written to") && !msg.contains("is not a valid scene file"), "{msg}");
+    assert!(!path.exists(), "nothing was written");
+    std::fs::remove_dir_all(&dir).unwrap();
 }

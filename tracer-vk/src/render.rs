@@ -127,11 +127,9 @@ pub struct Renderer<'g> {
     tile_pixels: u64,
 }
 
-const BINDINGS: u32 = 14;
-
 /// The kernels' storage buffers by binding number, as common.wgsl names them; `render_tile` binds
 /// its buffers in this order (a test holds common.wgsl to it).
-const BINDING_NAMES: [&str; BINDINGS as usize] = [
+const BINDING_NAMES: [&str; 14] = [
     "frame",
     "nodes",
     "tris",
@@ -147,6 +145,8 @@ const BINDING_NAMES: [&str; BINDINGS as usize] = [
     "image",
     "counters",
 ];
+
+const BINDINGS: u32 = BINDING_NAMES.len() as u32;
 
 /// Bytes per pixel of the per-pixel buffers: `PathRay`, `HitRec`, the accumulated colour, `Aov`
 /// and the packed RGBA8 image of common.wgsl (a test holds them to naga's layout).
