@@ -10,23 +10,8 @@ use bvh_format::{
 };
 use glam::Vec3;
 
-/// xorshift64*: a fixed seed makes every damaged file reproducible.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
+// A fixed seed makes every damaged file reproducible.
+use tests::Rng;
 
 fn scene(triangles: usize, layouts: Layouts) -> SceneFile {
     let mut rng = Rng(0x5eed_1234_abcd_0001);
