@@ -38,9 +38,9 @@ pub struct RenderArgs {
     /// Look-at point X,Y,Z.
     #[arg(long, value_parser = parse_vec3, requires = "eye", allow_hyphen_values = true)]
     pub at: Option<Vec3>,
-    /// Up vector X,Y,Z.
-    #[arg(long, value_parser = parse_vec3, default_value = "0,1,0", allow_hyphen_values = true)]
-    pub up: Vec3,
+    /// Up vector X,Y,Z [default: with --eye 0,1,0; a stored camera keeps its own unless given].
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub up: Option<Vec3>,
     /// Vertical field of view in degrees, between 0 and 180 (with --eye: default 45; a stored
     /// camera keeps its own unless given).
     #[arg(long, value_parser = parse_fov, allow_hyphen_values = true)]
@@ -202,7 +202,7 @@ impl RenderArgs {
     /// checked here, so that both tracers refuse a bad camera with the same sentence.
     pub fn camera(&self, scene: &SceneFile) -> Result<CameraSpec, String> {
         let spec = if let (Some(eye), Some(at)) = (self.eye, self.at) {
-            CameraSpec { eye, at, up: self.up, fov_deg: self.fov.unwrap_or(45.0) }
+            CameraSpec { eye, at, up: self.up.unwrap_or(Vec3::Y), fov_deg: self.fov.unwrap_or(45.0) }
         } else {
             let mut spec = match &self.camera {
                 Some(name) => stored_camera(scene, name)?,
@@ -210,6 +210,9 @@ impl RenderArgs {
             };
             if let Some(f) = self.fov {
                 spec.fov_deg = f;
+            }
+            if let Some(up) = self.up {
+                spec.up = up;
             }
             spec
         };
@@ -279,14 +282,16 @@ pub fn lights_n(scene: &SceneFile, n: usize, camera: &CameraSpec) -> Vec<Light> 
     let (lo, hi) = scene.bounds();
     let added = n.saturating_sub(lights.len());
     let c = 1.0 / n.max(1) as f32;
-    let placed = bvh_build::import::defaults::lights_around(camera.eye, camera.at, camera.up, lo.into(), hi.into(), added);
+    let placed =
+        bvh_build::import::defaults::lights_around(camera.eye, camera.at, camera.up, lo.into(), hi.into(), added);
     lights.extend(placed.into_iter().map(|p| Light::new(p.to_array(), [c, c, c])));
     lights
 }
 
 /// The line both tracers print for a heatmap: its scale, and how many pixels lie above a fixed one.
 pub fn heatmap_line(h: &output::Heatmap, out: &Output) -> String {
-    let clipped = if h.clipped > 0 { format!(", {} pixels above the scale drawn red", h.clipped) } else { String::new() };
+    let clipped =
+        if h.clipped > 0 { format!(", {} pixels above the scale drawn red", h.clipped) } else { String::new() };
     format!(
         "heatmap: nodes visited per pixel, 0 (blue) to {} (red), scale drawn below the image{clipped} -> {}",
         h.max,

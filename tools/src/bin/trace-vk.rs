@@ -230,8 +230,9 @@ fn median(v: &mut [f64]) -> f64 {
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
     let md_path = b.csv.with_extension("md");
-    let checked = output::check(&[("--csv", &b.csv, Kind::Table), ("--csv (its Markdown copy)", &md_path, Kind::Markdown)], &[])
-        .map_err(|e| e.to_string())?;
+    let checked =
+        output::check(&[("--csv", &b.csv, Kind::Table), ("--csv (its Markdown copy)", &md_path, Kind::Markdown)], &[])
+            .map_err(|e| e.to_string())?;
     let modes = &b.modes;
     let gpu = open(&b.device)?;
     let scenes: Vec<Option<PathBuf>> =
@@ -262,6 +263,9 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
             .unwrap_or_else(|| "bunny (built-in)".to_owned());
         bar.set_message(format!("loading {name}"));
         let scene = tools::load_scene(path.as_deref())?.file;
+        for cam in &b.cameras {
+            tools::render_args::stored_camera(&scene, cam)?;
+        }
         for &m in &b.methods {
             let method = method_of(m);
             let mut renderer = Renderer::new(&gpu, &scene, method, b.workgroup).map_err(|e| e.to_string())?;
