@@ -48,14 +48,15 @@ pub struct RenderArgs {
     /// Image size, at most 2^28 pixels.
     #[arg(long, value_parser = parse_res, default_value = "640x480", allow_hyphen_values = true)]
     pub res: (u32, u32),
-    /// A point light X,Y,Z or X,Y,Z,R,G,B (repeatable); replaces the scene's lights.
+    /// A point light X,Y,Z or X,Y,Z,R,G,B (repeatable, up to 256); replaces the scene's lights.
     #[arg(long = "light", value_parser = parse_light, allow_hyphen_values = true)]
     pub lights: Vec<Light>,
     /// Use this many lights: the scene's first ones, completed by lights placed around the
-    /// camera so that what it sees is lit (the thesis's 1-, 2- and 4-light modes).
+    /// camera so that what it sees is lit (the thesis's 1-, 2- and 4-light modes); 0 to 256.
     #[arg(long = "lights", conflicts_with = "lights", value_parser = parse_light_count, allow_hyphen_values = true)]
     pub light_count: Option<usize>,
-    /// Longest chain of secondary rays [default: the scene's].
+    /// Longest chain of secondary rays, 0 to 64; rendering stops early once no path is alive
+    /// [default: the scene's].
     #[arg(long, value_parser = parse_indirections, allow_hyphen_values = true)]
     pub indirections: Option<u32>,
     /// Output image: .png, .jpg/.jpeg (quality 95), .bmp (8-bit), or .exr (linear float RGB).
