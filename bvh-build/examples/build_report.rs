@@ -3,7 +3,7 @@
 //! `docs/build-benchmark.svg` (SAH cost against build time), and prints the table.
 //!
 //! `cargo run --release -p bvh-build --features compare --example build_report -- [--runs N]
-//! [--scenes bunny,dragon,million] [--out DIR]`
+//! [--scenes bunny,dragon,million] [--builders binned16,sweep,bvh,obvhs,...] [--out DIR]`
 //!
 //! Every tree's SAH cost is computed by `bvh_format::tree::stats` with our default constants, after
 //! converting the peers' trees into our layout (not timed).
@@ -35,6 +35,16 @@ impl Builder {
         let mut v: Vec<Builder> = BINS.iter().map(|&b| Builder::Binned(b)).collect();
         v.extend([Builder::Sweep, Builder::BvhCrate, Builder::Obvhs]);
         v
+    }
+
+    /// The name `--builders` takes.
+    fn key(self) -> String {
+        match self {
+            Builder::Binned(b) => format!("binned{b}"),
+            Builder::Sweep => "sweep".to_owned(),
+            Builder::BvhCrate => "bvh".to_owned(),
+            Builder::Obvhs => "obvhs".to_owned(),
+        }
     }
 
     fn label(self) -> String {
@@ -71,20 +81,37 @@ impl Row {
 struct Args {
     runs: usize,
     scenes: Vec<String>,
+    builders: Vec<Builder>,
     out: PathBuf,
 }
 
 fn parse_args() -> Result<Args, String> {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
-    let mut a = Args { runs: 5, scenes: SCENES.iter().map(|s| s.0.to_owned()).collect(), out: root.join("docs") };
+    let mut a = Args {
+        runs: 5,
+        scenes: SCENES.iter().map(|s| s.0.to_owned()).collect(),
+        builders: Builder::all(),
+        out: root.join("docs"),
+    };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         let mut value = || it.next().ok_or(format!("{flag} needs a value"));
         match flag.as_str() {
             "--runs" => a.runs = value()?.parse().map_err(|_| "--runs takes a positive number".to_owned())?,
             "--scenes" => a.scenes = value()?.split(',').map(str::to_owned).collect(),
+            "--builders" => {
+                a.builders = value()?
+                    .split(',')
+                    .map(|k| {
+                        Builder::all().into_iter().find(|b| b.key() == k).ok_or_else(|| {
+                            let known: Vec<String> = Builder::all().iter().map(|b| b.key()).collect();
+                            format!("unknown builder {k} (expected some of {})", known.join(", "))
+                        })
+                    })
+                    .collect::<Result<_, _>>()?
+            }
             "--out" => a.out = PathBuf::from(value()?),
-            _ => return Err(format!("unknown argument {flag} (expected --runs, --scenes, --out)")),
+            _ => return Err(format!("unknown argument {flag} (expected --runs, --scenes, --builders, --out)")),
         }
     }
     if a.runs == 0 {
@@ -373,7 +400,7 @@ fn main() {
         // during it.
         let mut runs = Vec::new();
         let mut scene_rows = Vec::new();
-        for builder in Builder::all() {
+        for &builder in &args.builders {
             let (run, tree) = prepare(&tris, builder);
             let stats = measure_stats(&tree.nodes, tris.len());
             eprintln!("  {:32} warm-up done, SAH {:.3}", builder.label(), stats.sah_cost);
