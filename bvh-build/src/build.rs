@@ -552,6 +552,87 @@ mod tests {
         }
     }
 
+    /// Builds with large nodes split in parallel from `parallel_node` primitives up, on a rayon
+    /// pool of `threads`.
+    fn build_parallel(tris: &[[Vec3; 3]], parallel_node: usize, threads: usize) -> super::BuiltTree {
+        let costs =
+            super::Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 8, depth_limit: super::DEPTH_LIMIT };
+        let splitter = crate::binned::BinnedSah { bins: 16, costs };
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
+        pool.install(|| {
+            let ctx = super::Ctx { splitter: &splitter, costs, progress: None, parallel_node };
+            super::build_with(&mut super::prim_refs(tris), ctx, true)
+        })
+    }
+
+    /// The leaf order with each leaf's triangles sorted: the serial partition is in place and
+    /// unstable, the parallel one stable, so only the order inside a leaf may differ.
+    fn leaf_sets(t: &super::BuiltTree) -> Vec<u32> {
+        let mut order = t.order.clone();
+        for n in t.nodes.iter().filter(|n| n.count > 0) {
+            order[n.index as usize..(n.index + n.count) as usize].sort_unstable();
+        }
+        order
+    }
+
+    /// A soup with a large floor under it, so that the large-triangle candidate wins some nodes.
+    fn soup_on_floor(n: usize) -> Vec<[Vec3; 3]> {
+        let mut tris = soup(n);
+        let (a, b, c, d) = (
+            Vec3::new(-1.0, -0.5, -1.0),
+            Vec3::new(11.0, -0.5, -1.0),
+            Vec3::new(11.0, -0.5, 11.0),
+            Vec3::new(-1.0, -0.5, 11.0),
+        );
+        tris.push([a, b, c]);
+        tris.push([a, c, d]);
+        tris
+    }
+
+    #[test]
+    fn parallel_splits_of_large_nodes_build_the_serial_tree() {
+        for tris in [soup(40_000), soup_on_floor(40_000)] {
+            // 64: nearly every inner node above the sweep's size takes the parallel path, across
+            // many chunks of its binning and partition.
+            let serial = build_parallel(&tris, usize::MAX, 1);
+            let parallel = build_parallel(&tris, 64, 3);
+            for t in [&serial, &parallel] {
+                check_shape(Tree::child_pair(&t.nodes), tris.len() as u32).expect("valid tree");
+                let mut order = t.order.clone();
+                order.sort_unstable();
+                assert!(order.iter().enumerate().all(|(i, &o)| i as u32 == o), "leaf order is a permutation");
+            }
+            // The same splits, hence the same boxes and SAH cost, bit for bit.
+            assert_eq!(serial.nodes, parallel.nodes);
+            assert_eq!(leaf_sets(&serial), leaf_sets(&parallel));
+            let (a, b) =
+                (stats(Tree::child_pair(&serial.nodes), 1.0, 1.0), stats(Tree::child_pair(&parallel.nodes), 1.0, 1.0));
+            assert_eq!(a.sah_cost, b.sah_cost);
+            assert!(a.node_count > 2 * super::PARALLEL_EMIT, "big enough to write the layouts in parallel");
+        }
+    }
+
+    #[test]
+    fn the_parallel_build_does_not_depend_on_the_number_of_threads() {
+        let tris = soup_on_floor(40_000);
+        let one = build_parallel(&tris, 64, 1);
+        for threads in [2, 5] {
+            let many = build_parallel(&tris, 64, threads);
+            assert_eq!(one.nodes, many.nodes, "{threads} threads");
+            assert_eq!(one.order, many.order, "{threads} threads");
+            assert_eq!(one.escape, many.escape, "{threads} threads");
+        }
+    }
+
+    #[test]
+    fn the_escape_layout_from_the_build_is_the_child_pair_tree_depth_first() {
+        let tris = soup_on_floor(40_000);
+        let t = build_parallel(&tris, 64, 3);
+        let escape = t.escape.expect("asked for");
+        assert_eq!(escape, bvh_format::tree::escape_from_child_pair(&t.nodes));
+        check_shape(Tree::escape(&escape), tris.len() as u32).expect("valid escape tree");
+    }
+
     #[test]
     fn more_bins_do_not_make_a_random_scene_much_worse() {
         // The 16-bin tree must be within 5% of the sweep.
