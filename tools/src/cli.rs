@@ -17,9 +17,7 @@ pub fn parse<T: clap::Parser>() -> T {
             use clap::error::ErrorKind;
             if matches!(
                 e.kind(),
-                ErrorKind::DisplayHelp
-                    | ErrorKind::DisplayVersion
-                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+                ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
             ) {
                 e.exit();
             }
@@ -145,13 +143,7 @@ pub fn rays_per_second(rays: u64, seconds: f64) -> String {
         r if r >= 1e3 => (r / 1e3, "krays/s"),
         r => (r, "rays/s"),
     };
-    let decimals = if v >= 100.0 {
-        0
-    } else if v >= 10.0 {
-        1
-    } else {
-        2
-    };
+    let decimals = if v >= 100.0 { 0 } else if v >= 10.0 { 1 } else { 2 };
     format!("{v:.decimals$} {unit}")
 }
 

@@ -170,8 +170,7 @@ fn info_lists_cameras_and_lights_for_every_input_kind() {
     }
     // A text file is named as what it is, not as a truncated scene file.
     std::fs::write(dir.join("notes.txt"), "hello\n").unwrap();
-    let line =
-        assert_one_sentence_error(&bvhc(&["info", dir.join("notes.txt").to_str().unwrap()]), "not a BVH scene file");
+    let line = assert_one_sentence_error(&bvhc(&["info", dir.join("notes.txt").to_str().unwrap()]), "not a BVH scene file");
     assert!(!line.contains("truncated"), "{line}");
 }
 
@@ -182,8 +181,7 @@ fn bvh_gltf(dir: &Path) -> std::path::PathBuf {
     const B64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut b64 = String::new();
     for c in bytes.chunks(3) {
-        let n =
-            (u32::from(c[0]) << 16) | (u32::from(*c.get(1).unwrap_or(&0)) << 8) | u32::from(*c.get(2).unwrap_or(&0));
+        let n = (u32::from(c[0]) << 16) | (u32::from(*c.get(1).unwrap_or(&0)) << 8) | u32::from(*c.get(2).unwrap_or(&0));
         for k in 0..4 {
             b64.push(if k <= c.len() { B64[(n >> (18 - 6 * k) & 63) as usize] as char } else { '=' });
         }

@@ -38,11 +38,7 @@ pub fn load(path: &Path, opts: &ImportOptions) -> Result<(Scene, Vec<Camera>), I
         {
             let file = base.join(percent_decode(uri));
             if let Err(e) = std::fs::metadata(&file) {
-                return Err(err(format!(
-                    "buffer {} refers to {}, which cannot be read ({e})",
-                    buffer.index(),
-                    file.display()
-                )));
+                return Err(err(format!("buffer {} refers to {}, which cannot be read ({e})", buffer.index(), file.display())));
             }
         }
     }
@@ -184,10 +180,7 @@ fn percent_decode(uri: &str) -> String {
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;
     while i < bytes.len() {
-        let hex = bytes
-            .get(i + 1..i + 3)
-            .and_then(|h| std::str::from_utf8(h).ok())
-            .and_then(|h| u8::from_str_radix(h, 16).ok());
+        let hex = bytes.get(i + 1..i + 3).and_then(|h| std::str::from_utf8(h).ok()).and_then(|h| u8::from_str_radix(h, 16).ok());
         match (bytes[i], hex) {
             (b'%', Some(v)) => {
                 out.push(v);
