@@ -481,7 +481,7 @@ mod tests {
         assert_eq!(h.max, 127);
         assert!(h.height > 4, "a legend below the image");
         assert_eq!(h.rgb.len(), (128 * h.height) as usize);
-        assert!(h.rgb[(4 * 128)..].iter().any(|&p| p == [255; 3]), "numbers drawn in the legend");
+        assert!(h.rgb[(4 * 128)..].contains(&[255; 3]), "numbers drawn in the legend");
         let fixed = Heatmap::new(128, 4, &nodes, Some(63));
         assert_eq!(fixed.max, 63);
         assert_eq!(fixed.clipped, 4 * 64);

@@ -339,18 +339,19 @@ impl<'g> Renderer<'g> {
     /// Renders one frame; without `readback` only the ray counts and GPU times come back (the
     /// image's pixels are empty and it has no AOVs), as benchmarks want.
     pub fn render_frame(&mut self, s: &Settings, readback: bool) -> Result<Output, VkRenderError> {
-        self.render_with_progress(s, readback, readback && s.aovs, &mut |_| {})
+        self.render_with_progress(s, readback, &mut |_| {})
     }
 
-    /// Renders one frame, calling `progress` after every tile. `image` reads back the colours,
-    /// `aovs` the per-pixel outputs; without either only the ray counts and GPU times come back.
+    /// Renders one frame, calling `progress` after every tile. `readback` reads back the colours,
+    /// and the per-pixel outputs when the settings ask for them; without it only the ray counts
+    /// and GPU times come back.
     pub fn render_with_progress(
         &mut self,
         s: &Settings,
-        image: bool,
-        aovs: bool,
+        readback: bool,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Output, VkRenderError> {
+        let (image, aovs) = (readback, readback && s.aovs);
         let f = s.frame()?;
         if s.lights.len() > u32::MAX as usize / 2 {
             return Err(VkRenderError::TooManyLights(s.lights.len()));

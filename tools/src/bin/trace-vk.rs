@@ -156,7 +156,11 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let method = method_of(method);
     let gpu = open(device)?;
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
-    let out = renderer.render(&settings).map_err(|e| e.to_string())?;
+    let pixels = u64::from(settings.width) * u64::from(settings.height);
+    let bar = Progress::new(pixels, "rendering {bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
+    let out = bar
+        .ticking(|| renderer.render_with_progress(&settings, true, &mut |p| bar.set_position(p.pixels_done)))
+        .map_err(|e| e.to_string())?;
     check_validation(&gpu)?;
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
@@ -258,6 +262,9 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
             .unwrap_or_else(|| "bunny (built-in)".to_owned());
         bar.set_message(format!("loading {name}"));
         let scene = tools::load_scene(path.as_deref())?.file;
+        for cam in &b.cameras {
+            tools::render_args::stored_camera(&scene, cam)?;
+        }
         for &m in &b.methods {
             let method = method_of(m);
             let mut renderer = Renderer::new(&gpu, &scene, method, b.workgroup).map_err(|e| e.to_string())?;
