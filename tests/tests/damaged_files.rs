@@ -278,7 +278,7 @@ fn random_garbage() {
     let mut rng = Rng(0x6a5b_a6e0);
     let good = big_file();
     for len in (0..600).chain((600..40_000).step_by(997)) {
-        let mut garbage: Vec<u8> = (0..len).map(|_| rng.next() as u8).collect();
+        let mut garbage: Vec<u8> = (0..len).map(|_| rng.next_u64() as u8).collect();
         rejected(&garbage);
         // The same garbage behind a plausible start, so that the checks past the magic run too.
         if len >= 16 {
@@ -303,7 +303,7 @@ fn random_section_tables_with_valid_header_checksum() {
                 0 => t[i].count = rng.below(64) as u64,
                 1 => t[i].offset = (rng.below(b.len() / 16 + 2) * 16) as u64,
                 2 => t[i].kind = 1 + rng.below(11) as u32,
-                3 => t[i].count = rng.next() >> rng.below(64),
+                3 => t[i].count = rng.next_u64() >> rng.below(64),
                 _ => {
                     let j = rng.below(t.len());
                     t.swap(i, j);
