@@ -6,7 +6,7 @@ use crate::output::{self, Kind, Output};
 use bvh_format::{Light, SceneFile};
 use clap::{Args, ValueEnum};
 use glam::Vec3;
-use render_spec::{CameraSpec, Mode, Settings};
+use render_spec::{CameraSpec, Image, Mode, Settings};
 use std::path::PathBuf;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -80,6 +80,29 @@ pub struct RenderOutputs {
     pub image: Output,
     pub heatmap: Option<Output>,
     pub aov: Option<Output>,
+}
+
+impl RenderOutputs {
+    /// Writes every output of a rendered image (the colour image, then the heatmap and the AOVs
+    /// where asked for) and returns the report lines of the heatmap and the AOVs, so that a caller
+    /// prints only after every file is complete.
+    pub fn write(&self, image: &Image, heatmap_max: Option<u32>) -> Result<Vec<String>, String> {
+        let frame = output::Frame { width: image.width, height: image.height, rgb: &image.rgb };
+        output::write_image(&self.image, &frame).map_err(|e| e.to_string())?;
+        let mut lines = Vec::new();
+        if let Some(aov) = &image.aov {
+            if let Some(out) = &self.heatmap {
+                let h = output::Heatmap::new(image.width, image.height, &aov.nodes, heatmap_max);
+                output::write_heatmap(out, &h).map_err(|e| e.to_string())?;
+                lines.push(heatmap_line(&h, out));
+            }
+            if let Some(out) = &self.aov {
+                output::write_aov(out, image.width, image.height, aov).map_err(|e| e.to_string())?;
+                lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", out.path.display()));
+            }
+        }
+        Ok(lines)
+    }
 }
 
 fn parse_floats(s: &str, counts: &[usize], what: &str) -> Result<Vec<f32>, String> {

@@ -4,7 +4,6 @@ use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
 use std::time::Instant;
 use tools::cli::{duration, rays_per_second};
-use tools::output::{self, Frame, Heatmap};
 use tools::render_args::{RenderArgs, parse_count};
 use tools::say;
 use tracer_cpu::{Method, Tracer};
@@ -71,8 +70,7 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     let seconds = t0.elapsed().as_secs_f64();
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
-    let frame = Frame { width: image.width, height: image.height, rgb: &image.rgb };
-    output::write_image(&outputs.image, &frame).map_err(|e| e.to_string())?;
+    let written = outputs.write(&image, args.heatmap_max)?;
     let mut lines = Vec::new();
     let r = image.rays;
     lines.push(format!(
@@ -90,18 +88,7 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
         rays_per_second(r.total(), seconds),
         outputs.image.path.display()
     ));
-    if let Some(aov) = &image.aov {
-        if let Some(out) = &outputs.heatmap {
-            let h = Heatmap::new(image.width, image.height, &aov.nodes, args.heatmap_max);
-            output::write_heatmap(out, &h).map_err(|e| e.to_string())?;
-            lines.push(tools::render_args::heatmap_line(&h, out));
-        }
-        if let Some(out) = &outputs.aov {
-            output::write_aov(out, image.width, image.height, aov).map_err(|e| e.to_string())?;
-            lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", out.path.display()));
-        }
-    }
-    for line in lines {
+    for line in lines.into_iter().chain(written) {
         say!("{line}");
     }
     Ok(())

@@ -5,7 +5,7 @@ use render_spec::{Mode, RayCounts, Settings};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use tools::cli::{Progress, duration, rays_per_second};
-use tools::output::{self, Frame, Heatmap, Kind};
+use tools::output::{self, Kind};
 use tools::render_args::{RenderArgs, lights_n, parse_count, parse_res, parse_workgroup};
 use tools::say;
 use tracer_vk::kernels::Method;
@@ -165,10 +165,9 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
     let image = &out.image;
-    output::write_image(&outputs.image, &Frame { width: image.width, height: image.height, rgb: &image.rgb })
-        .map_err(|e| e.to_string())?;
+    let written = outputs.write(image, args.heatmap_max)?;
     let r = image.rays;
-    let mut lines = vec![format!(
+    let lines = vec![format!(
         "{}x{} {:?} with {} on {}: {} GPU{}, rays: {} primary, {} shadow, {} secondary ({}) -> {}",
         image.width,
         image.height,
@@ -183,18 +182,7 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
         rays_per_second(r.total(), out.gpu_ms / 1e3),
         outputs.image.path.display()
     )];
-    if let Some(aov) = &image.aov {
-        if let Some(o) = &outputs.heatmap {
-            let h = Heatmap::new(image.width, image.height, &aov.nodes, args.heatmap_max);
-            output::write_heatmap(o, &h).map_err(|e| e.to_string())?;
-            lines.push(tools::render_args::heatmap_line(&h, o));
-        }
-        if let Some(o) = &outputs.aov {
-            output::write_aov(o, image.width, image.height, aov).map_err(|e| e.to_string())?;
-            lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", o.path.display()));
-        }
-    }
-    for line in lines {
+    for line in lines.into_iter().chain(written) {
         say!("{line}");
     }
     Ok(())
