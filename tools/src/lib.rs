@@ -1,6 +1,7 @@
 //! What the command-line programs share: loading scenes (the built-in bunny included), the render
 //! options every tracer takes, and writing images, heatmaps and AOV files.
 
+pub mod bench;
 pub mod output;
 pub mod render_args;
 
@@ -39,4 +40,15 @@ pub fn load_scene(path: Option<&Path>) -> Result<SceneFile, String> {
         }
         Some(p) => compile_default(p),
     }
+}
+
+/// The CPU's model name, for benchmark tables ("?" where the system does not say).
+pub fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            let line = s.lines().find(|l| l.starts_with("model name"))?;
+            Some(line.split_once(':')?.1.trim().to_owned())
+        })
+        .unwrap_or_else(|| "?".to_owned())
 }

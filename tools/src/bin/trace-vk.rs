@@ -1,9 +1,10 @@
 //! `trace-vk`: renders a scene file with the Vulkan compute tracer on any Vulkan device.
 
+use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
-use std::path::PathBuf;
 use std::process::ExitCode;
-use tools::render_args::{RenderArgs, lights_n, parse_res};
+use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed};
+use tools::render_args::{RenderArgs, parse_res};
 use tracer_vk::kernels::Method;
 use tracer_vk::render::{Mode, Renderer, Settings};
 use tracer_vk::{Gpu, list_devices};
@@ -49,32 +50,14 @@ enum Command {
 
 #[derive(clap::Args)]
 struct BenchArgs {
-    /// Scenes: compiled .bvh files, meshes or scene descriptions [default: the built-in bunny].
-    scenes: Vec<PathBuf>,
-    /// Stored cameras to render from.
-    #[arg(long, value_delimiter = ',', default_value = "close-up,medium,wide")]
-    cameras: Vec<String>,
-    /// Image sizes.
-    #[arg(long, value_delimiter = ',', value_parser = parse_res, default_value = "640x480,1280x960,1920x1440")]
-    res: Vec<(u32, u32)>,
-    /// Modes: cast, or whitted with a light count (whitted1, whitted2, whitted4).
-    #[arg(long, value_delimiter = ',', default_value = "cast,whitted1,whitted2")]
-    modes: Vec<String>,
+    #[command(flatten)]
+    matrix: MatrixArgs,
     /// Traversals.
     #[arg(long, value_delimiter = ',', value_enum, default_value = "lst,stackless,sst")]
     methods: Vec<MethodArg>,
-    /// Timed frames per setting (the median is reported).
-    #[arg(long, default_value_t = 50)]
-    frames: usize,
-    /// Untimed frames before the timed ones.
-    #[arg(long, default_value_t = 3)]
-    warmup: usize,
     /// Workgroup shape (pixels).
     #[arg(long, value_parser = parse_res, default_value = "8x8")]
     workgroup: (u32, u32),
-    /// Write the table as CSV here (and as Markdown next to it, .md).
-    #[arg(long, default_value = "bench.csv")]
-    csv: PathBuf,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -144,10 +127,7 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
         width: args.res.0,
         height: args.res.1,
         camera: args.camera(&scene)?,
-        mode: match args.mode() {
-            tracer_cpu::Mode::Cast => Mode::Cast,
-            tracer_cpu::Mode::Whitted => Mode::Whitted,
-        },
+        mode: vk_mode(args.mode()),
         lights: args.lights(&scene),
         max_indirections: args.indirections(&scene),
     };
@@ -182,6 +162,13 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     Ok(())
 }
 
+fn vk_mode(m: tracer_cpu::Mode) -> Mode {
+    match m {
+        tracer_cpu::Mode::Cast => Mode::Cast,
+        tracer_cpu::Mode::Whitted => Mode::Whitted,
+    }
+}
+
 fn method_of(m: MethodArg) -> Method {
     match m {
         MethodArg::Lst => Method::Lst,
@@ -191,126 +178,57 @@ fn method_of(m: MethodArg) -> Method {
     }
 }
 
-/// A mode of the bench matrix: ray casting, or Whitted with this many lights.
-fn parse_mode(s: &str) -> Result<(Mode, usize), String> {
-    match s {
-        "cast" => Ok((Mode::Cast, 0)),
-        _ => s
-            .strip_prefix("whitted")
-            .and_then(|n| n.parse::<usize>().ok())
-            .map(|n| (Mode::Whitted, n))
-            .ok_or_else(|| format!("{s:?} is not a mode (cast, whitted1, whitted2, ...)")),
-    }
+/// The GPU side of the benchmark matrix: one renderer per (scene, method), GPU time per frame.
+struct VkBench {
+    gpu: Gpu,
+    workgroup: (u32, u32),
 }
 
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+impl Bench for VkBench {
+    type Renderer<'a> = Renderer<'a>;
+
+    fn tracer(&self) -> &'static str {
+        "vk"
+    }
+
+    fn device(&self) -> String {
+        let i = self.gpu.info();
+        format!("{} ({:?}, {})", i.name, i.kind, i.driver)
+    }
+
+    fn timing(&self) -> String {
+        format!(
+            "a frame's time is the GPU time of its passes from timestamp queries (workgroup {}x{})",
+            self.workgroup.0, self.workgroup.1
+        )
+    }
+
+    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<Renderer<'a>, String> {
+        let method = MethodArg::from_str(method, false).map_err(|e| format!("{method:?}: {e}"))?;
+        Renderer::new(&self.gpu, scene, method_of(method), self.workgroup).map_err(|e| e.to_string())
+    }
+
+    fn frame(&self, r: &mut Renderer<'_>, f: &FrameSpec) -> Result<Timed, String> {
+        let settings = Settings {
+            width: f.width,
+            height: f.height,
+            camera: f.camera,
+            mode: vk_mode(f.mode),
+            lights: f.lights.clone(),
+            max_indirections: f.max_indirections,
+        };
+        let out = r.render_frame(&settings, false).map_err(|e| e.to_string())?;
+        Ok(Timed { ms: out.gpu_ms, rays: out.rays })
+    }
+
+    fn finish(&self) -> Result<(), String> {
+        check_validation(&self.gpu)
+    }
 }
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
-    let modes: Vec<(Mode, usize)> = b.modes.iter().map(|m| parse_mode(m)).collect::<Result<_, _>>()?;
-    if b.frames == 0 {
-        return Err("--frames must be at least 1".to_owned());
-    }
-    let gpu = open(&b.device)?;
-    let scenes: Vec<Option<PathBuf>> =
-        if b.scenes.is_empty() { vec![None] } else { b.scenes.iter().cloned().map(Some).collect() };
-    let total = scenes.len() * b.cameras.len() * b.res.len() * modes.len() * b.methods.len();
-    let bar = indicatif::ProgressBar::new(total as u64).with_style(
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}").expect("the template is valid"),
-    );
-    let header =
-        "scene,triangles,camera,width,height,mode,lights,method,median_ms,min_ms,primary,shadow,secondary,mrays_per_s";
-    let mut csv = vec![header.to_owned()];
-    let mut md = vec![
-        format!(
-            "Device: {} ({:?}, {}); {} frames per setting after {} warm-up frames, GPU time from timestamp queries.",
-            gpu.info().name,
-            gpu.info().kind,
-            gpu.info().driver,
-            b.frames,
-            b.warmup
-        ),
-        String::new(),
-        "| scene | camera | size | mode | method | median ms | Mrays/s | primary | shadow | secondary |".to_owned(),
-        "|---|---|---|---|---|---:|---:|---:|---:|---:|".to_owned(),
-    ];
-    for path in &scenes {
-        let name = path
-            .as_ref()
-            .and_then(|p| p.file_stem())
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "bunny (built-in)".to_owned());
-        bar.set_message(format!("loading {name}"));
-        let scene = tools::load_scene(path.as_deref())?;
-        for &m in &b.methods {
-            let method = method_of(m);
-            let mut renderer = Renderer::new(&gpu, &scene, method, b.workgroup).map_err(|e| e.to_string())?;
-            for cam in &b.cameras {
-                let camera = tools::render_args::stored_camera(&scene, cam)?;
-                for &(w, h) in &b.res {
-                    for &(mode, nl) in &modes {
-                        bar.set_message(format!(
-                            "{name} {cam} {w}x{h} {mode:?}{} {}",
-                            if nl > 0 { nl.to_string() } else { String::new() },
-                            method.name()
-                        ));
-                        let settings = Settings {
-                            width: w,
-                            height: h,
-                            camera,
-                            mode,
-                            lights: lights_n(&scene, nl),
-                            max_indirections: scene.settings.max_indirections,
-                        };
-                        let mut times = Vec::with_capacity(b.frames);
-                        let mut rays = [0u64; 3];
-                        for i in 0..b.warmup + b.frames {
-                            let out = renderer.render_frame(&settings, false).map_err(|e| e.to_string())?;
-                            if i >= b.warmup {
-                                times.push(out.gpu_ms);
-                                rays = out.rays;
-                            }
-                        }
-                        let min = times.iter().copied().fold(f64::INFINITY, f64::min);
-                        let med = median(&mut times);
-                        let mrays = (rays[0] + rays[1] + rays[2]) as f64 / med / 1e3;
-                        let mode_name = match mode {
-                            Mode::Cast => "cast".to_owned(),
-                            Mode::Whitted => format!("whitted{nl}"),
-                        };
-                        csv.push(format!(
-                            "{name},{},{cam},{w},{h},{mode_name},{nl},{},{med:.4},{min:.4},{},{},{},{mrays:.1}",
-                            scene.triangles.len(),
-                            method.name(),
-                            rays[0],
-                            rays[1],
-                            rays[2]
-                        ));
-                        md.push(format!(
-                            "| {name} | {cam} | {w}x{h} | {mode_name} | {} | {med:.3} | {mrays:.0} | {} | {} | {} |",
-                            method.name(),
-                            rays[0],
-                            rays[1],
-                            rays[2]
-                        ));
-                        bar.inc(1);
-                    }
-                }
-            }
-        }
-    }
-    bar.finish_and_clear();
-    check_validation(&gpu)?;
-    let write = |p: &std::path::Path, lines: &[String]| {
-        std::fs::write(p, lines.join("\n") + "\n").map_err(|e| format!("cannot write {}: {e}", p.display()))
-    };
-    write(&b.csv, &csv)?;
-    let md_path = b.csv.with_extension("md");
-    write(&md_path, &md)?;
-    println!("{}", md.join("\n"));
-    println!("\n-> {} and {}", b.csv.display(), md_path.display());
+    let methods: Vec<&str> = b.methods.iter().map(|&m| method_of(m).name()).collect();
+    let bench = VkBench { gpu: open(&b.device)?, workgroup: b.workgroup };
+    tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;
     Ok(())
 }
