@@ -1,14 +1,12 @@
 //! Coherent packets of 8 rays (a 4 x 2 pixel block) traced together with AVX2: one walk through
-//! the child-pair tree for all 8, each node's box and each leaf's triangles tested 8-wide. Used for
-//! primary rays and for the shadow rays of their hits; secondary rays go one by one.
+//! the child-pair tree for all 8, each node's box and each leaf's triangles tested 8-wide. The
+//! renderer traces every stage of a block this way (`lanes::Packets`); this module is the kernel
+//! alone.
 //!
 //! Every lane computes exactly what the scalar path computes, in the same order and without fused
 //! multiply-adds, so a packet finds bit-identical hits (a test holds it to that).
 
-use crate::camera::Frame;
 use crate::geometry::{Cost, Hit, Ray};
-use crate::render::{Sample, Shading, Tracer, shade_pixel, shadow_query};
-use crate::traverse::Stack;
 use bvh_format::{Node, Triangle};
 
 /// Lanes of a packet.
@@ -324,78 +322,5 @@ mod avx2 {
             out.cost[i] = Cost { nodes: nn[i] as u32, tris: nt[i] as u32 };
         }
         out
-    }
-}
-
-/// Renders one or two rows (`rows` holds them, `w` pixels each) in 4 x 2 packets.
-pub(crate) fn render_rows(
-    tracer: &Tracer<'_>,
-    sh: &Shading<'_>,
-    frame: &Frame,
-    y0: u32,
-    rows: &mut [Sample],
-    w: usize,
-    stack: &mut Stack,
-) {
-    let nodes = tracer.scene.child_pair.as_deref().expect("render checked the layout");
-    let tris = &tracer.scene.triangles;
-    let h = rows.len() / w;
-    let mut pstack = Vec::with_capacity(128);
-    let lights = sh.lights;
-    let shadow_lights = if sh.mode == crate::Mode::Whitted { lights.len() } else { 0 };
-    // Lane-major, so each lane hands shade_pixel one slice; allocated once for all packets.
-    let mut shadowed = vec![false; LANES * shadow_lights];
-    let mut x0 = 0usize;
-    while x0 < w {
-        let lane_xy = |i: usize| (x0 + i % 4, i / 4);
-        let mut valid = [false; LANES];
-        let mut rays = [Ray::new(frame.eye, glam::Vec3::Z); LANES];
-        for (i, (v, r)) in valid.iter_mut().zip(rays.iter_mut()).enumerate() {
-            let (x, dy) = lane_xy(i);
-            *v = x < w && dy < h;
-            if *v {
-                *r = Ray::new(frame.eye, frame.direction(x as u32, y0 + dy as u32));
-            }
-        }
-        let primary = trace::<false>(nodes, tris, &Rays { rays, valid, t_max: [f32::INFINITY; LANES] }, &mut pstack);
-
-        // Shadow rays of the primary hits, one packet per light.
-        shadowed.fill(false);
-        let mut extra = [Cost::default(); LANES];
-        let mut shadow_rays = [0u64; LANES];
-        for (li, light) in lights.iter().enumerate().take(shadow_lights) {
-            let mut srays = Rays { rays, valid: [false; LANES], t_max: [0.0; LANES] };
-            for i in 0..LANES {
-                let Some(hit) = primary.hits[i].filter(|_| valid[i]) else { continue };
-                if let (_, Some((ray, t_max))) = shadow_query(tracer, &rays[i], &hit, light) {
-                    srays.rays[i] = ray;
-                    srays.t_max[i] = t_max;
-                    srays.valid[i] = true;
-                    shadow_rays[i] += 1;
-                }
-            }
-            if !srays.valid.iter().any(|&v| v) {
-                continue;
-            }
-            let res = trace::<true>(nodes, tris, &srays, &mut pstack);
-            for i in 0..LANES {
-                shadowed[i * shadow_lights + li] = res.hits[i].is_some();
-                extra[i] += res.cost[i];
-            }
-        }
-
-        for i in 0..LANES {
-            if !valid[i] {
-                continue;
-            }
-            let (x, dy) = lane_xy(i);
-            let mut cost = primary.cost[i];
-            cost += extra[i];
-            let per_light = &shadowed[i * shadow_lights..(i + 1) * shadow_lights];
-            let mut s = shade_pixel(tracer, sh, rays[i], primary.hits[i], cost, Some(per_light), stack);
-            s.rays.shadow += shadow_rays[i];
-            rows[dy * w + x] = s;
-        }
-        x0 += 4;
     }
 }

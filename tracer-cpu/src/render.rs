@@ -1,11 +1,15 @@
-//! Whole images: primary rays per pixel, ray casting or Whitted shading, AOVs, rayon over rows.
+//! Whole images: bands of rows in parallel (rayon), 4 x 2 pixel blocks shaded by the Whitted
+//! driver and written straight into the 8-bit image and, when asked for, the AOVs.
 
 use crate::camera::{CameraError, CameraSpec, Frame};
-use crate::geometry::{Cost, Hit, Ray, offset_origin};
-use crate::shade::{self, Surface};
+use crate::geometry::{Cost, Hit, Ray};
+use crate::lanes::{OneByOne, Packets, TraceLanes};
+use crate::packet::{LANES, Rays};
+use crate::shade;
 use crate::traverse::{self, Stack};
+use crate::whitted::Shading;
 use crate::{Method, RenderError};
-use bvh_format::{Light, Material, NO_TRIANGLE, Node, SceneFile};
+use bvh_format::{Light, Node, SceneFile};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -118,7 +122,7 @@ impl<'a> Tracer<'a> {
     }
 
     /// The scalar traversal `method` names, on the layout it reads (or whichever is present).
-    fn trace<const ANY: bool>(
+    pub(crate) fn trace<const ANY: bool>(
         &self,
         method: Method,
         ray: &Ray,
@@ -136,160 +140,6 @@ impl<'a> Tracer<'a> {
             (_, None, None) => None,
         }
     }
-
-    fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
-        let i = hit.tri as usize;
-        shade::surface(&self.scene.triangles[i], &self.scene.normals[i], ray.origin, ray.dir, hit.t, hit.u, hit.v)
-    }
-}
-
-/// One pixel's result.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct Sample {
-    pub colour: Vec3,
-    pub t: f32,
-    pub normal: Vec3,
-    pub prim: u32,
-    pub cost: Cost,
-    pub rays: RayCounts,
-}
-
-/// Per-frame constants of the Whitted pipeline.
-pub(crate) struct Shading<'a> {
-    pub mode: Mode,
-    pub lights: &'a [Light],
-    pub max_indirections: u32,
-    pub ambient: Vec3,
-    pub background: Vec3,
-    pub bound: f32,
-    pub k_max: f32,
-    pub method: Method,
-}
-
-impl<'a> Shading<'a> {
-    pub fn new(scene: &SceneFile, s: &'a RenderSettings) -> Self {
-        let colours: Vec<[f32; 3]> = s.lights.iter().map(|l| l.colour).collect();
-        let (bound, k_max) = scene.bounce_bound(&colours);
-        let ambient = Vec3::from(scene.settings.ambient);
-        let background = Vec3::from(scene.settings.background);
-        Self {
-            mode: s.mode,
-            lights: &s.lights,
-            max_indirections: s.max_indirections,
-            ambient,
-            background,
-            bound,
-            k_max,
-            // Secondary and shadow rays are incoherent: the SIMD packet path traces them one by one.
-            method: if s.method == Method::Packet { Method::Ordered } else { s.method },
-        }
-    }
-}
-
-/// One light's unshadowed Phong term at a hit, and the shadow ray that decides whether it counts
-/// (none when the term is zero: a light behind the surface needs no shadow ray). The shadow ray
-/// leaves from the side of the surface the light is on and ends at the light.
-fn light_query(m: &Material, surf: &Surface, ray: &Ray, light: &Light) -> (Vec3, Option<(Ray, f32)>) {
-    let to = Vec3::from(light.position) - surf.point;
-    let l = to.normalize_or_zero();
-    let term = shade::phong(m, surf, ray.dir, l);
-    if term == Vec3::ZERO {
-        return (term, None);
-    }
-    let side = if surf.geometric.dot(l) >= 0.0 { surf.geometric } else { -surf.geometric };
-    let o = offset_origin(surf.point, side);
-    (term, Some((Ray::new(o, l), (Vec3::from(light.position) - o).length())))
-}
-
-/// [`light_query`] for a primary hit, for the packet path.
-pub(crate) fn shadow_query(tracer: &Tracer<'_>, ray: &Ray, hit: &Hit, light: &Light) -> (Vec3, Option<(Ray, f32)>) {
-    let scene = tracer.scene;
-    let m = &scene.materials[scene.material_ids[hit.tri as usize] as usize];
-    light_query(m, &tracer.surface(ray, hit), ray, light)
-}
-
-/// Shades one primary ray whose closest hit is already known (`primary`, found with `cost`), and
-/// follows its shadow and secondary rays. `shadowed`, when given, holds the primary hit's shadow
-/// test per light (a packet path traced those together).
-pub(crate) fn shade_pixel(
-    tracer: &Tracer<'_>,
-    sh: &Shading<'_>,
-    ray: Ray,
-    primary: Option<Hit>,
-    mut cost: Cost,
-    shadowed: Option<&[bool]>,
-    stack: &mut Stack,
-) -> Sample {
-    let scene = tracer.scene;
-    let mut rays = RayCounts { primary: 1, ..RayCounts::default() };
-    let Some(hit) = primary else {
-        return Sample { colour: sh.background, t: f32::INFINITY, normal: Vec3::ZERO, prim: NO_TRIANGLE, cost, rays };
-    };
-    let surf = tracer.surface(&ray, &hit);
-    let mut sample = Sample {
-        colour: Vec3::ZERO,
-        t: hit.t,
-        normal: surf.shading,
-        prim: scene.input_index[hit.tri as usize],
-        cost,
-        rays,
-    };
-    if sh.mode == Mode::Cast {
-        let m = &scene.materials[scene.material_ids[hit.tri as usize] as usize];
-        sample.colour = shade::cast(m, &surf, ray.dir);
-        return sample;
-    }
-
-    let mut colour = Vec3::ZERO;
-    let mut weight = 1.0f32;
-    let mut ray = ray;
-    let mut hit = hit;
-    let mut surf = surf;
-    let mut depth = 0u32;
-    loop {
-        let m = &scene.materials[scene.material_ids[hit.tri as usize] as usize];
-        let mut local = sh.ambient * Vec3::from(m.kd);
-        for (li, light) in sh.lights.iter().enumerate() {
-            let (term, shadow) = light_query(m, &surf, &ray, light);
-            let Some((sray, t_max)) = shadow else { continue };
-            let blocked = match shadowed.filter(|_| depth == 0) {
-                Some(s) => s[li],
-                None => {
-                    rays.shadow += 1;
-                    tracer.occluded(sh.method, &sray, t_max, stack, &mut cost)
-                }
-            };
-            if !blocked {
-                local += Vec3::from(light.colour) * term;
-            }
-        }
-        colour += weight * local;
-
-        let Some(next) = shade::secondary(m, &surf, ray.dir) else { break };
-        let remaining = sh.max_indirections - depth;
-        if remaining == 0 || !shade::worth_tracing(weight * next.factor, remaining, sh.bound, sh.k_max) {
-            break;
-        }
-        weight *= next.factor;
-        depth += 1;
-        let side = if next.same_side { surf.geometric } else { -surf.geometric };
-        ray = Ray::new(offset_origin(surf.point, side), next.dir);
-        rays.secondary += 1;
-        match tracer.closest(sh.method, &ray, 0.0, f32::INFINITY, stack, &mut cost) {
-            Some(h) => {
-                surf = tracer.surface(&ray, &h);
-                hit = h;
-            }
-            None => {
-                colour += weight * sh.background;
-                break;
-            }
-        }
-    }
-    sample.colour = colour;
-    sample.cost = cost;
-    sample.rays = rays;
-    sample
 }
 
 fn check(settings: &RenderSettings) -> Result<Frame, RenderError> {
@@ -302,38 +152,143 @@ fn check(settings: &RenderSettings) -> Result<Frame, RenderError> {
     })
 }
 
+/// Rows per band: the unit of parallel work, of progress and of the output slices a worker
+/// writes into. Within a band, blocks go tile by tile (see [`TILE_COLUMNS`]).
+const BAND_ROWS: usize = 8;
+/// Columns per tile: a band is traced in tiles of `BAND_ROWS` x `TILE_COLUMNS` pixels, 4 x 2
+/// blocks in each, so that neighbouring blocks reuse the same nodes from the cache.
+const TILE_COLUMNS: usize = 8;
+
 /// Renders an image. Pixels are independent, so the result does not depend on the thread count.
 pub fn render(tracer: &Tracer<'_>, settings: &RenderSettings) -> Result<Image, RenderError> {
+    render_with_progress(tracer, settings, &|_| {})
+}
+
+/// [`render`], calling `progress` with the number of rows finished each time a band of rows is
+/// done (from any worker thread).
+pub fn render_with_progress(
+    tracer: &Tracer<'_>,
+    settings: &RenderSettings,
+    progress: &(dyn Fn(u32) + Sync),
+) -> Result<Image, RenderError> {
+    match settings.method.resolve() {
+        Method::Packet => render_with(tracer, settings, || Packets::new(tracer), progress),
+        m => render_with(tracer, settings, || OneByOne::new(tracer, m), progress),
+    }
+}
+
+/// One band of rows and the part of every output it covers.
+struct Band<'a> {
+    y0: usize,
+    rgb: &'a mut [[u8; 3]],
+    aov: Option<AovRows<'a>>,
+}
+
+struct AovRows<'a> {
+    t: &'a mut [f32],
+    normal: &'a mut [[f32; 3]],
+    prim: &'a mut [u32],
+    nodes: &'a mut [u32],
+    tris: &'a mut [u32],
+}
+
+/// Splits the outputs into bands of `BAND_ROWS` rows of `w` pixels.
+fn bands<'a>(w: usize, rgb: &'a mut [[u8; 3]], aov: Option<&'a mut Aovs>) -> Vec<Band<'a>> {
+    let n = BAND_ROWS * w;
+    let mut aovs: Vec<Option<AovRows<'a>>> = match aov {
+        Some(a) => {
+            a.t.chunks_mut(n)
+                .zip(a.normal.chunks_mut(n))
+                .zip(a.prim.chunks_mut(n))
+                .zip(a.nodes.chunks_mut(n))
+                .zip(a.tris.chunks_mut(n))
+                .map(|((((t, normal), prim), nodes), tris)| Some(AovRows { t, normal, prim, nodes, tris }))
+                .collect()
+        }
+        None => Vec::new(),
+    };
+    aovs.resize_with(rgb.len().div_ceil(n), || None);
+    rgb.chunks_mut(n).zip(aovs).enumerate().map(|(i, (rgb, aov))| Band { y0: i * BAND_ROWS, rgb, aov }).collect()
+}
+
+/// [`render`] with the rays of every stage traced by a [`TraceLanes`] made once per worker by
+/// `lanes` (benchmarks wrap the renderer's own to see what it traces).
+pub fn render_with<T: TraceLanes>(
+    tracer: &Tracer<'_>,
+    settings: &RenderSettings,
+    lanes: impl Fn() -> T + Sync,
+    progress: &(dyn Fn(u32) + Sync),
+) -> Result<Image, RenderError> {
     let frame = check(settings)?;
-    let method = settings.method.resolve();
-    tracer.layout_for(method)?;
+    tracer.layout_for(settings.method.resolve())?;
     let (w, h) = (settings.width as usize, settings.height as usize);
     let sh = Shading::new(tracer.scene, settings);
-    let mut samples = vec![Sample::default(); w * h];
-    // Pairs of rows: the packet path traces 4 x 2 blocks.
-    samples.par_chunks_mut(2 * w).enumerate().for_each_init(Stack::default, |stack, (pair, rows)| {
-        let y0 = (pair * 2) as u32;
-        if method == Method::Packet {
-            crate::packet::render_rows(tracer, &sh, &frame, y0, rows, w, stack);
-            return;
-        }
-        for (i, s) in rows.iter_mut().enumerate() {
-            let (x, y) = ((i % w) as u32, y0 + (i / w) as u32);
-            let ray = Ray::new(frame.eye, frame.direction(x, y));
-            let mut cost = Cost::default();
-            let hit = tracer.closest(method, &ray, 0.0, f32::INFINITY, stack, &mut cost);
-            *s = shade_pixel(tracer, &sh, ray, hit, cost, None, stack);
-        }
+    let mut rgb = vec![[0u8; 3]; w * h];
+    let mut aov = settings.aovs.then(|| Aovs {
+        t: vec![0.0; w * h],
+        normal: vec![[0.0; 3]; w * h],
+        prim: vec![0; w * h],
+        nodes: vec![0; w * h],
+        tris: vec![0; w * h],
     });
-
-    let rays = samples.par_iter().map(|s| s.rays).reduce(RayCounts::default, |a, b| a + b);
-    let rgb = samples.iter().map(|s| shade::to_u8(s.colour)).collect();
-    let aov = settings.aovs.then(|| Aovs {
-        t: samples.iter().map(|s| s.t).collect(),
-        normal: samples.iter().map(|s| s.normal.to_array()).collect(),
-        prim: samples.iter().map(|s| s.prim).collect(),
-        nodes: samples.iter().map(|s| s.cost.nodes).collect(),
-        tris: samples.iter().map(|s| s.cost.tris).collect(),
-    });
+    let rays = bands(w, &mut rgb, aov.as_mut())
+        .into_par_iter()
+        .map_init(&lanes, |lanes, mut band| {
+            let rows = band.rgb.len() / w;
+            let mut rays = RayCounts::default();
+            for x0 in (0..w).step_by(TILE_COLUMNS) {
+                for dy in (0..rows).step_by(2) {
+                    for bx in (x0..(x0 + TILE_COLUMNS).min(w)).step_by(4) {
+                        rays = rays + block(&sh, &frame, lanes, &mut band, w, rows, bx, dy);
+                    }
+                }
+            }
+            progress(rows as u32);
+            rays
+        })
+        .reduce(RayCounts::default, |a, b| a + b);
     Ok(Image { width: settings.width, height: settings.height, rgb, aov, rays })
+}
+
+/// Traces and shades the 4 x 2 block whose top-left pixel is (`bx`, `dy`) in the band, writing
+/// its pixels; returns its rays.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn block<T: TraceLanes>(
+    sh: &Shading<'_>,
+    frame: &Frame,
+    lanes: &mut T,
+    band: &mut Band<'_>,
+    w: usize,
+    rows: usize,
+    bx: usize,
+    dy: usize,
+) -> RayCounts {
+    let lane_xy = |i: usize| (bx + i % 4, dy + i / 4);
+    let mut primary =
+        Rays { rays: [Ray::new(frame.eye, Vec3::Z); LANES], valid: [false; LANES], t_max: [f32::INFINITY; LANES] };
+    for i in 0..LANES {
+        let (x, y) = lane_xy(i);
+        if x < w && y < rows {
+            primary.valid[i] = true;
+            primary.rays[i] = Ray::new(frame.eye, frame.direction(x as u32, (band.y0 + y) as u32));
+        }
+    }
+    let out = sh.block(&primary, lanes);
+    for i in 0..LANES {
+        if !primary.valid[i] {
+            continue;
+        }
+        let (x, y) = lane_xy(i);
+        let p = y * w + x;
+        band.rgb[p] = shade::to_u8(out.colour[i]);
+        if let Some(a) = &mut band.aov {
+            a.t[p] = out.t[i];
+            a.normal[p] = out.normal[i].to_array();
+            a.prim[p] = out.prim[i];
+            a.nodes[p] = out.cost[i].nodes;
+            a.tris[p] = out.cost[i].tris;
+        }
+    }
+    out.rays
 }
