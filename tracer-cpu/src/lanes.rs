@@ -34,12 +34,9 @@ impl<'a> OneByOne<'a> {
             if !rays.valid[i] {
                 continue;
             }
-            let (ray, t_max, cost) = (&rays.rays[i], rays.t_max[i], &mut out.cost[i]);
-            out.hits[i] = if ANY {
-                self.tracer.trace::<true>(self.method, ray, 0.0, t_max, &mut self.stack, cost)
-            } else {
-                self.tracer.closest(self.method, ray, 0.0, t_max, &mut self.stack, cost)
-            };
+            let ray = rays.ray(i);
+            let hit = self.tracer.trace::<ANY>(self.method, &ray, 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
+            out.set(i, hit);
         }
         out
     }
@@ -73,7 +70,7 @@ impl<'a> Packets<'a> {
     }
 
     fn trace<const ANY: bool>(&mut self, rays: &Rays) -> Results {
-        if rays.valid.iter().filter(|&&v| v).count() <= SPARSE {
+        if rays.count() <= SPARSE {
             return self.single.trace::<ANY>(rays);
         }
         let nodes = self.tracer.scene.child_pair.as_deref().expect("the renderer checked the layout");

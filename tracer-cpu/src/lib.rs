@@ -21,6 +21,7 @@ pub mod render;
 pub mod shade;
 pub mod traverse;
 pub mod whitted;
+pub mod wide;
 
 pub use camera::CameraSpec;
 pub use geometry::{Cost, Hit, Ray};

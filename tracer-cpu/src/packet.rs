@@ -8,9 +8,10 @@
 
 use crate::geometry::{Cost, Hit, Ray};
 use bvh_format::{Node, Triangle};
+use glam::Vec3;
 
 /// Lanes of a packet.
-pub const LANES: usize = 8;
+pub use crate::wide::LANES;
 
 /// Whether this CPU runs the packet path.
 pub fn available() -> bool {
@@ -24,19 +25,77 @@ pub fn available() -> bool {
     }
 }
 
-/// Up to 8 rays; lanes with `valid[i] == false` take no part.
-#[derive(Clone, Copy)]
+/// Up to 8 rays, component by component across the lanes (as the kernel and the block shading
+/// read them); lanes with `valid[i] == false` take no part. The inverse directions are computed
+/// where they are needed (8-wide in the kernel, by [`Ray::new`] for one ray at a time).
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Rays {
-    pub rays: [Ray; LANES],
-    pub valid: [bool; LANES],
+    pub origin: [[f32; LANES]; 3],
+    pub dir: [[f32; LANES]; 3],
     pub t_max: [f32; LANES],
+    pub valid: [bool; LANES],
 }
 
-/// The result for each lane: its closest (or, for any-hit, some) hit and its work.
-#[derive(Clone, Copy, Debug, Default)]
+impl Rays {
+    /// Puts `ray` with `t_max` into lane `i` and marks it valid.
+    pub fn set(&mut self, i: usize, ray: &Ray, t_max: f32) {
+        for a in 0..3 {
+            self.origin[a][i] = ray.origin[a];
+            self.dir[a][i] = ray.dir[a];
+        }
+        self.t_max[i] = t_max;
+        self.valid[i] = true;
+    }
+
+    /// The ray of lane `i`.
+    pub fn ray(&self, i: usize) -> Ray {
+        let v = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][i], a[1][i], a[2][i]);
+        Ray::new(v(&self.origin), v(&self.dir))
+    }
+
+    /// Valid lanes.
+    pub fn count(&self) -> usize {
+        self.valid.iter().filter(|&&v| v).count()
+    }
+}
+
+/// The result for each lane, component by component: whether it hit (for any-hit: is blocked),
+/// the closest (or, for any-hit, some) hit's distance, triangle and barycentrics, and its work.
+#[derive(Clone, Copy, Debug)]
 pub struct Results {
-    pub hits: [Option<Hit>; LANES],
+    pub hit: [bool; LANES],
+    pub t: [f32; LANES],
+    pub tri: [u32; LANES],
+    pub u: [f32; LANES],
+    pub v: [f32; LANES],
     pub cost: [Cost; LANES],
+}
+
+impl Default for Results {
+    fn default() -> Self {
+        Self {
+            hit: [false; LANES],
+            t: [f32::INFINITY; LANES],
+            tri: [u32::MAX; LANES],
+            u: [0.0; LANES],
+            v: [0.0; LANES],
+            cost: [Cost::default(); LANES],
+        }
+    }
+}
+
+impl Results {
+    /// Lane `i`'s hit.
+    pub fn get(&self, i: usize) -> Option<Hit> {
+        self.hit[i].then(|| Hit { t: self.t[i], tri: self.tri[i], u: self.u[i], v: self.v[i] })
+    }
+
+    /// Sets lane `i`'s hit.
+    pub fn set(&mut self, i: usize, hit: Option<Hit>) {
+        if let Some(h) = hit {
+            (self.hit[i], self.t[i], self.tri[i], self.u[i], self.v[i]) = (true, h.t, h.tri, h.u, h.v);
+        }
+    }
 }
 
 /// Closest hits (`ANY == false`, `t_min` 0) or occlusion (`ANY == true`) for a packet. Only call
@@ -68,7 +127,7 @@ pub struct Entry {
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{Entry, LANES, Rays, Results};
-    use crate::geometry::{Cost, Hit, T_SLACK};
+    use crate::geometry::{Cost, T_SLACK};
     use bvh_format::{Node, Triangle};
     use std::arch::x86_64::*;
 
@@ -203,15 +262,19 @@ mod avx2 {
 
     #[target_feature(enable = "avx2")]
     pub fn trace<const ANY: bool>(nodes: &[Node], tris: &[Triangle], rays: &Rays, stack: &mut Vec<Entry>) -> Results {
-        let r = &rays.rays;
-        let pk = Packet {
-            o: [lanes(|i| r[i].origin.x), lanes(|i| r[i].origin.y), lanes(|i| r[i].origin.z)],
-            d: [lanes(|i| r[i].dir.x), lanes(|i| r[i].dir.y), lanes(|i| r[i].dir.z)],
-            inv: [lanes(|i| r[i].inv_dir.x), lanes(|i| r[i].inv_dir.y), lanes(|i| r[i].inv_dir.z)],
+        let load = |a: &[f32; LANES]| {
+            // SAFETY: `a` holds 8 floats.
+            unsafe { _mm256_loadu_ps(a.as_ptr()) }
         };
+        let o = [load(&rays.origin[0]), load(&rays.origin[1]), load(&rays.origin[2])];
+        let d = [load(&rays.dir[0]), load(&rays.dir[1]), load(&rays.dir[2])];
+        // `Ray::new`'s reciprocal, 8-wide: the same correctly rounded division.
+        let one = splat(1.0);
+        let inv = [_mm256_div_ps(one, d[0]), _mm256_div_ps(one, d[1]), _mm256_div_ps(one, d[2])];
+        let pk = Packet { o, d, inv };
         // Lanes still looking: valid ones, minus (for any-hit) those already blocked.
         let mut alive = lanes(|i| if rays.valid[i] { f32::from_bits(u32::MAX) } else { 0.0 });
-        let mut best_t = lanes(|i| rays.t_max[i]);
+        let mut best_t = load(&rays.t_max);
         let mut best_tri = _mm256_set1_epi32(-1);
         let mut best_u = _mm256_setzero_ps();
         let mut best_v = _mm256_setzero_ps();
@@ -311,16 +374,15 @@ mod avx2 {
             }
         }
 
-        let (t, u, v) = (to_array(best_t), to_array(best_u), to_array(best_v));
-        let (tri, hit) = (to_array_i(best_tri), to_array(hit_any));
+        let (hit, tri) = (to_array(hit_any), to_array_i(best_tri));
         let (nn, nt) = (to_array_i(n_nodes), to_array_i(n_tris));
-        let mut out = Results::default();
-        for i in 0..LANES {
-            if hit[i].to_bits() != 0 {
-                out.hits[i] = Some(Hit { t: t[i], tri: tri[i] as u32, u: u[i], v: v[i] });
-            }
-            out.cost[i] = Cost { nodes: nn[i] as u32, tris: nt[i] as u32 };
+        Results {
+            hit: hit.map(|h| h.to_bits() != 0),
+            t: to_array(best_t),
+            tri: tri.map(|t| t as u32),
+            u: to_array(best_u),
+            v: to_array(best_v),
+            cost: std::array::from_fn(|i| Cost { nodes: nn[i] as u32, tris: nt[i] as u32 }),
         }
-        out
     }
 }

@@ -8,9 +8,9 @@ use crate::packet::{LANES, Rays};
 use crate::shade;
 use crate::traverse::{self, Stack};
 use crate::whitted::Shading;
+use crate::wide::{F8, Real, V8};
 use crate::{Method, RenderError};
 use bvh_format::{Light, Node, SceneFile};
-use glam::Vec3;
 use rayon::prelude::*;
 
 /// Ray casting or Whitted ray tracing (DESIGN.md section 7).
@@ -250,6 +250,13 @@ pub fn render_with<T: TraceLanes>(
     Ok(Image { width: settings.width, height: settings.height, rgb, aov, rays })
 }
 
+/// `Frame::direction` for the pixels (`x`, `y`) of the lanes, operation by operation.
+#[inline(always)]
+fn directions(frame: &Frame, x: F8, y: F8) -> V8 {
+    let half = F8::splat(0.5);
+    (V8::splat(frame.top_left) + V8::splat(frame.h_step) * (x + half) + V8::splat(frame.v_step) * (y + half)).normalize()
+}
+
 /// Traces and shades the 4 x 2 block whose top-left pixel is (`bx`, `dy`) in the band, writing
 /// its pixels; returns its rays.
 #[allow(clippy::too_many_arguments)]
@@ -265,15 +272,14 @@ fn block<T: TraceLanes>(
     dy: usize,
 ) -> RayCounts {
     let lane_xy = |i: usize| (bx + i % 4, dy + i / 4);
-    let mut primary =
-        Rays { rays: [Ray::new(frame.eye, Vec3::Z); LANES], valid: [false; LANES], t_max: [f32::INFINITY; LANES] };
+    let mut primary = Rays::default();
     for i in 0..LANES {
         let (x, y) = lane_xy(i);
-        if x < w && y < rows {
-            primary.valid[i] = true;
-            primary.rays[i] = Ray::new(frame.eye, frame.direction(x as u32, (band.y0 + y) as u32));
-        }
+        primary.valid[i] = x < w && y < rows;
     }
+    primary.origin = V8::splat(frame.eye).to_arrays();
+    primary.dir = directions(frame, F8::from_fn(|i| lane_xy(i).0 as f32), F8::from_fn(|i| (band.y0 + lane_xy(i).1) as f32)).to_arrays();
+    primary.t_max = [f32::INFINITY; LANES];
     let out = sh.block(&primary, lanes);
     for i in 0..LANES {
         if !primary.valid[i] {
@@ -281,10 +287,10 @@ fn block<T: TraceLanes>(
         }
         let (x, y) = lane_xy(i);
         let p = y * w + x;
-        band.rgb[p] = shade::to_u8(out.colour[i]);
+        band.rgb[p] = shade::to_u8(out.colour.lane(i));
         if let Some(a) = &mut band.aov {
-            a.t[p] = out.t[i];
-            a.normal[p] = out.normal[i].to_array();
+            a.t[p] = out.t.0[i];
+            a.normal[p] = out.normal.lane(i).to_array();
             a.prim[p] = out.prim[i];
             a.nodes[p] = out.cost[i].nodes;
             a.tris[p] = out.cost[i].tris;

@@ -7,11 +7,12 @@
 //! Each lane computes exactly what its pixel traced on its own would, in the same order, so an
 //! image does not depend on how its rays are grouped or traced ([`TraceLanes`]).
 
-use crate::geometry::{Cost, Ray, offset_origin};
+use crate::geometry::{Cost, offset_origin};
 use crate::lanes::TraceLanes;
-use crate::packet::{LANES, Rays};
+use crate::packet::{LANES, Rays, Results};
 use crate::render::{Mode, RayCounts, RenderSettings};
-use crate::shade::{self, Surface};
+use crate::shade;
+use crate::wide::{F8, M8, Mask, Real, V8};
 use bvh_format::{Light, Material, NO_TRIANGLE, SceneFile};
 use glam::Vec3;
 
@@ -34,10 +35,10 @@ pub struct Shading<'a> {
 #[derive(Clone, Copy, Debug)]
 pub struct Block {
     /// Linear radiance.
-    pub colour: [Vec3; LANES],
+    pub colour: V8,
     /// Primary hit distance (+inf on a miss), shading normal and input triangle (with AOVs only).
-    pub t: [f32; LANES],
-    pub normal: [Vec3; LANES],
+    pub t: F8,
+    pub normal: V8,
     pub prim: [u32; LANES],
     /// Work over all of the lane's rays.
     pub cost: [Cost; LANES],
@@ -47,9 +48,9 @@ pub struct Block {
 impl Default for Block {
     fn default() -> Self {
         Self {
-            colour: [Vec3::ZERO; LANES],
-            t: [f32::INFINITY; LANES],
-            normal: [Vec3::ZERO; LANES],
+            colour: V8::zero(),
+            t: F8::splat(f32::INFINITY),
+            normal: V8::zero(),
             prim: [NO_TRIANGLE; LANES],
             cost: [Cost::default(); LANES],
             rays: RayCounts::default(),
@@ -57,8 +58,36 @@ impl Default for Block {
     }
 }
 
-fn count(valid: &[bool; LANES]) -> u64 {
-    valid.iter().filter(|&&v| v).count() as u64
+/// The materials of the lanes that hit something (a default material elsewhere).
+struct Materials {
+    kd: V8,
+    ks: V8,
+    shininess: F8,
+    kr: F8,
+    kt: F8,
+    ior: F8,
+}
+
+impl Materials {
+    #[inline(always)]
+    fn gather(m: &[&Material; LANES]) -> Self {
+        let f = |g: fn(&Material) -> f32| F8::from_fn(|i| g(m[i]));
+        Self {
+            kd: V8::from_lanes(|i| Vec3::from(m[i].kd)),
+            ks: V8::from_lanes(|i| Vec3::from(m[i].ks)),
+            shininess: f(|m| m.shininess),
+            kr: f(|m| m.kr),
+            kt: f(|m| m.kt),
+            ior: f(|m| m.ior),
+        }
+    }
+}
+
+/// `offset_origin` lane by lane (bit arithmetic on the coordinates).
+#[inline(always)]
+fn offset(p: V8, n: V8) -> V8 {
+    let o: [Vec3; LANES] = std::array::from_fn(|i| offset_origin(p.lane(i), n.lane(i)));
+    V8::from_lanes(|i| o[i])
 }
 
 impl<'a> Shading<'a> {
@@ -81,110 +110,121 @@ impl<'a> Shading<'a> {
     /// Shades the valid lanes of `primary` (rays from the eye, `t_max` +inf), tracing every ray
     /// through `lanes`.
     pub fn block<T: TraceLanes>(&self, primary: &Rays, lanes: &mut T) -> Block {
+        #[cfg(target_arch = "x86_64")]
+        if crate::packet::available() {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { self.block_avx2(primary, lanes) };
+        }
+        self.block_lanes(primary, lanes)
+    }
+
+    /// [`Shading::block`] compiled for AVX2, so that each lane operation is one instruction.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn block_avx2<T: TraceLanes>(&self, primary: &Rays, lanes: &mut T) -> Block {
+        self.block_lanes(primary, lanes)
+    }
+
+    #[inline(always)]
+    fn block_lanes<T: TraceLanes>(&self, primary: &Rays, lanes: &mut T) -> Block {
         let scene = self.scene;
+        let zero = F8::splat(0.0);
+        let background = V8::splat(self.background);
         let mut out = Block::default();
         let mut rays = *primary;
         let mut hits = lanes.closest(&rays);
-        out.rays.primary = count(&rays.valid);
-        let mut weight = [1.0f32; LANES];
+        out.rays.primary = M8(rays.valid).count() as u64;
+        let mut weight = F8::splat(1.0);
         for depth in 0u32.. {
             // The surfaces hit; a miss adds the background and ends the path.
-            let mut surf: [Option<(Surface, &Material)>; LANES] = [None; LANES];
-            for i in 0..LANES {
-                if !rays.valid[i] {
-                    continue;
-                }
-                out.cost[i] += hits.cost[i];
-                let Some(hit) = hits.hits[i] else {
-                    out.colour[i] =
-                        if depth == 0 { self.background } else { out.colour[i] + weight[i] * self.background };
-                    continue;
-                };
-                let k = hit.tri as usize;
-                let ray = &rays.rays[i];
-                let s =
-                    shade::surface(&scene.triangles[k], &scene.normals[k], ray.origin, ray.dir, hit.t, hit.u, hit.v);
-                if depth == 0 && self.aovs {
-                    (out.t[i], out.normal[i], out.prim[i]) = (hit.t, s.shading, scene.input_index[k]);
-                }
-                surf[i] = Some((s, &scene.materials[scene.material_ids[k] as usize]));
+            let valid = M8(rays.valid);
+            add_cost(&mut out.cost, valid, &hits);
+            let hit = valid & M8(hits.hit);
+            let miss = valid & !hit;
+            let behind = if depth == 0 { background } else { out.colour + background * weight };
+            out.colour = V8::select(miss, behind, out.colour);
+            if !hit.any() {
+                break;
             }
-            if self.mode == Mode::Cast {
+            let tri: [usize; LANES] = std::array::from_fn(|i| if hit.0[i] { hits.tri[i] as usize } else { 0 });
+            let (t, n) = (&scene.triangles, &scene.normals);
+            let normal = |k: usize| V8::from_lanes(|i| Vec3::from_slice(&n[tri[i]].n[k][..3]));
+            let (origin, dir) = (V8::from_arrays(&rays.origin), V8::from_arrays(&rays.dir));
+            let s = shade::surface_of(
+                V8::from_lanes(|i| Vec3::from_slice(&t[tri[i]].e1[..3])),
+                V8::from_lanes(|i| Vec3::from_slice(&t[tri[i]].e2[..3])),
+                [normal(0), normal(1), normal(2)],
+                origin,
+                dir,
+                F8(hits.t),
+                F8(hits.u),
+                F8(hits.v),
+            );
+            if depth == 0 && self.aovs {
+                out.t = F8::select(hit, F8(hits.t), out.t);
+                out.normal = V8::select(hit, s.shading, out.normal);
                 for i in 0..LANES {
-                    if let Some((s, m)) = &surf[i] {
-                        out.colour[i] = shade::cast(m, s, rays.rays[i].dir);
+                    if hit.0[i] {
+                        out.prim[i] = scene.input_index[tri[i]];
                     }
                 }
-                return out;
+            }
+            let m = Materials::gather(&std::array::from_fn(|i| &scene.materials[scene.material_ids[tri[i]] as usize]));
+            if self.mode == Mode::Cast {
+                out.colour = V8::select(hit, shade::cast_of(m.kd, s.shading, dir), out.colour);
+                break;
             }
 
             // Phong per light, each light's shadow rays traced together.
-            let mut local = [Vec3::ZERO; LANES];
-            for i in 0..LANES {
-                if let Some((_, m)) = &surf[i] {
-                    local[i] = self.ambient * Vec3::from(m.kd);
-                }
-            }
+            let mut local = V8::select(hit, V8::splat(self.ambient).mul(m.kd), V8::zero());
             for light in self.lights {
-                let mut shadow = Rays { rays: rays.rays, valid: [false; LANES], t_max: [0.0; LANES] };
-                let mut terms = [Vec3::ZERO; LANES];
-                for i in 0..LANES {
-                    let Some((s, m)) = &surf[i] else { continue };
-                    if let (term, Some((ray, t_max))) = light_query(m, s, &rays.rays[i], light) {
-                        (terms[i], shadow.rays[i], shadow.t_max[i], shadow.valid[i]) = (term, ray, t_max, true);
-                    }
-                }
-                if !shadow.valid.contains(&true) {
+                let position = V8::splat(Vec3::from(light.position));
+                let l = (position - s.point).normalize_or_zero();
+                let term = shade::phong_of(m.kd, m.ks, m.shininess, s.shading, dir, l, hit);
+                // A light behind the surface needs no shadow ray.
+                let asks = hit & !term.is_zero();
+                if !asks.any() {
                     continue;
                 }
-                out.rays.shadow += count(&shadow.valid);
+                // The shadow ray leaves from the side of the surface the light is on.
+                let side = V8::select(s.geometric.dot(l).ge(zero), s.geometric, -s.geometric);
+                let from = offset(s.point, side);
+                let shadow =
+                    Rays { origin: from.to_arrays(), dir: l.to_arrays(), t_max: (position - from).length().0, valid: asks.0 };
+                out.rays.shadow += asks.count() as u64;
                 let blocked = lanes.occluded(&shadow);
-                for i in 0..LANES {
-                    if shadow.valid[i] {
-                        out.cost[i] += blocked.cost[i];
-                        if blocked.hits[i].is_none() {
-                            local[i] += Vec3::from(light.colour) * terms[i];
-                        }
-                    }
-                }
+                add_cost(&mut out.cost, asks, &blocked);
+                let lit = asks & !M8(blocked.hit);
+                local = V8::select(lit, local + term.mul(V8::splat(Vec3::from(light.colour))), local);
             }
+            out.colour = V8::select(hit, out.colour + local * weight, out.colour);
 
             // Secondary rays of the paths that can still change their pixel.
-            let mut next = Rays { rays: rays.rays, valid: [false; LANES], t_max: [f32::INFINITY; LANES] };
-            for i in 0..LANES {
-                let Some((s, m)) = &surf[i] else { continue };
-                out.colour[i] += weight[i] * local[i];
-                let Some(sec) = shade::secondary(m, s, rays.rays[i].dir) else { continue };
-                let remaining = self.max_indirections - depth;
-                if remaining == 0 || !shade::worth_tracing(weight[i] * sec.factor, remaining, self.bound, self.k_max) {
-                    continue;
-                }
-                weight[i] *= sec.factor;
-                let side = if sec.same_side { s.geometric } else { -s.geometric };
-                (next.rays[i], next.valid[i]) = (Ray::new(offset_origin(s.point, side), sec.dir), true);
-            }
-            if !next.valid.contains(&true) {
+            let remaining = self.max_indirections - depth;
+            if remaining == 0 {
                 break;
             }
-            out.rays.secondary += count(&next.valid);
-            rays = next;
+            let sec = shade::secondary_of(m.kr, m.kt, m.ior, s.shading, s.front, dir);
+            let go = hit & sec.exists & shade::worth_of(weight * sec.factor, self.bound, shade::chain(remaining, self.k_max));
+            if !go.any() {
+                break;
+            }
+            weight = F8::select(go, weight * sec.factor, weight);
+            let side = V8::select(sec.same_side, s.geometric, -s.geometric);
+            let from = offset(s.point, side);
+            rays = Rays { origin: from.to_arrays(), dir: sec.dir.to_arrays(), t_max: [f32::INFINITY; LANES], valid: go.0 };
+            out.rays.secondary += go.count() as u64;
             hits = lanes.closest(&rays);
         }
         out
     }
 }
 
-/// One light's unshadowed Phong term at a hit, and the shadow ray that decides whether it counts
-/// (none when the term is zero: a light behind the surface needs no shadow ray). The shadow ray
-/// leaves from the side of the surface the light is on and ends at the light.
-fn light_query(m: &Material, surf: &Surface, ray: &Ray, light: &Light) -> (Vec3, Option<(Ray, f32)>) {
-    let to = Vec3::from(light.position) - surf.point;
-    let l = to.normalize_or_zero();
-    let term = shade::phong(m, surf, ray.dir, l);
-    if term == Vec3::ZERO {
-        return (term, None);
+#[inline(always)]
+fn add_cost(cost: &mut [Cost; LANES], m: M8, r: &Results) {
+    for i in 0..LANES {
+        if m.0[i] {
+            cost[i] += r.cost[i];
+        }
     }
-    let side = if surf.geometric.dot(l) >= 0.0 { surf.geometric } else { -surf.geometric };
-    let o = offset_origin(surf.point, side);
-    (term, Some((Ray::new(o, l), (Vec3::from(light.position) - o).length())))
 }

@@ -146,7 +146,7 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
                     } else {
                         packet::trace::<false>(nodes, tris, p, pstack)
                     };
-                    res.hits.map(|h| match h {
+                    std::array::from_fn(|i| match res.get(i) {
                         Some(_) if any => 0.0,
                         Some(h) => h.t,
                         None => f32::INFINITY,
@@ -180,16 +180,15 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
 /// packets with no ray.
 fn blocks(rays: &[Option<(Ray, f32)>], out: &mut [f32], w: usize, mut f: impl FnMut(&Rays) -> [f32; LANES]) {
     let h = rays.len() / w;
-    let idle = Ray::new(Vec3::ZERO, Vec3::Z);
     for x0 in (0..w).step_by(4) {
-        let mut p = Rays { rays: [idle; LANES], valid: [false; LANES], t_max: [0.0; LANES] };
+        let mut p = Rays::default();
         for i in 0..LANES {
             let (x, dy) = (x0 + i % 4, i / 4);
             if x < w
                 && dy < h
                 && let Some((r, t)) = rays[dy * w + x]
             {
-                (p.rays[i], p.valid[i], p.t_max[i]) = (r, true, t);
+                p.set(i, &r, t);
             }
         }
         if !p.valid.contains(&true) {
@@ -258,4 +257,20 @@ fn median(mut t: Vec<f64>) -> f64 {
 /// The scenes directory of this checkout.
 pub fn scenes_dir() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes")
+}
+
+/// The load average over 1, 5 and 15 minutes, as /proc/loadavg gives it.
+pub fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map_or("?".into(), |s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+}
+
+/// The CPU's model name.
+pub fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_owned())
+        })
+        .unwrap_or_else(|| "?".into())
 }
