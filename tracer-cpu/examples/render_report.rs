@@ -71,7 +71,10 @@ fn parse_args() -> Result<Options, String> {
             "--size" => {
                 let v = value()?;
                 let (w, h) = v.split_once('x').ok_or(format!("bad size {v:?}"))?;
-                o.size = (w.parse().map_err(|_| format!("bad size {v:?}"))?, h.parse().map_err(|_| format!("bad size {v:?}"))?);
+                o.size = (
+                    w.parse().map_err(|_| format!("bad size {v:?}"))?,
+                    h.parse().map_err(|_| format!("bad size {v:?}"))?,
+                );
             }
             "--threads" => {
                 o.threads = list(value()?)
@@ -233,15 +236,26 @@ fn main() {
                 let sink = Mutex::new(Vec::new());
                 let image = one
                     .install(|| {
-                        render_with(&tracer, &settings, || Recorder { inner: lanes_for(&tracer, method), calls: Vec::new(), sink: &sink }, &|_| {})
+                        render_with(
+                            &tracer,
+                            &settings,
+                            || Recorder { inner: lanes_for(&tracer, method), calls: Vec::new(), sink: &sink },
+                            &|_| {},
+                        )
                     })
                     .unwrap_or_else(|e| fail(&e.to_string()));
                 let calls = sink.into_inner().expect("no recorder panicked");
                 let rays = image.rays.primary + image.rays.shadow + image.rays.secondary;
                 let recorded: u64 = calls.iter().map(|c| c.rays.valid.iter().filter(|&&v| v).count() as u64).sum();
                 assert_eq!(recorded, rays, "the recorded calls hold every ray of the image");
-                let primary_set = (mode == Mode::Cast && method == Method::Packet && opts.camera == "medium")
-                    .then(|| rayset::generate(&scene, w, h).unwrap_or_else(|e| fail(&e)).into_iter().next().expect("three sets"));
+                let primary_set =
+                    (mode == Mode::Cast && method == Method::Packet && opts.camera == "medium").then(|| {
+                        rayset::generate(&scene, w, h)
+                            .unwrap_or_else(|e| fail(&e))
+                            .into_iter()
+                            .next()
+                            .expect("three sets")
+                    });
                 for (threads, pool) in &pools {
                     let mut out = vec![rayset::NO_RAY; (w * h) as usize];
                     let mut a = || {

@@ -35,7 +35,8 @@ impl<'a> OneByOne<'a> {
                 continue;
             }
             let ray = rays.ray(i);
-            let hit = self.tracer.trace::<ANY>(self.method, &ray, 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
+            let hit =
+                self.tracer.trace::<ANY>(self.method, &ray, 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
             out.set(i, hit);
         }
         out

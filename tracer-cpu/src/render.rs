@@ -8,9 +8,10 @@ use crate::packet::{LANES, Rays};
 use crate::shade;
 use crate::traverse::{self, Stack};
 use crate::whitted::Shading;
-use crate::wide::{F8, Real, V8};
+use crate::wide::{F8, Lanes, V3};
 use crate::{Method, RenderError};
 use bvh_format::{Light, Node, SceneFile};
+use glam::Vec3;
 use rayon::prelude::*;
 
 /// Ray casting or Whitted ray tracing (DESIGN.md section 7).
@@ -219,6 +220,17 @@ pub fn render_with<T: TraceLanes>(
     lanes: impl Fn() -> T + Sync,
     progress: &(dyn Fn(u32) + Sync),
 ) -> Result<Image, RenderError> {
+    render_in(tracer, settings, lanes, progress, crate::packet::available())
+}
+
+/// [`render_with`], with AVX lanes for the shading or (`avx` false, or no AVX2) plain arrays.
+fn render_in<T: TraceLanes>(
+    tracer: &Tracer<'_>,
+    settings: &RenderSettings,
+    lanes: impl Fn() -> T + Sync,
+    progress: &(dyn Fn(u32) + Sync),
+    avx: bool,
+) -> Result<Image, RenderError> {
     let frame = check(settings)?;
     tracer.layout_for(settings.method.resolve())?;
     let (w, h) = (settings.width as usize, settings.height as usize);
@@ -234,34 +246,78 @@ pub fn render_with<T: TraceLanes>(
     let rays = bands(w, &mut rgb, aov.as_mut())
         .into_par_iter()
         .map_init(&lanes, |lanes, mut band| {
-            let rows = band.rgb.len() / w;
-            let mut rays = RayCounts::default();
-            for x0 in (0..w).step_by(TILE_COLUMNS) {
-                for dy in (0..rows).step_by(2) {
-                    for bx in (x0..(x0 + TILE_COLUMNS).min(w)).step_by(4) {
-                        rays = rays + block(&sh, &frame, lanes, &mut band, w, rows, bx, dy);
-                    }
-                }
-            }
-            progress(rows as u32);
+            let rays = render_band(&sh, &frame, lanes, &mut band, w, avx);
+            progress((band.rgb.len() / w) as u32);
             rays
         })
         .reduce(RayCounts::default, |a, b| a + b);
     Ok(Image { width: settings.width, height: settings.height, rgb, aov, rays })
 }
 
-/// `Frame::direction` for the pixels (`x`, `y`) of the lanes, operation by operation.
-#[inline(always)]
-fn directions(frame: &Frame, x: F8, y: F8) -> V8 {
-    let half = F8::splat(0.5);
-    (V8::splat(frame.top_left) + V8::splat(frame.h_step) * (x + half) + V8::splat(frame.v_step) * (y + half)).normalize()
+/// Renders a band: with AVX lanes when asked and the CPU has AVX2, else with plain arrays.
+fn render_band<T: TraceLanes>(
+    sh: &Shading<'_>,
+    frame: &Frame,
+    lanes: &mut T,
+    band: &mut Band<'_>,
+    w: usize,
+    avx: bool,
+) -> RayCounts {
+    #[cfg(target_arch = "x86_64")]
+    if avx && crate::packet::available() {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { render_band_avx2(sh, frame, lanes, band, w) };
+    }
+    render_band_in::<F8, T>(sh, frame, lanes, band, w)
 }
 
+/// [`render_band`] compiled for AVX2, so that every lane operation of the shading is one
+/// instruction.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn render_band_avx2<T: TraceLanes>(
+    sh: &Shading<'_>,
+    frame: &Frame,
+    lanes: &mut T,
+    band: &mut Band<'_>,
+    w: usize,
+) -> RayCounts {
+    render_band_in::<crate::wide::Avx8, T>(sh, frame, lanes, band, w)
+}
+
+/// The band tile by tile, and each tile in 4 x 2 blocks.
+#[inline(always)]
+fn render_band_in<L: Lanes, T: TraceLanes>(
+    sh: &Shading<'_>,
+    frame: &Frame,
+    lanes: &mut T,
+    band: &mut Band<'_>,
+    w: usize,
+) -> RayCounts {
+    let rows = band.rgb.len() / w;
+    let mut rays = RayCounts::default();
+    for x0 in (0..w).step_by(TILE_COLUMNS) {
+        for dy in (0..rows).step_by(2) {
+            for bx in (x0..(x0 + TILE_COLUMNS).min(w)).step_by(4) {
+                rays = rays + block::<L, T>(sh, frame, lanes, band, w, rows, bx, dy);
+            }
+        }
+    }
+    rays
+}
+
+/// `Frame::direction` for the pixels (`x`, `y`) of the lanes, operation by operation.
+#[inline(always)]
+fn directions<L: Lanes>(frame: &Frame, x: L, y: L) -> V3<L> {
+    let half = L::splat(0.5);
+    (V3::splat(frame.top_left) + V3::splat(frame.h_step) * (x + half) + V3::splat(frame.v_step) * (y + half))
+        .normalize()
+}
 /// Traces and shades the 4 x 2 block whose top-left pixel is (`bx`, `dy`) in the band, writing
 /// its pixels; returns its rays.
 #[allow(clippy::too_many_arguments)]
-#[inline]
-fn block<T: TraceLanes>(
+#[inline(always)]
+fn block<L: Lanes, T: TraceLanes>(
     sh: &Shading<'_>,
     frame: &Frame,
     lanes: &mut T,
@@ -277,24 +333,103 @@ fn block<T: TraceLanes>(
         let (x, y) = lane_xy(i);
         primary.valid[i] = x < w && y < rows;
     }
-    primary.origin = V8::splat(frame.eye).to_arrays();
-    primary.dir = directions(frame, F8::from_fn(|i| lane_xy(i).0 as f32), F8::from_fn(|i| (band.y0 + lane_xy(i).1) as f32)).to_arrays();
+    primary.origin = V3::<L>::splat(frame.eye).to_arrays();
+    let (x, y) = (L::from_fn(|i| lane_xy(i).0 as f32), L::from_fn(|i| (band.y0 + lane_xy(i).1) as f32));
+    primary.dir = directions(frame, x, y).to_arrays();
     primary.t_max = [f32::INFINITY; LANES];
-    let out = sh.block(&primary, lanes);
+    let out = sh.block::<L, T>(&primary, lanes);
     for i in 0..LANES {
         if !primary.valid[i] {
             continue;
         }
         let (x, y) = lane_xy(i);
         let p = y * w + x;
-        band.rgb[p] = shade::to_u8(out.colour.lane(i));
+        let c = out.colour;
+        band.rgb[p] = shade::to_u8(Vec3::new(c[0][i], c[1][i], c[2][i]));
         if let Some(a) = &mut band.aov {
-            a.t[p] = out.t.0[i];
-            a.normal[p] = out.normal.lane(i).to_array();
+            let n = out.normal;
+            a.t[p] = out.t[i];
+            a.normal[p] = [n[0][i], n[1][i], n[2][i]];
             a.prim[p] = out.prim[i];
             a.nodes[p] = out.cost[i].nodes;
             a.tris[p] = out.cost[i].tris;
         }
     }
     out.rays
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn same_directions<L: Lanes>() {
+        let cams = [
+            CameraSpec { eye: Vec3::new(0.0, 0.1, 0.3), at: Vec3::new(0.01, 0.1, 0.0), up: Vec3::Y, fov_deg: 45.0 },
+            CameraSpec { eye: Vec3::new(-3e4, 2e3, 7.0), at: Vec3::ZERO, up: Vec3::new(0.1, 1.0, 0.3), fov_deg: 170.0 },
+            CameraSpec { eye: Vec3::new(1.0, 2.0, 3.0), at: Vec3::new(1.0, 2.0, 2.0), up: Vec3::X, fov_deg: 0.01 },
+        ];
+        for cam in cams {
+            for (w, h) in [(1, 1), (97, 61), (16384, 3), (3, 70000)] {
+                let frame = cam.frame(w, h).unwrap();
+                for (bx, by) in [(0, 0), (w.saturating_sub(4), h.saturating_sub(2)), (w / 2, h / 3)] {
+                    let x = L::from_fn(|i| (bx + i as u32 % 4) as f32);
+                    let y = L::from_fn(|i| (by + i as u32 / 4) as f32);
+                    let d = directions(&frame, x, y).to_arrays();
+                    for i in 0..LANES {
+                        let want = frame.direction(bx + i as u32 % 4, by + i as u32 / 4);
+                        assert_eq!([d[0][i], d[1][i], d[2][i]].map(f32::to_bits), want.to_array().map(f32::to_bits));
+                    }
+                }
+            }
+        }
+    }
+
+    /// The image with AVX lanes is the image with plain arrays (the path of CPUs without AVX2),
+    /// for every way of tracing the rays.
+    #[test]
+    fn both_lane_types_render_the_same_image() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/room.toml");
+        let scene = bvh_build::import::load(&path, &Default::default()).unwrap();
+        let scene = bvh_build::compile(&scene, &Default::default(), Default::default()).unwrap();
+        let tracer = Tracer::new(&scene);
+        for mode in [Mode::Cast, Mode::Whitted] {
+            for method in [Method::Packet, Method::Ordered, Method::Stackless] {
+                let settings = RenderSettings {
+                    width: 61,
+                    height: 37,
+                    camera: CameraSpec::from(scene.camera("medium").unwrap()),
+                    mode,
+                    lights: scene.lights.clone(),
+                    max_indirections: scene.settings.max_indirections,
+                    method,
+                    aovs: true,
+                };
+                let image = |avx| match method.resolve() {
+                    Method::Packet => render_in(&tracer, &settings, || Packets::new(&tracer), &|_| {}, avx),
+                    m => render_in(&tracer, &settings, || OneByOne::new(&tracer, m), &|_| {}, avx),
+                };
+                let (a, b) = (image(true).unwrap(), image(false).unwrap());
+                assert_eq!(a.rgb, b.rgb, "{mode:?} {method:?}");
+                assert_eq!(a.rays, b.rays, "{mode:?} {method:?}");
+                let (x, y) = (a.aov.unwrap(), b.aov.unwrap());
+                assert_eq!(
+                    x.t.iter().map(|t| t.to_bits()).collect::<Vec<_>>(),
+                    y.t.iter().map(|t| t.to_bits()).collect::<Vec<_>>()
+                );
+                assert_eq!(
+                    (x.normal, x.prim, x.nodes, x.tris),
+                    (y.normal, y.prim, y.nodes, y.tris),
+                    "{mode:?} {method:?}"
+                );
+                assert!(a.rays.secondary > 0 || mode == Mode::Cast, "the room has a mirror and glass");
+            }
+        }
+    }
+
+    #[test]
+    fn block_directions_are_the_cameras_bit_for_bit() {
+        same_directions::<F8>();
+        #[cfg(target_arch = "x86_64")]
+        same_directions::<crate::wide::Avx8>();
+    }
 }

@@ -12,7 +12,7 @@ use crate::lanes::TraceLanes;
 use crate::packet::{LANES, Rays, Results};
 use crate::render::{Mode, RayCounts, RenderSettings};
 use crate::shade;
-use crate::wide::{F8, M8, Mask, Real, V8};
+use crate::wide::{Lanes, Mask, V3};
 use bvh_format::{Light, Material, NO_TRIANGLE, SceneFile};
 use glam::Vec3;
 
@@ -34,11 +34,11 @@ pub struct Shading<'a> {
 /// What a block produced per lane, and the rays it traced.
 #[derive(Clone, Copy, Debug)]
 pub struct Block {
-    /// Linear radiance.
-    pub colour: V8,
+    /// Linear radiance, component by component.
+    pub colour: [[f32; LANES]; 3],
     /// Primary hit distance (+inf on a miss), shading normal and input triangle (with AOVs only).
-    pub t: F8,
-    pub normal: V8,
+    pub t: [f32; LANES],
+    pub normal: [[f32; LANES]; 3],
     pub prim: [u32; LANES],
     /// Work over all of the lane's rays.
     pub cost: [Cost; LANES],
@@ -48,9 +48,9 @@ pub struct Block {
 impl Default for Block {
     fn default() -> Self {
         Self {
-            colour: V8::zero(),
-            t: F8::splat(f32::INFINITY),
-            normal: V8::zero(),
+            colour: [[0.0; LANES]; 3],
+            t: [f32::INFINITY; LANES],
+            normal: [[0.0; LANES]; 3],
             prim: [NO_TRIANGLE; LANES],
             cost: [Cost::default(); LANES],
             rays: RayCounts::default(),
@@ -59,35 +59,43 @@ impl Default for Block {
 }
 
 /// The materials of the lanes that hit something (a default material elsewhere).
-struct Materials {
-    kd: V8,
-    ks: V8,
-    shininess: F8,
-    kr: F8,
-    kt: F8,
-    ior: F8,
+struct Materials<L: Lanes> {
+    kd: V3<L>,
+    ks: V3<L>,
+    shininess: L,
+    kr: L,
+    kt: L,
+    ior: L,
 }
 
-impl Materials {
+impl<L: Lanes> Materials<L> {
     #[inline(always)]
     fn gather(m: &[&Material; LANES]) -> Self {
-        let f = |g: fn(&Material) -> f32| F8::from_fn(|i| g(m[i]));
         Self {
-            kd: V8::from_lanes(|i| Vec3::from(m[i].kd)),
-            ks: V8::from_lanes(|i| Vec3::from(m[i].ks)),
-            shininess: f(|m| m.shininess),
-            kr: f(|m| m.kr),
-            kt: f(|m| m.kt),
-            ior: f(|m| m.ior),
+            kd: V3::from_lanes(|i| Vec3::from(m[i].kd)),
+            ks: V3::from_lanes(|i| Vec3::from(m[i].ks)),
+            shininess: L::from_fn(|i| m[i].shininess),
+            kr: L::from_fn(|i| m[i].kr),
+            kt: L::from_fn(|i| m[i].kt),
+            ior: L::from_fn(|i| m[i].ior),
         }
     }
 }
 
 /// `offset_origin` lane by lane (bit arithmetic on the coordinates).
+///
+/// Helpers like this one take no closures that touch lanes: a closure is compiled for the
+/// function that defines it, not for the AVX2 loop it ends up inlined into, so a lane operation
+/// inside one becomes a call.
 #[inline(always)]
-fn offset(p: V8, n: V8) -> V8 {
-    let o: [Vec3; LANES] = std::array::from_fn(|i| offset_origin(p.lane(i), n.lane(i)));
-    V8::from_lanes(|i| o[i])
+fn offset<L: Lanes>(p: V3<L>, n: V3<L>) -> V3<L> {
+    let (p, n) = (p.to_arrays(), n.to_arrays());
+    let mut o = [[0.0; LANES]; 3];
+    for i in 0..LANES {
+        let r = offset_origin(Vec3::new(p[0][i], p[1][i], p[2][i]), Vec3::new(n[0][i], n[1][i], n[2][i]));
+        (o[0][i], o[1][i], o[2][i]) = (r.x, r.y, r.z);
+    }
+    V3::from_arrays(&o)
 }
 
 impl<'a> Shading<'a> {
@@ -107,78 +115,70 @@ impl<'a> Shading<'a> {
         }
     }
 
-    /// Shades the valid lanes of `primary` (rays from the eye, `t_max` +inf), tracing every ray
-    /// through `lanes`.
-    pub fn block<T: TraceLanes>(&self, primary: &Rays, lanes: &mut T) -> Block {
-        #[cfg(target_arch = "x86_64")]
-        if crate::packet::available() {
-            // SAFETY: the CPU has AVX2 (checked just above).
-            return unsafe { self.block_avx2(primary, lanes) };
-        }
-        self.block_lanes(primary, lanes)
-    }
-
-    /// [`Shading::block`] compiled for AVX2, so that each lane operation is one instruction.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn block_avx2<T: TraceLanes>(&self, primary: &Rays, lanes: &mut T) -> Block {
-        self.block_lanes(primary, lanes)
-    }
-
+    /// Shades the valid lanes of `primary` (rays from the eye, `t_max` +inf) with lanes of type
+    /// `L`, tracing every ray through `lanes`. Inlined into the renderer's loop, which is compiled
+    /// for AVX2 where the CPU has it.
     #[inline(always)]
-    fn block_lanes<T: TraceLanes>(&self, primary: &Rays, lanes: &mut T) -> Block {
+    pub(crate) fn block<L: Lanes, T: TraceLanes>(&self, primary: &Rays, lanes: &mut T) -> Block {
         let scene = self.scene;
-        let zero = F8::splat(0.0);
-        let background = V8::splat(self.background);
+        let zero = L::splat(0.0);
+        let background = V3::<L>::splat(self.background);
         let mut out = Block::default();
+        let mut colour = V3::<L>::zero();
         let mut rays = *primary;
         let mut hits = lanes.closest(&rays);
-        out.rays.primary = M8(rays.valid).count() as u64;
-        let mut weight = F8::splat(1.0);
+        out.rays.primary = rays.count() as u64;
+        let mut weight = L::splat(1.0);
         for depth in 0u32.. {
             // The surfaces hit; a miss adds the background and ends the path.
-            let valid = M8(rays.valid);
-            add_cost(&mut out.cost, valid, &hits);
-            let hit = valid & M8(hits.hit);
-            let miss = valid & !hit;
-            let behind = if depth == 0 { background } else { out.colour + background * weight };
-            out.colour = V8::select(miss, behind, out.colour);
+            let valid = L::mask(rays.valid);
+            add_cost(&mut out.cost, &rays.valid, &hits);
+            let found = L::mask(hits.hit);
+            let hit = valid & found;
+            let miss = valid & !found;
+            let behind = if depth == 0 { background } else { colour + background * weight };
+            colour = V3::select(miss, behind, colour);
             if !hit.any() {
                 break;
             }
-            let tri: [usize; LANES] = std::array::from_fn(|i| if hit.0[i] { hits.tri[i] as usize } else { 0 });
+            let hit_lanes = L::bools(hit);
+            let tri: [usize; LANES] = std::array::from_fn(|i| if hit_lanes[i] { hits.tri[i] as usize } else { 0 });
             let (t, n) = (&scene.triangles, &scene.normals);
-            let normal = |k: usize| V8::from_lanes(|i| Vec3::from_slice(&n[tri[i]].n[k][..3]));
-            let (origin, dir) = (V8::from_arrays(&rays.origin), V8::from_arrays(&rays.dir));
+            let (origin, dir) = (V3::<L>::from_arrays(&rays.origin), V3::<L>::from_arrays(&rays.dir));
             let s = shade::surface_of(
-                V8::from_lanes(|i| Vec3::from_slice(&t[tri[i]].e1[..3])),
-                V8::from_lanes(|i| Vec3::from_slice(&t[tri[i]].e2[..3])),
-                [normal(0), normal(1), normal(2)],
+                V3::from_lanes(|i| Vec3::from_slice(&t[tri[i]].e1[..3])),
+                V3::from_lanes(|i| Vec3::from_slice(&t[tri[i]].e2[..3])),
+                [
+                    V3::from_lanes(|i| Vec3::from_slice(&n[tri[i]].n[0][..3])),
+                    V3::from_lanes(|i| Vec3::from_slice(&n[tri[i]].n[1][..3])),
+                    V3::from_lanes(|i| Vec3::from_slice(&n[tri[i]].n[2][..3])),
+                ],
                 origin,
                 dir,
-                F8(hits.t),
-                F8(hits.u),
-                F8(hits.v),
+                L::from_array(hits.t),
+                L::from_array(hits.u),
+                L::from_array(hits.v),
             );
             if depth == 0 && self.aovs {
-                out.t = F8::select(hit, F8(hits.t), out.t);
-                out.normal = V8::select(hit, s.shading, out.normal);
+                out.t = L::select(hit, L::from_array(hits.t), L::from_array(out.t)).to_array();
+                out.normal = V3::select(hit, s.shading, V3::zero()).to_arrays();
                 for i in 0..LANES {
-                    if hit.0[i] {
+                    if hit_lanes[i] {
                         out.prim[i] = scene.input_index[tri[i]];
                     }
                 }
             }
-            let m = Materials::gather(&std::array::from_fn(|i| &scene.materials[scene.material_ids[tri[i]] as usize]));
+            let m =
+                Materials::<L>::gather(&std::array::from_fn(|i| &scene.materials[scene.material_ids[tri[i]] as usize]));
             if self.mode == Mode::Cast {
-                out.colour = V8::select(hit, shade::cast_of(m.kd, s.shading, dir), out.colour);
+                colour = V3::select(hit, shade::cast_of(m.kd, s.shading, dir), colour);
                 break;
             }
 
             // Phong per light, each light's shadow rays traced together.
-            let mut local = V8::select(hit, V8::splat(self.ambient).mul(m.kd), V8::zero());
+            let mut local = V3::select(hit, V3::splat(self.ambient).mul(m.kd), V3::zero());
             for light in self.lights {
-                let position = V8::splat(Vec3::from(light.position));
+                let position = V3::<L>::splat(Vec3::from(light.position));
                 let l = (position - s.point).normalize_or_zero();
                 let term = shade::phong_of(m.kd, m.ks, m.shininess, s.shading, dir, l, hit);
                 // A light behind the surface needs no shadow ray.
@@ -187,17 +187,21 @@ impl<'a> Shading<'a> {
                     continue;
                 }
                 // The shadow ray leaves from the side of the surface the light is on.
-                let side = V8::select(s.geometric.dot(l).ge(zero), s.geometric, -s.geometric);
+                let side = V3::select(s.geometric.dot(l).ge(zero), s.geometric, -s.geometric);
                 let from = offset(s.point, side);
-                let shadow =
-                    Rays { origin: from.to_arrays(), dir: l.to_arrays(), t_max: (position - from).length().0, valid: asks.0 };
-                out.rays.shadow += asks.count() as u64;
+                let shadow = Rays {
+                    origin: from.to_arrays(),
+                    dir: l.to_arrays(),
+                    t_max: (position - from).length().to_array(),
+                    valid: L::bools(asks),
+                };
+                out.rays.shadow += L::count(asks) as u64;
                 let blocked = lanes.occluded(&shadow);
-                add_cost(&mut out.cost, asks, &blocked);
-                let lit = asks & !M8(blocked.hit);
-                local = V8::select(lit, local + term.mul(V8::splat(Vec3::from(light.colour))), local);
+                add_cost(&mut out.cost, &shadow.valid, &blocked);
+                let lit = asks & !L::mask(blocked.hit);
+                local = V3::select(lit, local + term.mul(V3::splat(Vec3::from(light.colour))), local);
             }
-            out.colour = V8::select(hit, out.colour + local * weight, out.colour);
+            colour = V3::select(hit, colour + local * weight, colour);
 
             // Secondary rays of the paths that can still change their pixel.
             let remaining = self.max_indirections - depth;
@@ -205,25 +209,33 @@ impl<'a> Shading<'a> {
                 break;
             }
             let sec = shade::secondary_of(m.kr, m.kt, m.ior, s.shading, s.front, dir);
-            let go = hit & sec.exists & shade::worth_of(weight * sec.factor, self.bound, shade::chain(remaining, self.k_max));
+            let go = hit
+                & sec.exists
+                & shade::worth_of(weight * sec.factor, self.bound, shade::chain(remaining, self.k_max));
             if !go.any() {
                 break;
             }
-            weight = F8::select(go, weight * sec.factor, weight);
-            let side = V8::select(sec.same_side, s.geometric, -s.geometric);
+            weight = L::select(go, weight * sec.factor, weight);
+            let side = V3::select(sec.same_side, s.geometric, -s.geometric);
             let from = offset(s.point, side);
-            rays = Rays { origin: from.to_arrays(), dir: sec.dir.to_arrays(), t_max: [f32::INFINITY; LANES], valid: go.0 };
-            out.rays.secondary += go.count() as u64;
+            rays = Rays {
+                origin: from.to_arrays(),
+                dir: sec.dir.to_arrays(),
+                t_max: [f32::INFINITY; LANES],
+                valid: L::bools(go),
+            };
+            out.rays.secondary += L::count(go) as u64;
             hits = lanes.closest(&rays);
         }
+        out.colour = colour.to_arrays();
         out
     }
 }
 
 #[inline(always)]
-fn add_cost(cost: &mut [Cost; LANES], m: M8, r: &Results) {
+fn add_cost(cost: &mut [Cost; LANES], m: &[bool; LANES], r: &Results) {
     for i in 0..LANES {
-        if m.0[i] {
+        if m[i] {
             cost[i] += r.cost[i];
         }
     }

@@ -1,12 +1,18 @@
 //! Arithmetic that runs on one ray or on a block of eight: the shading formulas ([`crate::shade`])
-//! are written once over [`Real`], and instantiated with `f32` for a single ray and with [`F8`]
-//! for the 8 lanes of a 4 x 2 pixel block, where the compiler turns each operation into one AVX
-//! instruction (the renderer calls the block code through a function compiled for AVX2).
+//! are written once over [`Real`], and instantiated with `f32` for a single ray and with 8-lane
+//! types ([`Lanes`]) for the 4 x 2 pixel blocks the renderer shades: `Avx8` (one AVX instruction
+//! per operation, used where the CPU has AVX2) or [`F8`] (plain arrays, anywhere).
 //!
-//! Every operation of [`F8`] is the `f32` operation lane by lane (IEEE add, subtract, multiply,
-//! divide and square root are correctly rounded, and Rust never fuses a multiply with an add), so
-//! a lane computes exactly what a single ray does, bit for bit. Branches become selects: both
-//! sides are computed and the mask picks, so a lane never sees the other side's value.
+//! Every lane operation is the `f32` operation (IEEE add, subtract, multiply, divide and square
+//! root are correctly rounded, and Rust never fuses a multiply with an add), so a lane computes
+//! exactly what a single ray does, bit for bit. Branches become selects: both sides are computed
+//! and the mask picks, so a lane never sees the other side's value. `max` is defined as
+//! `if a > b { a } else { b }` everywhere (what the x86 `max` instructions compute), so that no
+//! lane type depends on how `f32::max` breaks a tie between +0 and -0.
+//!
+//! A closure is compiled with the target features of the function that defines it, not of the
+//! AVX2 function it is finally inlined into, so code generic over [`Lanes`] never performs a lane
+//! operation inside a closure (it would become a call to an out-of-line intrinsic).
 
 use glam::Vec3;
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
@@ -26,7 +32,8 @@ pub trait Real:
     type Mask: Mask;
     fn splat(v: f32) -> Self;
     fn sqrt(self) -> Self;
-    /// `f32::max` lane by lane (a NaN loses to a number).
+    /// `if self > o { self } else { o }`: `f32::max`, except that a tie of +0 and -0 gives `o`
+    /// and a NaN `o` is kept.
     fn max(self, o: Self) -> Self;
     /// `f32::powf` in the lanes of `m`, 1 elsewhere (pow is costly: idle lanes skip it).
     fn powf_in(self, e: Self, m: Self::Mask) -> Self;
@@ -59,7 +66,7 @@ impl Real for f32 {
     }
     #[inline(always)]
     fn max(self, o: Self) -> Self {
-        f32::max(self, o)
+        if self > o { self } else { o }
     }
     #[inline(always)]
     fn powf_in(self, e: Self, m: bool) -> Self {
@@ -95,7 +102,24 @@ impl Real for f32 {
     }
 }
 
-/// Eight lanes of `f32`.
+/// Eight lanes: what the block shading needs beyond [`Real`] (moving values in and out of lanes).
+pub trait Lanes: Real {
+    fn from_array(a: [f32; LANES]) -> Self;
+    fn to_array(self) -> [f32; LANES];
+    fn mask(b: [bool; LANES]) -> Self::Mask;
+    fn bools(m: Self::Mask) -> [bool; LANES];
+    /// Lanes where `m` holds.
+    #[inline(always)]
+    fn count(m: Self::Mask) -> usize {
+        Self::bools(m).iter().filter(|&&b| b).count()
+    }
+    #[inline(always)]
+    fn from_fn(f: impl FnMut(usize) -> f32) -> Self {
+        Self::from_array(std::array::from_fn(f))
+    }
+}
+
+/// Eight lanes of `f32` in a plain array: the lane type for CPUs without AVX2.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct F8(pub [f32; LANES]);
 
@@ -116,18 +140,24 @@ impl F8 {
     fn test(self, o: F8, f: impl Fn(f32, f32) -> bool) -> M8 {
         M8(std::array::from_fn(|i| f(self.0[i], o.0[i])))
     }
-    /// Lane `i` of each of eight values.
-    #[inline(always)]
-    pub fn from_fn(f: impl FnMut(usize) -> f32) -> F8 {
-        F8(std::array::from_fn(f))
-    }
 }
 
-impl M8 {
-    pub const NONE: M8 = M8([false; LANES]);
+impl Lanes for F8 {
     #[inline(always)]
-    pub fn count(self) -> usize {
-        self.0.iter().filter(|&&b| b).count()
+    fn from_array(a: [f32; LANES]) -> Self {
+        F8(a)
+    }
+    #[inline(always)]
+    fn to_array(self) -> [f32; LANES] {
+        self.0
+    }
+    #[inline(always)]
+    fn mask(b: [bool; LANES]) -> M8 {
+        M8(b)
+    }
+    #[inline(always)]
+    fn bools(m: M8) -> [bool; LANES] {
+        m.0
     }
 }
 
@@ -198,7 +228,7 @@ impl Real for F8 {
     }
     #[inline(always)]
     fn max(self, o: Self) -> Self {
-        self.zip(o, f32::max)
+        self.zip(o, <f32 as Real>::max)
     }
     #[inline(always)]
     fn powf_in(self, e: Self, m: M8) -> Self {
@@ -354,25 +384,328 @@ impl From<V3<f32>> for Vec3 {
     }
 }
 
-impl V8 {
-    /// Lane `i`.
-    #[inline(always)]
-    pub fn lane(&self, i: usize) -> Vec3 {
-        Vec3::new(self.x.0[i], self.y.0[i], self.z.0[i])
-    }
-    /// From a vector per lane.
+impl<L: Lanes> V3<L> {
+    /// From a vector per lane (`f` must not touch lanes itself: see the module's note on
+    /// closures).
     #[inline(always)]
     pub fn from_lanes(f: impl Fn(usize) -> Vec3) -> Self {
-        let v: [Vec3; LANES] = std::array::from_fn(f);
-        Self::new(F8::from_fn(|i| v[i].x), F8::from_fn(|i| v[i].y), F8::from_fn(|i| v[i].z))
+        let mut a = [[0.0; LANES]; 3];
+        for i in 0..LANES {
+            let v = f(i);
+            (a[0][i], a[1][i], a[2][i]) = (v.x, v.y, v.z);
+        }
+        Self::from_arrays(&a)
     }
     /// From three arrays of lanes, as [`crate::packet::Rays`] stores origins and directions.
     #[inline(always)]
     pub fn from_arrays(a: &[[f32; LANES]; 3]) -> Self {
-        Self::new(F8(a[0]), F8(a[1]), F8(a[2]))
+        Self::new(L::from_array(a[0]), L::from_array(a[1]), L::from_array(a[2]))
     }
     #[inline(always)]
     pub fn to_arrays(self) -> [[f32; LANES]; 3] {
-        [self.x.0, self.y.0, self.z.0]
+        [self.x.to_array(), self.y.to_array(), self.z.to_array()]
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+pub(crate) use avx::Avx8;
+
+/// Lanes in AVX registers. Only code compiled for AVX2 and entered after `packet::available()`
+/// may use them: each operation is an AVX intrinsic.
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use super::{LANES, Lanes, Mask, Real};
+    use std::arch::x86_64::*;
+    use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
+
+    #[derive(Clone, Copy, Debug)]
+    pub struct Avx8(__m256);
+
+    /// All ones in the lanes where the condition holds.
+    #[derive(Clone, Copy, Debug)]
+    pub struct AvxMask(__m256);
+
+    // SAFETY (every `unsafe` block below): register arithmetic on a CPU with AVX2, which the
+    // callers of these types guarantee (see the type's documentation).
+    macro_rules! op {
+        ($tr:ident, $f:ident, $intr:ident) => {
+            impl $tr for Avx8 {
+                type Output = Avx8;
+                #[inline(always)]
+                fn $f(self, o: Avx8) -> Avx8 {
+                    Avx8(unsafe { $intr(self.0, o.0) })
+                }
+            }
+        };
+    }
+    op!(Add, add, _mm256_add_ps);
+    op!(Sub, sub, _mm256_sub_ps);
+    op!(Mul, mul, _mm256_mul_ps);
+    op!(Div, div, _mm256_div_ps);
+
+    impl Neg for Avx8 {
+        type Output = Avx8;
+        #[inline(always)]
+        fn neg(self) -> Avx8 {
+            Avx8(unsafe { _mm256_xor_ps(self.0, _mm256_set1_ps(-0.0)) })
+        }
+    }
+
+    impl BitAnd for AvxMask {
+        type Output = AvxMask;
+        #[inline(always)]
+        fn bitand(self, o: AvxMask) -> AvxMask {
+            AvxMask(unsafe { _mm256_and_ps(self.0, o.0) })
+        }
+    }
+
+    impl BitOr for AvxMask {
+        type Output = AvxMask;
+        #[inline(always)]
+        fn bitor(self, o: AvxMask) -> AvxMask {
+            AvxMask(unsafe { _mm256_or_ps(self.0, o.0) })
+        }
+    }
+
+    impl Not for AvxMask {
+        type Output = AvxMask;
+        #[inline(always)]
+        fn not(self) -> AvxMask {
+            AvxMask(unsafe { _mm256_xor_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(-1))) })
+        }
+    }
+
+    impl Mask for AvxMask {
+        #[inline(always)]
+        fn any(self) -> bool {
+            unsafe { _mm256_movemask_ps(self.0) != 0 }
+        }
+    }
+
+    impl Avx8 {
+        #[inline(always)]
+        fn cmp<const P: i32>(self, o: Avx8) -> AvxMask {
+            AvxMask(unsafe { _mm256_cmp_ps::<P>(self.0, o.0) })
+        }
+    }
+
+    impl Real for Avx8 {
+        type Mask = AvxMask;
+        #[inline(always)]
+        fn splat(v: f32) -> Self {
+            Avx8(unsafe { _mm256_set1_ps(v) })
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            Avx8(unsafe { _mm256_sqrt_ps(self.0) })
+        }
+        /// `maxps(a, b)` is `a > b ? a : b`, exactly [`Real::max`].
+        #[inline(always)]
+        fn max(self, o: Self) -> Self {
+            Avx8(unsafe { _mm256_max_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn powf_in(self, e: Self, m: AvxMask) -> Self {
+            let (b, e, m) = (self.to_array(), e.to_array(), Self::bools(m));
+            Self::from_fn(|i| if m[i] { b[i].powf(e[i]) } else { 1.0 })
+        }
+        // Ordered, quiet comparisons: false where either side is NaN, as Rust's are.
+        #[inline(always)]
+        fn lt(self, o: Self) -> AvxMask {
+            self.cmp::<_CMP_LT_OQ>(o)
+        }
+        #[inline(always)]
+        fn le(self, o: Self) -> AvxMask {
+            self.cmp::<_CMP_LE_OQ>(o)
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> AvxMask {
+            self.cmp::<_CMP_GT_OQ>(o)
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> AvxMask {
+            self.cmp::<_CMP_GE_OQ>(o)
+        }
+        #[inline(always)]
+        fn eq(self, o: Self) -> AvxMask {
+            self.cmp::<_CMP_EQ_OQ>(o)
+        }
+        #[inline(always)]
+        fn is_finite(self) -> AvxMask {
+            let abs = Avx8(unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0) });
+            abs.lt(Avx8::splat(f32::INFINITY))
+        }
+        #[inline(always)]
+        fn select(m: AvxMask, a: Self, b: Self) -> Self {
+            Avx8(unsafe { _mm256_blendv_ps(b.0, a.0, m.0) })
+        }
+    }
+
+    impl Lanes for Avx8 {
+        #[inline(always)]
+        fn from_array(a: [f32; LANES]) -> Self {
+            Avx8(unsafe { _mm256_loadu_ps(a.as_ptr()) })
+        }
+        #[inline(always)]
+        fn to_array(self) -> [f32; LANES] {
+            let mut a = [0f32; LANES];
+            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
+            a
+        }
+        #[inline(always)]
+        fn mask(b: [bool; LANES]) -> AvxMask {
+            let bytes = u64::from_le_bytes(b.map(u8::from));
+            unsafe {
+                let wide = _mm256_cvtepu8_epi32(_mm_set_epi64x(0, bytes as i64));
+                AvxMask(_mm256_castsi256_ps(_mm256_cmpgt_epi32(wide, _mm256_setzero_si256())))
+            }
+        }
+        #[inline(always)]
+        fn bools(m: AvxMask) -> [bool; LANES] {
+            let bits = unsafe { _mm256_movemask_ps(m.0) };
+            std::array::from_fn(|i| bits >> i & 1 != 0)
+        }
+        #[inline(always)]
+        fn count(m: AvxMask) -> usize {
+            unsafe { _mm256_movemask_ps(m.0) }.count_ones() as usize
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! Every shading formula gives the same bits on one ray and on each kind of lanes.
+
+    use super::*;
+    use crate::shade;
+
+    /// Deterministic numbers, with the values that break formulas mixed in: zeros of both signs,
+    /// tiny and huge magnitudes, infinities and NaN.
+    struct Gen(u64);
+
+    impl Gen {
+        fn next(&mut self) -> f32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            const SPECIAL: [f32; 9] = [0.0, -0.0, 1.0, -1.0, 1e-30, -1e30, f32::INFINITY, f32::NAN, 0.5];
+            match self.0 % 16 {
+                0 => SPECIAL[(self.0 >> 8) as usize % SPECIAL.len()],
+                _ => ((self.0 >> 40) as f32 / (1u64 << 24) as f32) * 4.0 - 2.0,
+            }
+        }
+        fn v(&mut self) -> Vec3 {
+            Vec3::new(self.next(), self.next(), self.next())
+        }
+    }
+
+    /// Bits of a number, every NaN alike: which NaN an operation on two NaNs returns depends on
+    /// the order of its operands, which the compiler is free to swap (and no output depends on it).
+    fn bits1(f: f32) -> u32 {
+        if f.is_nan() { u32::MAX } else { f.to_bits() }
+    }
+
+    fn bits(v: Vec3) -> [u32; 3] {
+        v.to_array().map(bits1)
+    }
+
+    /// A formula's outputs flattened to floats and flags.
+    type Out = (Vec<f32>, Vec<bool>);
+
+    /// Runs `f` on lanes of `L`, filled lane by lane from `inputs`, and returns lane `i`'s outputs.
+    fn check<L: Lanes>(
+        name: &str,
+        inputs: &[Vec<Vec3>],
+        one: impl Fn(&[V3<f32>]) -> Out,
+        many: impl Fn(&[V3<L>]) -> (Vec<L>, Vec<L::Mask>),
+    ) {
+        for chunk in inputs.chunks(LANES).filter(|c| c.len() == LANES) {
+            let args: Vec<V3<L>> = (0..chunk[0].len()).map(|k| V3::from_lanes(|i| chunk[i][k])).collect();
+            let (floats, masks) = many(&args);
+            for (i, input) in chunk.iter().enumerate() {
+                let scalar: Vec<V3<f32>> = input.iter().map(|&v| v.into()).collect();
+                let (want_f, want_m) = one(&scalar);
+                let got_f: Vec<f32> = floats.iter().map(|f| f.to_array()[i]).collect();
+                let got_m: Vec<bool> = masks.iter().map(|&m| L::bools(m)[i]).collect();
+                let (a, b): (Vec<u32>, Vec<u32>) =
+                    (want_f.iter().map(|&f| bits1(f)).collect(), got_f.iter().map(|&f| bits1(f)).collect());
+                assert_eq!((a, want_m), (b, got_m), "{name}, lane {i}, inputs {input:?}");
+            }
+        }
+    }
+
+    fn flat<R: Real>(vs: &[V3<R>]) -> Vec<R> {
+        vs.iter().flat_map(|v| [v.x, v.y, v.z]).collect()
+    }
+
+    fn all_formulas<L: Lanes>() {
+        let mut g = Gen(0x9e37_79b9_7f4a_7c15);
+        let inputs: Vec<Vec<Vec3>> = (0..4096).map(|_| (0..8).map(|_| g.v()).collect()).collect();
+        // Inputs: 0 e1, 1 e2, 2-4 normals, 5 origin, 6 dir, 7 (t, u, v).
+        check::<L>(
+            "surface",
+            &inputs,
+            |a| {
+                let s = shade::surface_of(a[0], a[1], [a[2], a[3], a[4]], a[5], a[6], a[7].x, a[7].y, a[7].z);
+                (flat(&[s.point, s.geometric, s.shading]), vec![s.front])
+            },
+            |a| {
+                let s = shade::surface_of(a[0], a[1], [a[2], a[3], a[4]], a[5], a[6], a[7].x, a[7].y, a[7].z);
+                (flat(&[s.point, s.geometric, s.shading]), vec![s.front])
+            },
+        );
+        // Inputs: 0 kd, 1 ks, 2 shading normal, 3 dir, 4 to light, 5 (shininess, kr, kt), 6 ior.
+        check::<L>(
+            "cast, phong, secondary",
+            &inputs,
+            |a| {
+                let c = shade::cast_of(a[0], a[2], a[3]);
+                let p = shade::phong_of(a[0], a[1], a[5].x, a[2], a[3], a[4], true);
+                let front = a[6].y.lt(0.0);
+                let s = shade::secondary_of(a[5].y, a[5].z, a[6].x, a[2], front, a[3]);
+                let w = shade::worth_of(a[6].z, 1.5, 2.0);
+                let mut f = flat(&[c, p, s.dir, a[4].normalize_or_zero()]);
+                f.push(s.factor);
+                (f, vec![s.same_side, s.exists, w, a[4].is_zero()])
+            },
+            |a| {
+                let c = shade::cast_of(a[0], a[2], a[3]);
+                let all = L::splat(0.0).eq(L::splat(0.0));
+                let p = shade::phong_of(a[0], a[1], a[5].x, a[2], a[3], a[4], all);
+                let front = a[6].y.lt(L::splat(0.0));
+                let s = shade::secondary_of(a[5].y, a[5].z, a[6].x, a[2], front, a[3]);
+                let w = shade::worth_of(a[6].z, 1.5, 2.0);
+                let mut f = flat(&[c, p, s.dir, a[4].normalize_or_zero()]);
+                f.push(s.factor);
+                (f, vec![s.same_side, s.exists, w, a[4].is_zero()])
+            },
+        );
+    }
+
+    #[test]
+    fn portable_lanes_match_one_ray_bit_for_bit() {
+        all_formulas::<F8>();
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx_lanes_match_one_ray_bit_for_bit() {
+        assert!(crate::packet::available(), "this test needs a CPU with AVX2");
+        all_formulas::<Avx8>();
+    }
+
+    #[test]
+    fn the_scalar_functions_are_the_formulas_on_one_lane() {
+        let mut g = Gen(7);
+        for _ in 0..2000 {
+            let (a, b, c) = (g.v(), g.v(), g.v());
+            assert_eq!(bits(shade::reflect(a, b)), bits(shade::reflect_of(a.into(), b.into()).into()));
+            // glam's own normalisation, which the rest of the tracer uses, agrees with ours.
+            let (n, ok) = V3::from(a).try_normalize();
+            assert_eq!(a.try_normalize().map(bits), ok.then(|| bits(n.into())), "{a:?}");
+            assert_eq!(bits(a.normalize_or_zero()), bits(V3::from(a).normalize_or_zero().into()));
+            assert_eq!(bits1(a.dot(b)), bits1(V3::from(a).dot(b.into())));
+            assert_eq!(bits(a.cross(c)), bits(V3::from(a).cross(c.into()).into()));
+        }
     }
 }
