@@ -31,7 +31,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use tracer_cpu::lanes::{OneByOne, Packets, TraceLanes};
 use tracer_cpu::packet::{Rays, Results};
-use tracer_cpu::{CameraSpec, Method, Mode, RenderSettings, Tracer, render, render::render_with};
+use tracer_cpu::render::{Tiles, render_with};
+use tracer_cpu::{CameraSpec, Method, Mode, RenderSettings, Tracer, render};
 
 struct Options {
     scenes: Vec<(String, PathBuf)>,
@@ -240,6 +241,7 @@ fn main() {
                             &tracer,
                             &settings,
                             || Recorder { inner: lanes_for(&tracer, method), calls: Vec::new(), sink: &sink },
+                            Tiles::default(),
                             &|_| {},
                         )
                     })
