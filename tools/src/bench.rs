@@ -299,9 +299,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
     let scenes: Vec<Option<PathBuf>> =
         if m.scenes.is_empty() { vec![None] } else { m.scenes.iter().cloned().map(Some).collect() };
     let total = scenes.len() * m.cameras.len() * m.res.len() * m.modes.len() * methods.len();
-    let bar = indicatif::ProgressBar::new(total as u64).with_style(
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed} {msg}").expect("the template is valid"),
-    );
+    let bar = crate::progress::LateBar::new(total as u64, "settings");
     let device = bench.device();
     let mut rows = Vec::with_capacity(total);
     for path in &scenes {
@@ -360,7 +358,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
             }
         }
     }
-    bar.finish_and_clear();
+    bar.finish();
     bench.finish()?;
     let preface = format!(
         "Device: {device} (`{}`); {frames} frames per setting after {warmup} warm-up frames; {}.",

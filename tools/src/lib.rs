@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod output;
+pub mod progress;
 pub mod render_args;
 
 use bvh_format::SceneFile;

@@ -4,7 +4,8 @@ use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
 use std::time::Instant;
-use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed};
+use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed, significant};
+use tools::progress::LateBar;
 use tools::render_args::RenderArgs;
 use tracer_cpu::{Method, RenderSettings, Tracer};
 
@@ -81,7 +82,9 @@ fn main() -> ExitCode {
 }
 
 fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Result<(), String> {
+    let loading = Instant::now();
     let scene = tools::load_scene(args.scene.as_deref())?;
+    let load_s = loading.elapsed().as_secs_f64();
     let settings = RenderSettings {
         width: args.res.0,
         height: args.res.1,
@@ -94,24 +97,31 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     };
     let pool = pool(threads)?;
     let tracer = Tracer::new(&scene);
+    let bar = LateBar::new(settings.height as u64, "rows");
     let t0 = Instant::now();
-    let image = pool.install(|| tracer_cpu::render(&tracer, &settings)).map_err(|e| e.to_string())?;
+    let image = pool
+        .install(|| tracer_cpu::render_with_progress(&tracer, &settings, &|rows| bar.inc(rows as u64)))
+        .map_err(|e| e.to_string())?;
     let ms = t0.elapsed().as_secs_f64() * 1e3;
+    bar.finish();
     tools::output::write_png(&args.output, &image)?;
     let r = image.rays;
     let total = r.primary + r.shadow + r.secondary;
     println!(
-        "{}x{} {:?} with {:?} on {} threads: {:.1} ms, rays: {} primary, {} shadow, {} secondary ({:.2} Mrays/s) -> {}",
+        "{}x{} {:?} with {:?} on {} threads: {} ms to trace and shade into the 8-bit image{} (not the {:.2} s to load \
+         the scene, nor writing files), rays: {} primary, {} shadow, {} secondary ({} Mrays/s) -> {}",
         image.width,
         image.height,
         settings.mode,
         settings.method.resolve(),
         pool.current_num_threads(),
-        ms,
+        significant(ms),
+        if settings.aovs { " and the AOVs" } else { "" },
+        load_s,
         r.primary,
         r.shadow,
         r.secondary,
-        total as f64 / ms / 1e3,
+        significant(total as f64 / ms / 1e3),
         args.output.display()
     );
     if let Some(aov) = &image.aov {
