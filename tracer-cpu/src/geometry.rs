@@ -120,15 +120,21 @@ pub fn intersect(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f
     (t > t_min && t <= t_max).then_some((t, u, v))
 }
 
+/// [`offset_origin`]'s constants: below this magnitude a coordinate moves by a fixed float step ...
+pub const OFFSET_ORIGIN: f32 = 1.0 / 32.0;
+/// ... of this times the normal; above it by this times the normal in units in the last place.
+pub const OFFSET_FLOAT_SCALE: f32 = 1.0 / 65536.0;
+pub const OFFSET_INT_SCALE: f32 = 256.0;
+
 /// Moves a ray origin off the surface it lies on, along the geometric normal `n` (pointing to the
 /// side the new ray leaves into), by a few units in the last place of the coordinates: scale-free,
 /// so it works for the tiny Stanford models and for huge scenes alike. After Wächter and Binder,
 /// "A Fast and Robust Method for Avoiding Self-Intersection" (Ray Tracing Gems, 2019).
 #[inline]
 pub fn offset_origin(p: Vec3, n: Vec3) -> Vec3 {
-    const ORIGIN: f32 = 1.0 / 32.0;
-    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
-    const INT_SCALE: f32 = 256.0;
+    const ORIGIN: f32 = OFFSET_ORIGIN;
+    const FLOAT_SCALE: f32 = OFFSET_FLOAT_SCALE;
+    const INT_SCALE: f32 = OFFSET_INT_SCALE;
     let of_i = (n * INT_SCALE).as_ivec3();
     let step = |p: f32, o: i32| {
         let bits = p.to_bits() as i32;

@@ -376,13 +376,13 @@ mod avx2 {
 
         let (hit, tri) = (to_array(hit_any), to_array_i(best_tri));
         let (nn, nt) = (to_array_i(n_nodes), to_array_i(n_tris));
-        Results {
-            hit: hit.map(|h| h.to_bits() != 0),
-            t: to_array(best_t),
-            tri: tri.map(|t| t as u32),
-            u: to_array(best_u),
-            v: to_array(best_v),
-            cost: std::array::from_fn(|i| Cost { nodes: nn[i] as u32, tris: nt[i] as u32 }),
+        let mut out = Results { t: to_array(best_t), u: to_array(best_u), v: to_array(best_v), ..Results::default() };
+        // A loop, not `array::from_fn`: its closure would not be compiled for AVX2 nor inlined.
+        for i in 0..LANES {
+            out.hit[i] = hit[i].to_bits() != 0;
+            out.tri[i] = tri[i] as u32;
+            out.cost[i] = Cost { nodes: nn[i] as u32, tris: nt[i] as u32 };
         }
+        out
     }
 }

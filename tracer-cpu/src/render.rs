@@ -11,7 +11,6 @@ use crate::whitted::Shading;
 use crate::wide::{F8, Lanes, V3};
 use crate::{Method, RenderError};
 use bvh_format::{Light, Node, SceneFile};
-use glam::Vec3;
 use rayon::prelude::*;
 
 /// Ray casting or Whitted ray tracing (DESIGN.md section 7).
@@ -364,14 +363,14 @@ fn block<L: Lanes, T: TraceLanes>(
     primary.dir = directions(frame, x, y).to_arrays();
     primary.t_max = [f32::INFINITY; LANES];
     let out = sh.block::<L, T>(&primary, lanes);
+    let rgb = shade::to_u8_lanes(V3::<L>::from_arrays(&out.colour));
     for i in 0..LANES {
         if !primary.valid[i] {
             continue;
         }
         let (x, y) = lane_xy(i);
         let p = y * w + x;
-        let c = out.colour;
-        band.rgb[p] = shade::to_u8(Vec3::new(c[0][i], c[1][i], c[2][i]));
+        band.rgb[p] = rgb[i];
         if let Some(a) = &mut band.aov {
             let n = out.normal;
             a.t[p] = out.t[i];
@@ -387,6 +386,7 @@ fn block<L: Lanes, T: TraceLanes>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     fn same_directions<L: Lanes>() {
         let cams = [

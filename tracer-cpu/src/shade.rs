@@ -1,7 +1,7 @@
 //! The shading definition (docs/shading.md), as pure functions. The Vulkan kernels implement the
 //! same formulas; the cross-backend tests hold them to it.
 
-use crate::wide::{Real, V3};
+use crate::wide::{LANES, Lanes, Real, V3};
 use bvh_format::{Material, Triangle, TriangleNormals};
 use glam::Vec3;
 
@@ -215,6 +215,23 @@ pub fn worth_of<R: Real>(w: R, bound: f32, chain: f32) -> R::Mask {
 pub fn to_u8(c: Vec3) -> [u8; 3] {
     let q = |x: f32| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
     [q(c.x), q(c.y), q(c.z)]
+}
+
+/// [`to_u8`] for eight lanes: the same clamp (`f32::clamp` keeps a NaN, which `as u8` turns into
+/// 0), scale and offset; then every value lies in [0.5, 255.5], where `as u8` is truncation.
+#[inline(always)]
+pub fn to_u8_lanes<L: Lanes>(c: V3<L>) -> [[u8; 3]; LANES] {
+    let (r, g, b) = (quantize(c.x), quantize(c.y), quantize(c.z));
+    std::array::from_fn(|i| [r[i] as u8, g[i] as u8, b[i] as u8])
+}
+
+#[inline(always)]
+fn quantize<L: Lanes>(x: L) -> [i32; LANES] {
+    let (zero, one) = (L::splat(0.0), L::splat(1.0));
+    let x = L::select(x.lt(zero), zero, x);
+    let x = L::select(x.gt(one), one, x);
+    let x = x * L::splat(255.0) + L::splat(0.5);
+    L::select(x.eq(x), x, zero).trunc()
 }
 
 #[cfg(test)]

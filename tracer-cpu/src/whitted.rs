@@ -7,7 +7,7 @@
 //! Each lane computes exactly what its pixel traced on its own would, in the same order, so an
 //! image does not depend on how its rays are grouped or traced ([`TraceLanes`]).
 
-use crate::geometry::{Cost, offset_origin};
+use crate::geometry::Cost;
 use crate::lanes::TraceLanes;
 use crate::packet::{LANES, Rays, Results};
 use crate::render::{Mode, RayCounts, RenderSettings};
@@ -82,22 +82,6 @@ impl<L: Lanes> Materials<L> {
     }
 }
 
-/// `offset_origin` lane by lane (bit arithmetic on the coordinates).
-///
-/// Helpers like this one take no closures that touch lanes: a closure is compiled for the
-/// function that defines it, not for the AVX2 loop it ends up inlined into, so a lane operation
-/// inside one becomes a call.
-#[inline(always)]
-fn offset<L: Lanes>(p: V3<L>, n: V3<L>) -> V3<L> {
-    let (p, n) = (p.to_arrays(), n.to_arrays());
-    let mut o = [[0.0; LANES]; 3];
-    for i in 0..LANES {
-        let r = offset_origin(Vec3::new(p[0][i], p[1][i], p[2][i]), Vec3::new(n[0][i], n[1][i], n[2][i]));
-        (o[0][i], o[1][i], o[2][i]) = (r.x, r.y, r.z);
-    }
-    V3::from_arrays(&o)
-}
-
 impl<'a> Shading<'a> {
     pub fn new(scene: &'a SceneFile, s: &'a RenderSettings) -> Self {
         let colours: Vec<[f32; 3]> = s.lights.iter().map(|l| l.colour).collect();
@@ -145,13 +129,14 @@ impl<'a> Shading<'a> {
             let tri: [usize; LANES] = std::array::from_fn(|i| if hit_lanes[i] { hits.tri[i] as usize } else { 0 });
             let (t, n) = (&scene.triangles, &scene.normals);
             let (origin, dir) = (V3::<L>::from_arrays(&rays.origin), V3::<L>::from_arrays(&rays.dir));
+            let (tris, normals) = (tri.map(|k| &t[k]), tri.map(|k| &n[k]));
             let s = shade::surface_of(
-                V3::from_lanes(|i| Vec3::from_slice(&t[tri[i]].e1[..3])),
-                V3::from_lanes(|i| Vec3::from_slice(&t[tri[i]].e2[..3])),
+                L::gather3(tris.map(|t| &t.e1)),
+                L::gather3(tris.map(|t| &t.e2)),
                 [
-                    V3::from_lanes(|i| Vec3::from_slice(&n[tri[i]].n[0][..3])),
-                    V3::from_lanes(|i| Vec3::from_slice(&n[tri[i]].n[1][..3])),
-                    V3::from_lanes(|i| Vec3::from_slice(&n[tri[i]].n[2][..3])),
+                    L::gather3(normals.map(|n| &n.n[0])),
+                    L::gather3(normals.map(|n| &n.n[1])),
+                    L::gather3(normals.map(|n| &n.n[2])),
                 ],
                 origin,
                 dir,
@@ -188,7 +173,7 @@ impl<'a> Shading<'a> {
                 }
                 // The shadow ray leaves from the side of the surface the light is on.
                 let side = V3::select(s.geometric.dot(l).ge(zero), s.geometric, -s.geometric);
-                let from = offset(s.point, side);
+                let from = L::offset_origin(s.point, side);
                 let shadow = Rays {
                     origin: from.to_arrays(),
                     dir: l.to_arrays(),
@@ -217,7 +202,7 @@ impl<'a> Shading<'a> {
             }
             weight = L::select(go, weight * sec.factor, weight);
             let side = V3::select(sec.same_side, s.geometric, -s.geometric);
-            let from = offset(s.point, side);
+            let from = L::offset_origin(s.point, side);
             rays = Rays {
                 origin: from.to_arrays(),
                 dir: sec.dir.to_arrays(),

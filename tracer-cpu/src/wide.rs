@@ -108,6 +108,8 @@ pub trait Lanes: Real {
     fn to_array(self) -> [f32; LANES];
     fn mask(b: [bool; LANES]) -> Self::Mask;
     fn bools(m: Self::Mask) -> [bool; LANES];
+    /// Each lane rounded toward zero to an integer; only for lanes well inside the `i32` range.
+    fn trunc(self) -> [i32; LANES];
     /// Lanes where `m` holds.
     #[inline(always)]
     fn count(m: Self::Mask) -> usize {
@@ -116,6 +118,27 @@ pub trait Lanes: Real {
     #[inline(always)]
     fn from_fn(f: impl FnMut(usize) -> f32) -> Self {
         Self::from_array(std::array::from_fn(f))
+    }
+    /// [`crate::geometry::offset_origin`] lane by lane.
+    #[inline(always)]
+    fn offset_origin(p: V3<Self>, n: V3<Self>) -> V3<Self> {
+        let (p, n) = (p.to_arrays(), n.to_arrays());
+        let mut o = [[0.0; LANES]; 3];
+        for i in 0..LANES {
+            let v = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][i], a[1][i], a[2][i]);
+            let r = crate::geometry::offset_origin(v(&p), v(&n));
+            (o[0][i], o[1][i], o[2][i]) = (r.x, r.y, r.z);
+        }
+        V3::from_arrays(&o)
+    }
+    /// The first three components of a 16-byte vector per lane (triangle edges, vertex normals).
+    #[inline(always)]
+    fn gather3(v: [&[f32; 4]; LANES]) -> V3<Self> {
+        let mut a = [[0.0; LANES]; 3];
+        for i in 0..LANES {
+            (a[0][i], a[1][i], a[2][i]) = (v[i][0], v[i][1], v[i][2]);
+        }
+        V3::from_arrays(&a)
     }
 }
 
@@ -158,6 +181,10 @@ impl Lanes for F8 {
     #[inline(always)]
     fn bools(m: M8) -> [bool; LANES] {
         m.0
+    }
+    #[inline(always)]
+    fn trunc(self) -> [i32; LANES] {
+        self.0.map(|x| x as i32)
     }
 }
 
@@ -414,7 +441,7 @@ pub(crate) use avx::Avx8;
 /// may use them: each operation is an AVX intrinsic.
 #[cfg(target_arch = "x86_64")]
 mod avx {
-    use super::{LANES, Lanes, Mask, Real};
+    use super::{LANES, Lanes, Mask, Real, V3};
     use std::arch::x86_64::*;
     use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 
@@ -565,6 +592,73 @@ mod avx {
             let bits = unsafe { _mm256_movemask_ps(m.0) };
             std::array::from_fn(|i| bits >> i & 1 != 0)
         }
+        /// `offset_origin`'s integer step and float step, 8-wide.
+        #[inline(always)]
+        fn offset_origin(p: V3<Self>, n: V3<Self>) -> V3<Self> {
+            #[inline(always)]
+            fn axis(p: __m256, n: __m256) -> __m256 {
+                unsafe {
+                    // `(n * 256.0) as i32`: truncation, saturating, NaN to 0 (cvtt gives i32::MIN
+                    // for NaN and for anything out of range).
+                    let scaled = _mm256_mul_ps(n, _mm256_set1_ps(crate::geometry::OFFSET_INT_SCALE));
+                    let mut o = _mm256_cvttps_epi32(scaled);
+                    let too_big = _mm256_cmp_ps::<_CMP_GE_OQ>(scaled, _mm256_set1_ps(2147483648.0));
+                    o = _mm256_castps_si256(_mm256_blendv_ps(
+                        _mm256_castsi256_ps(o),
+                        _mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX)),
+                        too_big,
+                    ));
+                    o = _mm256_and_si256(o, _mm256_castps_si256(_mm256_cmp_ps::<_CMP_ORD_Q>(scaled, scaled)));
+                    // Away from zero by `o` units in the last place, whichever the sign.
+                    let bits = _mm256_castps_si256(p);
+                    let negative = _mm256_cmp_ps::<_CMP_LT_OQ>(p, _mm256_setzero_ps());
+                    let stepped = _mm256_blendv_ps(
+                        _mm256_castsi256_ps(_mm256_add_epi32(bits, o)),
+                        _mm256_castsi256_ps(_mm256_sub_epi32(bits, o)),
+                        negative,
+                    );
+                    // Near the origin a fixed float step instead.
+                    let abs = _mm256_andnot_ps(_mm256_set1_ps(-0.0), p);
+                    let near = _mm256_cmp_ps::<_CMP_LT_OQ>(abs, _mm256_set1_ps(crate::geometry::OFFSET_ORIGIN));
+                    let float_step =
+                        _mm256_add_ps(p, _mm256_mul_ps(_mm256_set1_ps(crate::geometry::OFFSET_FLOAT_SCALE), n));
+                    _mm256_blendv_ps(stepped, float_step, near)
+                }
+            }
+            V3::new(Avx8(axis(p.x.0, n.x.0)), Avx8(axis(p.y.0, n.y.0)), Avx8(axis(p.z.0, n.z.0)))
+        }
+        /// Eight 4-float loads and a transpose instead of 24 single-float inserts.
+        #[inline(always)]
+        fn gather3(v: [&[f32; 4]; LANES]) -> V3<Self> {
+            #[inline(always)]
+            fn pair(lo: &[f32; 4], hi: &[f32; 4]) -> __m256 {
+                unsafe {
+                    _mm256_insertf128_ps::<1>(
+                        _mm256_castps128_ps256(_mm_loadu_ps(lo.as_ptr())),
+                        _mm_loadu_ps(hi.as_ptr()),
+                    )
+                }
+            }
+            unsafe {
+                // Lanes i and i + 4 share a register: x0 y0 z0 w0 | x4 y4 z4 w4, and so on.
+                let (t0, t1, t2, t3) = (pair(v[0], v[4]), pair(v[1], v[5]), pair(v[2], v[6]), pair(v[3], v[7]));
+                let xy01 = _mm256_unpacklo_ps(t0, t1);
+                let zw01 = _mm256_unpackhi_ps(t0, t1);
+                let xy23 = _mm256_unpacklo_ps(t2, t3);
+                let zw23 = _mm256_unpackhi_ps(t2, t3);
+                V3::new(
+                    Avx8(_mm256_shuffle_ps::<0x44>(xy01, xy23)),
+                    Avx8(_mm256_shuffle_ps::<0xEE>(xy01, xy23)),
+                    Avx8(_mm256_shuffle_ps::<0x44>(zw01, zw23)),
+                )
+            }
+        }
+        #[inline(always)]
+        fn trunc(self) -> [i32; LANES] {
+            let mut a = [0i32; LANES];
+            unsafe { _mm256_storeu_si256(a.as_mut_ptr().cast(), _mm256_cvttps_epi32(self.0)) };
+            a
+        }
         #[inline(always)]
         fn count(m: AvxMask) -> usize {
             unsafe { _mm256_movemask_ps(m.0) }.count_ones() as usize
@@ -588,7 +682,8 @@ mod tests {
             self.0 ^= self.0 << 13;
             self.0 ^= self.0 >> 7;
             self.0 ^= self.0 << 17;
-            const SPECIAL: [f32; 9] = [0.0, -0.0, 1.0, -1.0, 1e-30, -1e30, f32::INFINITY, f32::NAN, 0.5];
+            const SPECIAL: [f32; 12] =
+                [0.0, -0.0, 1.0, -1.0, 1e-30, -1e30, 1e30, 3e9, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 0.5];
             match self.0 % 16 {
                 0 => SPECIAL[(self.0 >> 8) as usize % SPECIAL.len()],
                 _ => ((self.0 >> 40) as f32 / (1u64 << 24) as f32) * 4.0 - 2.0,
@@ -682,9 +777,41 @@ mod tests {
         );
     }
 
+    /// Radiance to 8 bits on lanes, against the scalar conversion, over every float of a range
+    /// sampled densely and the special values.
+    fn quantize_like_one_ray<L: Lanes>() {
+        let mut g = Gen(3);
+        let mut values: Vec<f32> = (0..20000).map(|i| i as f32 / 16000.0 - 0.1).collect();
+        values.extend((0..4000).map(|_| g.next()));
+        values.extend([f32::NAN, -f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -0.0, 0.0, 1.0, 1.0 + f32::EPSILON]);
+        values.extend([0.5 / 255.0, 1.5 / 255.0, 254.5 / 255.0, f32::MIN_POSITIVE, -f32::MIN_POSITIVE]);
+        for chunk in values.chunks(LANES).filter(|c| c.len() == LANES) {
+            let v = V3::<L>::new(L::from_fn(|i| chunk[i]), L::from_fn(|i| chunk[(i + 3) % LANES]), L::splat(0.25));
+            let got = shade::to_u8_lanes(v);
+            for i in 0..LANES {
+                assert_eq!(got[i], shade::to_u8(Vec3::new(chunk[i], chunk[(i + 3) % LANES], 0.25)), "{}", chunk[i]);
+            }
+        }
+    }
+
+    fn offsets_like_one_ray<L: Lanes>() {
+        let mut g = Gen(11);
+        for _ in 0..20000 {
+            let p: [Vec3; LANES] = std::array::from_fn(|_| g.v() * [1.0, 1e-3, 1e3, 0.01][(g.0 % 4) as usize]);
+            let n: [Vec3; LANES] = std::array::from_fn(|_| g.v());
+            let got = L::offset_origin(V3::from_lanes(|i| p[i]), V3::from_lanes(|i| n[i])).to_arrays();
+            for i in 0..LANES {
+                let want = crate::geometry::offset_origin(p[i], n[i]);
+                assert_eq!(bits(Vec3::new(got[0][i], got[1][i], got[2][i])), bits(want), "{:?} {:?}", p[i], n[i]);
+            }
+        }
+    }
+
     #[test]
     fn portable_lanes_match_one_ray_bit_for_bit() {
         all_formulas::<F8>();
+        quantize_like_one_ray::<F8>();
+        offsets_like_one_ray::<F8>();
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -692,6 +819,8 @@ mod tests {
     fn avx_lanes_match_one_ray_bit_for_bit() {
         assert!(crate::packet::available(), "this test needs a CPU with AVX2");
         all_formulas::<Avx8>();
+        quantize_like_one_ray::<Avx8>();
+        offsets_like_one_ray::<Avx8>();
     }
 
     #[test]

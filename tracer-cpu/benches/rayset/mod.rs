@@ -219,11 +219,56 @@ pub fn agreement(a: &[f32], reference: &[f32]) -> (usize, usize) {
     (same, n)
 }
 
+/// What a pass is timed by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Clock {
+    /// Wall-clock time.
+    Wall,
+    /// CPU time of all the process's threads: on a machine shared with other work, time spent
+    /// waiting for a core does not count (the figures are then rays per CPU-second).
+    Cpu,
+}
+
+impl Clock {
+    /// Seconds on this clock since some fixed start.
+    pub fn now(self) -> f64 {
+        match self {
+            Clock::Wall => {
+                static START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
+                START.get_or_init(Instant::now).elapsed().as_secs_f64()
+            }
+            Clock::Cpu => cpu_seconds(),
+        }
+    }
+}
+
+/// Nanoseconds on a CPU summed over the process's threads (Linux: the first field of each
+/// thread's `schedstat`).
+fn cpu_seconds() -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return f64::NAN };
+    let ns: u64 = tasks
+        .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("schedstat")).ok())
+        .filter_map(|s| s.split_whitespace().next()?.parse::<u64>().ok())
+        .sum();
+    ns as f64 * 1e-9
+}
+
 /// Times passes of several tracers interleaved (one pass of each per round), so that a change in
 /// the machine's load during the measurement hits all of them alike: at least `reps` rounds and
-/// enough to fill `min_seconds`, at most `max_rounds`. Returns each one's median pass in seconds.
-/// The caller warms up first.
+/// enough to fill `min_seconds`, at most `max_rounds`. Returns each one's median pass in seconds
+/// of wall-clock time. The caller warms up first.
 pub fn interleaved_medians(
+    reps: usize,
+    min_seconds: f64,
+    max_rounds: usize,
+    passes: &mut [&mut dyn FnMut()],
+) -> Vec<f64> {
+    interleaved_medians_on(Clock::Wall, reps, min_seconds, max_rounds, passes)
+}
+
+/// [`interleaved_medians`] on `clock`.
+pub fn interleaved_medians_on(
+    clock: Clock,
     reps: usize,
     min_seconds: f64,
     max_rounds: usize,
@@ -234,9 +279,9 @@ pub fn interleaved_medians(
     let mut elapsed = 0.0;
     loop {
         for (p, s) in passes.iter_mut().zip(samples.iter_mut()) {
-            let start = Instant::now();
+            let start = clock.now();
             p();
-            let t = start.elapsed().as_secs_f64();
+            let t = clock.now() - start;
             elapsed += t;
             s.push(t);
         }
