@@ -3,7 +3,8 @@
 //! bench` and `trace-vk bench` both run it, so their rows have the same columns and one table or
 //! chart can hold CPU and GPU rows of a scene side by side (`bench-chart`).
 
-use crate::render_args::{lights_n, parse_res, stored_camera};
+use crate::output::{self, Kind, Output};
+use crate::render_args::{MAX_LIGHTS, lights_n, parse_count, parse_res, stored_camera};
 use bvh_format::{Light, SceneFile};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -15,24 +16,32 @@ pub struct MatrixArgs {
     /// Scenes: compiled .bvh files, meshes or scene descriptions [default: the built-in bunny].
     pub scenes: Vec<PathBuf>,
     /// Stored cameras to render from.
-    #[arg(long, value_delimiter = ',', default_value = "close-up,medium,wide")]
+    #[arg(long, value_delimiter = ',', default_value = "close-up,medium,wide", allow_hyphen_values = true)]
     pub cameras: Vec<String>,
     /// Image sizes.
-    #[arg(long, value_delimiter = ',', value_parser = parse_res, default_value = "640x480,1280x960,1920x1440")]
+    #[arg(long, value_delimiter = ',', value_parser = parse_res, default_value = "640x480,1280x960,1920x1440", allow_hyphen_values = true)]
     pub res: Vec<(u32, u32)>,
     /// Modes: cast, or whitted with a light count (whitted1, whitted2, whitted4).
-    #[arg(long, value_delimiter = ',', value_parser = parse_mode, default_value = "cast,whitted1,whitted2")]
+    #[arg(long, value_delimiter = ',', value_parser = parse_mode, default_value = "cast,whitted1,whitted2", allow_hyphen_values = true)]
     pub modes: Vec<BenchMode>,
-    /// Timed frames per setting; the median is reported [default: 50 on the GPU, 10 on the CPU,
-    /// whose frames are a hundred times longer].
-    #[arg(long)]
+    /// Timed frames per setting, 1 to 100000; the median is reported [default: 50 on the GPU, 10
+    /// on the CPU, whose frames are a hundred times longer].
+    #[arg(long, value_parser = parse_frames, allow_hyphen_values = true)]
     pub frames: Option<usize>,
-    /// Untimed frames before the timed ones [default: 3 on the GPU, 1 on the CPU].
-    #[arg(long)]
+    /// Untimed frames before the timed ones, 0 to 100000 [default: 3 on the GPU, 1 on the CPU].
+    #[arg(long, value_parser = parse_warmup, allow_hyphen_values = true)]
     pub warmup: Option<usize>,
     /// Write the table as CSV here (and as Markdown next to it, .md).
-    #[arg(long, default_value = "bench.csv")]
+    #[arg(long, default_value = "bench.csv", allow_hyphen_values = true)]
     pub csv: PathBuf,
+}
+
+fn parse_frames(s: &str) -> Result<usize, String> {
+    parse_count(s, 1, 100_000, "the number of frames").map(|n| n as usize)
+}
+
+fn parse_warmup(s: &str) -> Result<usize, String> {
+    parse_count(s, 0, 100_000, "the number of warm-up frames").map(|n| n as usize)
 }
 
 /// A mode of the matrix: ray casting, or Whitted ray tracing with this many lights (the scene's
@@ -56,12 +65,11 @@ impl BenchMode {
 pub fn parse_mode(s: &str) -> Result<BenchMode, String> {
     match s.trim() {
         "cast" => Ok(BenchMode { mode: Mode::Cast, lights: 0 }),
-        t => t
-            .strip_prefix("whitted")
-            .and_then(|n| n.parse::<usize>().ok())
-            .filter(|&n| (1..=64).contains(&n))
-            .map(|lights| BenchMode { mode: Mode::Whitted, lights })
-            .ok_or_else(|| format!("{s:?} is not a mode (cast, or whitted1 to whitted64)")),
+        t => match t.strip_prefix("whitted") {
+            Some(n) => parse_count(n, 1, MAX_LIGHTS as u64, "the light count after \"whitted\"")
+                .map(|n| BenchMode { mode: Mode::Whitted, lights: n as usize }),
+            None => Err(format!("{s:?} is not a mode (cast, whitted1, whitted2, ...)")),
+        },
     }
 }
 
@@ -257,20 +265,28 @@ pub fn markdown(prefaces: &[String], rows: &[Row]) -> String {
     s
 }
 
-/// Writes the CSV and the Markdown next to it (`.md`).
+/// Checks the CSV path and its Markdown copy (`.md` beside it) before any work.
+pub fn check_tables(csv: &Path) -> Result<[Output; 2], String> {
+    let md = csv.with_extension("md");
+    let checked =
+        output::check(&[("--csv", csv, Kind::Table), ("--csv (its Markdown copy)", &md, Kind::Markdown)], &[])
+            .map_err(|e| e.to_string())?;
+    let [csv, md]: [Output; 2] = checked.try_into().map_err(|_| "two outputs were checked".to_owned())?;
+    Ok([csv, md])
+}
+
+/// Writes the CSV and the Markdown next to it (`.md`), each complete or not at all.
 pub fn write_tables(csv: &Path, preface: &str, rows: &[Row]) -> Result<PathBuf, String> {
-    let write =
-        |p: &Path, text: String| std::fs::write(p, text).map_err(|e| format!("cannot write {}: {e}", p.display()));
+    let [csv, md] = check_tables(csv)?;
     let mut text = String::from(CSV_HEADER);
     text.push('\n');
     for r in rows {
         text.push_str(&r.csv());
         text.push('\n');
     }
-    write(csv, text)?;
-    let md = csv.with_extension("md");
-    write(&md, markdown(&[preface.to_owned()], rows))?;
-    Ok(md)
+    output::write_text(&csv, &text).map_err(|e| e.to_string())?;
+    output::write_text(&md, &markdown(&[preface.to_owned()], rows)).map_err(|e| e.to_string())?;
+    Ok(md.path)
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -290,16 +306,15 @@ pub struct Defaults {
 pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defaults) -> Result<Vec<Row>, String> {
     let frames = m.frames.unwrap_or(defaults.frames);
     let warmup = m.warmup.unwrap_or(defaults.warmup);
-    if frames == 0 {
-        return Err("--frames must be at least 1".to_owned());
-    }
     if methods.is_empty() || m.cameras.is_empty() || m.res.is_empty() || m.modes.is_empty() {
         return Err("the matrix is empty: give at least one method, camera, size and mode".to_owned());
     }
+    check_tables(&m.csv)?;
     let scenes: Vec<Option<PathBuf>> =
         if m.scenes.is_empty() { vec![None] } else { m.scenes.iter().cloned().map(Some).collect() };
     let total = scenes.len() * m.cameras.len() * m.res.len() * m.modes.len() * methods.len();
-    let bar = crate::progress::LateBar::new(total as u64, "settings");
+    let bar =
+        crate::cli::Progress::new(total as u64, "{bar:40} {pos}/{len} settings ({elapsed}, {eta} left) {msg}", false);
     let device = bench.device();
     let mut rows = Vec::with_capacity(total);
     for path in &scenes {
@@ -309,7 +324,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "bunny (built-in)".to_owned());
         bar.set_message(format!("loading {name}"));
-        let scene = crate::load_scene(path.as_deref())?;
+        let scene = crate::load_scene(path.as_deref())?.file;
         // Every camera is looked up before the first frame, so a misspelt one fails at once.
         let cameras: Vec<(&String, CameraSpec)> =
             m.cameras.iter().map(|c| Ok((c, stored_camera(&scene, c)?))).collect::<Result<_, String>>()?;
@@ -324,7 +339,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
                             height,
                             camera,
                             mode: mode.mode,
-                            lights: lights_n(&scene, mode.lights),
+                            lights: lights_n(&scene, mode.lights, &camera),
                             max_indirections: scene.settings.max_indirections,
                         };
                         let mut times = Vec::with_capacity(frames);
@@ -366,8 +381,8 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
         bench.timing()
     );
     let md_path = write_tables(&m.csv, &preface, &rows)?;
-    println!("{}", markdown(&[preface], &rows));
-    println!("-> {} and {}", m.csv.display(), md_path.display());
+    crate::say!("{}", markdown(&[preface], &rows));
+    crate::say!("-> {} and {}", m.csv.display(), md_path.display());
     Ok(rows)
 }
 

@@ -29,7 +29,7 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
     let rows = read_csv(&csv).unwrap();
     assert_eq!(rows.len(), 2 * 2 * 2 * 3, "cameras x sizes x methods x modes");
 
-    let scene = tools::load_scene(Some(&room)).unwrap();
+    let scene = tools::load_scene(Some(&room)).unwrap().file;
     let tracer = Tracer::new(&scene);
     for (i, r) in rows.iter().enumerate() {
         // Scene, then method, then camera, size and mode: the order of the loops.
@@ -46,14 +46,15 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
         assert!(r.device.ends_with("2 threads"), "{}", r.device);
         assert!(r.min_ms > 0.0 && r.min_ms <= r.median_ms, "row {i}: {} > {}", r.min_ms, r.median_ms);
 
+        let cam = tools::render_args::stored_camera(&scene, camera).unwrap();
         let image = tracer_cpu::render(
             &tracer,
             &RenderSettings {
                 width: r.width,
                 height: r.height,
-                camera: tools::render_args::stored_camera(&scene, camera).unwrap(),
+                camera: cam,
                 mode: if lights == 0 { Mode::Cast } else { Mode::Whitted },
-                lights: tools::render_args::lights_n(&scene, lights),
+                lights: tools::render_args::lights_n(&scene, lights, &cam),
                 max_indirections: scene.settings.max_indirections,
                 method: Method::Ordered,
                 aovs: false,

@@ -54,7 +54,7 @@ fn main() {
             aovs: false,
         };
         let frame = |tiles: Tiles| {
-            pool.install(|| match settings.method.resolve() {
+            pool.install(|| match settings.method.resolve(&scene) {
                 Method::Packet => render_with(&tracer, &settings, || Packets::new(&tracer), tiles, &|_| {}),
                 m => render_with(&tracer, &settings, || OneByOne::new(&tracer, m), tiles, &|_| {}),
             })

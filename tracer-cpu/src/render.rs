@@ -191,7 +191,7 @@ pub fn render_with_progress(
     progress: &(dyn Fn(u32) + Sync),
 ) -> Result<Image, RenderError> {
     let tiles = Tiles::default();
-    match settings.method.resolve() {
+    match settings.method.resolve(tracer.scene) {
         Method::Packet => render_with(tracer, settings, || Packets::new(tracer), tiles, progress),
         m => render_with(tracer, settings, || OneByOne::new(tracer, m), tiles, progress),
     }
@@ -254,7 +254,8 @@ fn render_in<T: TraceLanes>(
 ) -> Result<Image, RenderError> {
     let tiles = tiles.blocks();
     let frame = check(settings)?;
-    tracer.layout_for(settings.method.resolve())?;
+    let method = settings.method.resolve(tracer.scene);
+    tracer.layout_for(method)?;
     let (w, h) = (settings.width as usize, settings.height as usize);
     let sh = Shading::new(tracer.scene, settings);
     let mut rgb = vec![[0u8; 3]; w * h];
@@ -401,9 +402,10 @@ mod tests {
                     let x = L::from_fn(|i| (bx + i as u32 % 4) as f32);
                     let y = L::from_fn(|i| (by + i as u32 / 4) as f32);
                     let d = directions(&frame, x, y).to_arrays();
-                    for i in 0..LANES {
+                    let got: [[f32; 3]; LANES] = std::array::from_fn(|i| [d[0][i], d[1][i], d[2][i]]);
+                    for (i, got) in got.iter().enumerate() {
                         let want = frame.direction(bx + i as u32 % 4, by + i as u32 / 4);
-                        assert_eq!([d[0][i], d[1][i], d[2][i]].map(f32::to_bits), want.to_array().map(f32::to_bits));
+                        assert_eq!(got.map(f32::to_bits), want.to_array().map(f32::to_bits));
                     }
                 }
             }
@@ -431,7 +433,7 @@ mod tests {
                     aovs: true,
                 };
                 let tiles = Tiles { rows: 6, columns: 12 };
-                let image = |avx| match method.resolve() {
+                let image = |avx| match method.resolve(&scene) {
                     Method::Packet => render_in(&tracer, &settings, || Packets::new(&tracer), tiles, &|_| {}, avx),
                     m => render_in(&tracer, &settings, || OneByOne::new(&tracer, m), tiles, &|_| {}, avx),
                 };

@@ -161,7 +161,7 @@ impl<'a> Shading<'a> {
             }
 
             // Phong per light, each light's shadow rays traced together.
-            let mut local = V3::select(hit, V3::splat(self.ambient).mul(m.kd), V3::zero());
+            let mut local = V3::select(hit, V3::splat(self.ambient).mul_each(m.kd), V3::zero());
             for light in self.lights {
                 let position = V3::<L>::splat(Vec3::from(light.position));
                 let l = (position - s.point).normalize_or_zero();
@@ -184,7 +184,7 @@ impl<'a> Shading<'a> {
                 let blocked = lanes.occluded(&shadow);
                 add_cost(&mut out.cost, &shadow.valid, &blocked);
                 let lit = asks & !L::mask(blocked.hit);
-                local = V3::select(lit, local + term.mul(V3::splat(Vec3::from(light.colour))), local);
+                local = V3::select(lit, local + term.mul_each(V3::splat(Vec3::from(light.colour))), local);
             }
             colour = V3::select(hit, colour + local * weight, colour);
 

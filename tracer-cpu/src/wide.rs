@@ -348,7 +348,7 @@ impl<R: Real> V3<R> {
     }
     /// Component by component (`glam::Vec3 * Vec3`).
     #[inline(always)]
-    pub fn mul(self, o: Self) -> Self {
+    pub fn mul_each(self, o: Self) -> Self {
         Self::new(self.x * o.x, self.y * o.y, self.z * o.z)
     }
     #[inline(always)]
@@ -416,12 +416,8 @@ impl<L: Lanes> V3<L> {
     /// closures).
     #[inline(always)]
     pub fn from_lanes(f: impl Fn(usize) -> Vec3) -> Self {
-        let mut a = [[0.0; LANES]; 3];
-        for i in 0..LANES {
-            let v = f(i);
-            (a[0][i], a[1][i], a[2][i]) = (v.x, v.y, v.z);
-        }
-        Self::from_arrays(&a)
+        let v: [Vec3; LANES] = std::array::from_fn(f);
+        Self::from_arrays(&[v.map(|v| v.x), v.map(|v| v.y), v.map(|v| v.z)])
     }
     /// From three arrays of lanes, as [`crate::packet::Rays`] stores origins and directions.
     #[inline(always)]

@@ -44,6 +44,9 @@ struct Frame {
     size: vec4<u32>,
     // bounce-stop bound B, largest kr/kt, -, -
     stop: vec4<f32>,
+    // The tile this dispatch renders: first column, first row, width, height. The per-pixel
+    // buffers hold the tile's pixels only, row by row.
+    tile: vec4<u32>,
 }
 
 // The current ray of a pixel: origin (w: path weight), direction (w: 1 while the path is alive).
@@ -67,7 +70,7 @@ struct Aov {
     tris: u32,
 }
 
-// Which light a shade pass handles, and which bounce a bounce pass is.
+// Which light a shade pass handles, and which bounce a bounce pass is (a push constant).
 struct Pass {
     light: u32,
     depth: u32,
@@ -88,15 +91,29 @@ struct Pass {
 @group(0) @binding(10) var<storage, read_write> accum: array<vec4<f32>>;
 @group(0) @binding(11) var<storage, read_write> aovs: array<Aov>;
 @group(0) @binding(12) var<storage, read_write> image: array<u32>;
-// primary, shadow, secondary ray counts
-@group(0) @binding(13) var<storage, read_write> counters: array<atomic<u32>, 4>;
-@group(0) @binding(14) var<storage, read> pass_info: Pass;
+// Ray counts, finished invocations, faults and live paths per bounce, at the SLOT_* words the
+// host prepends (kernels.rs); see count() and fault().
+@group(0) @binding(13) var<storage, read_write> counters: array<atomic<u32>>;
+var<immediate> pass_info: Pass;
 
 const NO_HIT: u32 = 0xffffffffu;
 const T_SLACK: f32 = 9.5367431640625e-7; // 2^-20
 
 // This invocation's index in its workgroup (set by the entry point; SST needs it).
 var<private> lid: u32;
+
+// Adds one to the 64-bit counter at words `slot` (low) and `slot + 1` (high): a tile's shadow
+// rays can pass 2^32. Exactly one invocation sees the low word wrap and carries.
+fn count(slot: u32) {
+    if atomicAdd(&counters[slot], 1u) == 0xffffffffu {
+        atomicAdd(&counters[slot + 1u], 1u);
+    }
+}
+
+// Records that a traversal gave up on a ray (a FAULT_* bit); the host refuses the frame.
+fn fault(bit: u32) {
+    atomicOr(&counters[SLOT_FAULTS], bit);
+}
 
 // Work done by the current invocation's rays, for the cost AOV.
 var<private> cost_nodes: u32;

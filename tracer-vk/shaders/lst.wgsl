@@ -2,7 +2,7 @@
 // child-pair layout with a stack in private memory. Both children are tested; when both are hit
 // the farther one is pushed (with its entry distance, so a pop can skip it once a nearer hit was
 // found) and the nearer one entered. STACK_SIZE is the file's max depth: the deepest path pushes
-// at most one node per level, so the stack cannot overflow.
+// at most one node per level, so the stack cannot overflow (if it would, the frame is refused).
 
 fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec {
     var best = HitRec(t_max, NO_HIT, 0.0, 0.0);
@@ -17,7 +17,15 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
         return best;
     }
     var current = 0u;
+    // Each node is entered at most once; more steps than nodes would be a walk gone wrong.
+    let node_count = arrayLength(&nodes);
+    var steps = 0u;
     loop {
+        steps += 1u;
+        if steps > node_count {
+            fault(FAULT_WALK);
+            return best;
+        }
         let n = nodes[current];
         if n.count > 0u {
             if intersect_leaf(n, r, t_min, &best, any_hit) {
@@ -29,6 +37,10 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
             let tr = slab(nodes[n.index + 1u], r, best.t);
             if tl >= 0.0 && tr >= 0.0 {
                 let right_first = tr < tl;
+                if sp == STACK_SIZE {
+                    fault(FAULT_STACK);
+                    return best;
+                }
                 stack_node[sp] = select(n.index + 1u, n.index, right_first);
                 stack_near[sp] = select(tr, tl, right_first);
                 sp += 1u;

@@ -53,8 +53,19 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
     if lid == 0u && atomicLoad(&sst_live) == 0u {
         sst_done = 1u;
     }
+    // A walk enters each node at most once: more steps than nodes means the walk went wrong, and
+    // the frame is refused instead of hanging (every invocation counts the same steps).
+    let node_count = arrayLength(&nodes);
+    var steps = 0u;
     loop {
         if workgroupUniformLoad(&sst_done) != 0u {
+            break;
+        }
+        steps += 1u;
+        if steps > node_count {
+            if lid == 0u {
+                fault(FAULT_WALK);
+            }
             break;
         }
         let node = workgroupUniformLoad(&sst_node);
@@ -80,11 +91,12 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
             }
             pop = true;
         } else {
-            if lid < 2u {
-                sst_children[lid] = nodes[node.index + lid];
+            // Loops, not `lid < 2u`: a workgroup may have fewer invocations than entries.
+            for (var i = lid; i < 2u; i += WG_SIZE) {
+                sst_children[i] = nodes[node.index + i];
             }
-            if lid < 4u {
-                atomicStore(&sst_hitcode[lid], 0u);
+            for (var i = lid; i < 4u; i += WG_SIZE) {
+                atomicStore(&sst_hitcode[i], 0u);
             }
             workgroupBarrier();
             var code = 0u;
@@ -130,8 +142,14 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
                 let right = both || atomicLoad(&sst_hitcode[2]) != 0u;
                 if left && right {
                     let right_first = sst_votes[0] > 0;
-                    sst_stack[sst_sp] = sst_children[select(1u, 0u, right_first)];
-                    sst_sp += 1u;
+                    // One push per level: a full stack means the tree is deeper than the file says.
+                    if sst_sp == STACK_SIZE {
+                        fault(FAULT_STACK);
+                        sst_done = 1u;
+                    } else {
+                        sst_stack[sst_sp] = sst_children[select(1u, 0u, right_first)];
+                        sst_sp += 1u;
+                    }
                     sst_next = select(0u, 1u, right_first);
                 } else if left {
                     sst_next = 0u;

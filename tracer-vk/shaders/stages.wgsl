@@ -9,8 +9,9 @@
 
 const MAX_T: f32 = 3.40282347e38;
 
+// Index of image pixel (x, y) in the per-pixel buffers, which hold the current tile.
 fn pixel_index(x: u32, y: u32) -> u32 {
-    return y * frame.size.x + x;
+    return (y - frame.tile.y) * frame.tile.z + (x - frame.tile.x);
 }
 
 fn record_primary(p: u32, r: Ray, h: HitRec) -> bool {
@@ -38,13 +39,14 @@ fn stage_cast(x: u32, y: u32, valid: bool) {
     if !valid {
         return;
     }
-    atomicAdd(&counters[0], 1u);
+    count(SLOT_PRIMARY);
     var c = frame.background.xyz;
     if record_primary(p, r, h) {
         let s = surface_at(r, h);
         c = material_of(h.tri).kd_n.xyz * max(dot(s.shading, -r.d), 0.0);
     }
     image[p] = to_rgba8(c);
+    count(SLOT_FINISHED);
 }
 
 fn stage_primary(x: u32, y: u32, valid: bool) {
@@ -54,11 +56,12 @@ fn stage_primary(x: u32, y: u32, valid: bool) {
     if !valid {
         return;
     }
-    atomicAdd(&counters[0], 1u);
+    count(SLOT_PRIMARY);
     hits[p] = h;
     let alive = record_primary(p, r, h);
     paths[p] = PathRay(vec4<f32>(r.o, 1.0), vec4<f32>(r.d, select(0.0, 1.0, alive)));
     accum[p] = select(vec4<f32>(frame.background.xyz, 0.0), vec4<f32>(0.0), alive);
+    count(SLOT_FINISHED);
 }
 
 // One light (pass_info.light) at the current hit of every live path; the first pass also adds the
@@ -102,11 +105,14 @@ fn stage_shade(x: u32, y: u32, valid: bool) {
         }
     }
     let blocked = trace(shadow, 0.0, shadow_t, true, wants_shadow).tri != NO_HIT;
+    if valid {
+        count(SLOT_FINISHED);
+    }
     if !live {
         return;
     }
     if wants_shadow {
-        atomicAdd(&counters[1], 1u);
+        count(SLOT_SHADOW);
         if !blocked {
             add += colour * term;
         }
@@ -161,6 +167,9 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
     }
     let nr = make_ray(o, dir);
     let nh = trace(nr, 0.0, MAX_T, false, go);
+    if valid {
+        count(SLOT_FINISHED);
+    }
     if !live {
         return;
     }
@@ -168,7 +177,7 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
         paths[p].dir.w = 0.0;
         return;
     }
-    atomicAdd(&counters[2], 1u);
+    count(SLOT_SECONDARY);
     aovs[p].nodes += cost_nodes;
     aovs[p].tris += cost_tris;
     if nh.tri == NO_HIT {
@@ -178,6 +187,8 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
     }
     hits[p] = nh;
     paths[p] = PathRay(vec4<f32>(o, w), vec4<f32>(dir, 1.0));
+    // Paths still alive after this bounce: the host stops the passes once none is.
+    atomicAdd(&counters[SLOT_LIVE + pass_info.depth], 1u);
 }
 
 fn stage_convert(x: u32, y: u32, valid: bool) {
@@ -186,4 +197,5 @@ fn stage_convert(x: u32, y: u32, valid: bool) {
     }
     let p = pixel_index(x, y);
     image[p] = to_rgba8(accum[p].xyz);
+    count(SLOT_FINISHED);
 }

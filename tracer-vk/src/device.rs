@@ -141,6 +141,37 @@ struct Inner {
     info: DeviceInfo,
     timestamp_mask: u64,
     log: ValidationLog,
+    /// Objects dropped while a submission abandoned by a timeout may still use them.
+    retired: Mutex<Retired>,
+}
+
+/// After a timeout the GPU may go on running the abandoned work (lavapipe's threads do), so a
+/// buffer or pipeline dropped meanwhile is parked here and destroyed once the work is seen
+/// finished. Destroying it at once freed memory a running kernel still used: `trace-vk render
+/// --method sst --workgroup 1x1` aborted with "double free or corruption" that way.
+#[derive(Default)]
+struct Retired {
+    /// A submission was abandoned and has not been seen finished.
+    in_flight: bool,
+    buffers: Vec<(vk::Buffer, vk::DeviceMemory)>,
+    pipelines: Vec<(vk::Pipeline, vk::PipelineLayout, vk::DescriptorSetLayout)>,
+}
+
+impl Retired {
+    /// SAFETY: no pending work may use the parked objects.
+    unsafe fn destroy(&mut self, device: &ash::Device) {
+        unsafe {
+            for (buffer, memory) in self.buffers.drain(..) {
+                device.destroy_buffer(buffer, None);
+                device.free_memory(memory, None);
+            }
+            for (pipeline, layout, set_layout) in self.pipelines.drain(..) {
+                device.destroy_pipeline(pipeline, None);
+                device.destroy_pipeline_layout(layout, None);
+                device.destroy_descriptor_set_layout(set_layout, None);
+            }
+        }
+    }
 }
 
 impl Drop for Inner {
@@ -148,6 +179,7 @@ impl Drop for Inner {
         // SAFETY: every child object holds an Arc<Inner>, so all of them are destroyed by now.
         unsafe {
             let _ = self.device.device_wait_idle();
+            self.retired.get_mut().unwrap_or_else(PoisonError::into_inner).destroy(&self.device);
             self.device.destroy_device(None);
             if let Some((utils, messenger)) = &self.messenger {
                 utils.destroy_debug_utils_messenger(*messenger, None);
@@ -158,6 +190,33 @@ impl Drop for Inner {
 }
 
 impl Inner {
+    /// Parks the objects when abandoned work may still run; otherwise hands them back to destroy.
+    fn retire_buffer(&self, buffer: vk::Buffer, memory: vk::DeviceMemory) -> bool {
+        let mut r = self.retired.lock().unwrap_or_else(PoisonError::into_inner);
+        if r.in_flight {
+            r.buffers.push((buffer, memory));
+        }
+        r.in_flight
+    }
+
+    fn retire_pipeline(&self, p: vk::Pipeline, layout: vk::PipelineLayout, set: vk::DescriptorSetLayout) -> bool {
+        let mut r = self.retired.lock().unwrap_or_else(PoisonError::into_inner);
+        if r.in_flight {
+            r.pipelines.push((p, layout, set));
+        }
+        r.in_flight
+    }
+
+    /// Marks abandoned work as finished (or not) and destroys what waited for it.
+    fn set_in_flight(&self, in_flight: bool) {
+        let mut r = self.retired.lock().unwrap_or_else(PoisonError::into_inner);
+        r.in_flight = in_flight;
+        if !in_flight {
+            // SAFETY: the caller saw the abandoned submission finish.
+            unsafe { r.destroy(&self.device) };
+        }
+    }
+
     fn name<H: vk::Handle>(&self, handle: H, label: &str) {
         if let (Some(names), Ok(name)) = (&self.names, CString::new(label)) {
             let info = vk::DebugUtilsObjectNameInfoEXT::default().object_handle(handle).object_name(&name);
@@ -252,8 +311,11 @@ impl fmt::Debug for Buffer {
 
 impl Drop for Buffer {
     fn drop(&mut self) {
+        if self.inner.retire_buffer(self.buffer, self.memory) {
+            return;
+        }
         // SAFETY: `run`/`upload`/`download` wait for the GPU, so no pending work uses the buffer
-        // (except after a Timeout, which the caller was told about).
+        // (after a Timeout it was parked above instead).
         unsafe {
             self.inner.device.destroy_buffer(self.buffer, None);
             self.inner.device.free_memory(self.memory, None);
@@ -298,6 +360,9 @@ impl fmt::Debug for Pipeline {
 
 impl Drop for Pipeline {
     fn drop(&mut self) {
+        if self.inner.retire_pipeline(self.pipeline, self.layout, self.set_layout) {
+            return;
+        }
         // SAFETY: as for Buffer: no pending work uses it.
         unsafe {
             self.inner.device.destroy_pipeline(self.pipeline, None);
@@ -403,6 +468,8 @@ impl Drop for Gpu {
             let _ = device.device_wait_idle();
             state.destroy(device);
         }
+        // The device is idle: whatever waited for abandoned work can go.
+        self.inner.set_in_flight(false);
     }
 }
 
@@ -470,6 +537,7 @@ impl Gpu {
             info: candidate.info,
             timestamp_mask: if bits >= 64 { u64::MAX } else { (1u64 << bits) - 1 },
             log,
+            retired: Mutex::new(Retired::default()),
         });
         // From here on, a failure drops `gpu`, which destroys whatever was made (null handles are
         // valid arguments to vkDestroy*).
@@ -587,8 +655,16 @@ impl Gpu {
 
     /// The whole buffer's contents.
     pub fn download(&self, buf: &Buffer) -> Result<Vec<u8>, VkError> {
+        self.download_prefix(buf, buf.size)
+    }
+
+    /// The first `bytes` of the buffer (a tile's pixels in a buffer sized for the largest tile).
+    pub fn download_prefix(&self, buf: &Buffer, bytes: u64) -> Result<Vec<u8>, VkError> {
         self.check_buffer(buf)?;
-        let mut out = vec![0u8; buf.size as usize];
+        if bytes > buf.size {
+            return Err(VkError::Usage(format!("buffer `{}` holds {} bytes, not {bytes}", buf.label, buf.size)));
+        }
+        let mut out = vec![0u8; bytes as usize];
         let mut guard = self.lock()?;
         let state = &mut *guard.state;
         for (i, chunk) in out.chunks_mut(STAGING_CHUNK as usize).enumerate() {
@@ -622,6 +698,12 @@ impl Gpu {
         let bytes = self.download(buf)?;
         let whole = bytes.len() - bytes.len() % size_of::<T>().max(1);
         Ok(bytemuck::pod_collect_to_vec(&bytes[..whole]))
+    }
+
+    /// The first `count` elements of the buffer as `T`s.
+    pub fn download_prefix_as<T: bytemuck::Pod>(&self, buf: &Buffer, count: usize) -> Result<Vec<T>, VkError> {
+        let bytes = self.download_prefix(buf, (count * size_of::<T>()) as u64)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
 
     /// A compute pipeline from SPIR-V words with entry point `main`, `bindings` storage buffers at
@@ -826,9 +908,13 @@ impl Gpu {
         match unsafe { self.inner.device.wait_for_fences(&[state.fence], true, nanos(self.timeout)) } {
             Ok(()) => {
                 state.pending = false;
+                self.inner.set_in_flight(false);
                 Ok(())
             }
-            Err(vk::Result::TIMEOUT) => Err(VkError::Timeout { seconds: self.timeout.as_secs_f64().ceil() as u64 }),
+            Err(vk::Result::TIMEOUT) => {
+                self.inner.set_in_flight(true);
+                Err(VkError::Timeout { seconds: self.timeout.as_secs_f64().ceil() as u64 })
+            }
             Err(e) => Err(VkError::vk("vkWaitForFences", e)),
         }
     }

@@ -102,6 +102,39 @@ pub fn strip_features(src: &str, enabled: &[&str]) -> String {
     out
 }
 
+/// The counters buffer the kernels count into, in u32 words; the kernels get these as constants.
+pub mod counters {
+    /// 64-bit counters (low word, high word): primary, shadow and secondary rays, and invocations
+    /// that finished a stage for a pixel of the tile.
+    pub const PRIMARY: usize = 0;
+    pub const SHADOW: usize = 2;
+    pub const SECONDARY: usize = 4;
+    pub const FINISHED: usize = 6;
+    /// FAULT_* bits: a traversal gave up on a ray.
+    pub const FAULTS: usize = 8;
+    /// Then one word per bounce: paths still alive after it.
+    pub const LIVE: usize = 9;
+    /// A stack push found the stack full (the tree is deeper than the file's depth).
+    pub const FAULT_STACK: u32 = 1;
+    /// A walk took more steps than the tree has nodes.
+    pub const FAULT_WALK: u32 = 2;
+
+    pub(crate) const WGSL: [(&str, u32); 8] = [
+        ("SLOT_PRIMARY", PRIMARY as u32),
+        ("SLOT_SHADOW", SHADOW as u32),
+        ("SLOT_SECONDARY", SECONDARY as u32),
+        ("SLOT_FINISHED", FINISHED as u32),
+        ("SLOT_FAULTS", FAULTS as u32),
+        ("SLOT_LIVE", LIVE as u32),
+        ("FAULT_STACK", FAULT_STACK),
+        ("FAULT_WALK", FAULT_WALK),
+    ];
+}
+
+/// Bytes of the push constant every kernel takes: which light a shade pass handles and which
+/// bounce a bounce pass is (`Pass` in common.wgsl).
+pub const PASS_BYTES: u32 = 16;
+
 /// The complete WGSL source of one kernel.
 pub fn source(stage: Stage, spec: &Specialisation) -> String {
     let mut features = Vec::new();
@@ -117,30 +150,29 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
         Method::Stackless => STACKLESS,
         Method::Sst | Method::SstSubgroup => SST,
     };
-    // naga accepts the subgroup builtins only in one-dimensional workgroups: the subgroup variant
-    // runs WG_X * WG_Y invocations in a line and maps them onto the same WG_X x WG_Y pixel block.
-    let entry = if spec.method == Method::SstSubgroup {
-        format!(
-            "@compute @workgroup_size(WG_X * WG_Y)\n\
-             fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32,\n\
-             \x20       @builtin(subgroup_invocation_id) sgl: u32, @builtin(subgroup_id) sgi: u32,\n\
-             \x20       @builtin(num_subgroups) sgn: u32) {{\n\
-             \x20   lid = li;\n    sg_lane = sgl;\n    sg_id = sgi;\n    sg_count = sgn;\n\
-             \x20   let x = wg.x * WG_X + li % WG_X;\n    let y = wg.y * WG_Y + li / WG_X;\n\
-             \x20   {}(x, y, x < frame.size.x && y < frame.size.y);\n}}\n",
-            stage.entry()
+    // Every kernel runs its WG_X x WG_Y pixel block as a line of WG_X * WG_Y invocations. naga
+    // accepts the subgroup builtins only in one-dimensional workgroups, and lavapipe (whose
+    // subgroups are 8 wide) loses whole rows of SST's workgroups when a two-dimensional one is
+    // narrower than 8: `--workgroup 4x4` traced a quarter of its rays.
+    let (params, subgroup_setup) = if spec.method == Method::SstSubgroup {
+        (
+            ",\n        @builtin(subgroup_invocation_id) sgl: u32, @builtin(subgroup_id) sgi: u32, @builtin(num_subgroups) sgn: u32",
+            "    sg_lane = sgl;\n    sg_id = sgi;\n    sg_count = sgn;\n",
         )
     } else {
-        format!(
-            "@compute @workgroup_size(WG_X, WG_Y)\n\
-             fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) li: u32) {{\n\
-             \x20   lid = li;\n\
-             \x20   {}(gid.x, gid.y, gid.x < frame.size.x && gid.y < frame.size.y);\n}}\n",
-            stage.entry()
-        )
+        ("", "")
     };
+    let entry = format!(
+        "@compute @workgroup_size(WG_X * WG_Y)\n\
+         fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32{params}) {{\n\
+         \x20   lid = li;\n{subgroup_setup}\
+         \x20   let x = frame.tile.x + wg.x * WG_X + li % WG_X;\n    let y = frame.tile.y + wg.y * WG_Y + li / WG_X;\n\
+         \x20   {}(x, y, x < frame.tile.x + frame.tile.z && y < frame.tile.y + frame.tile.w);\n}}\n",
+        stage.entry()
+    );
+    let counters: String = counters::WGSL.iter().map(|(name, v)| format!("const {name}: u32 = {v}u;\n")).collect();
     format!(
-        "const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n\
+        "{counters}const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n\
          {}\n{}\n{}\n{}",
         spec.stack_size.max(1),
         spec.leaf_size.max(1),

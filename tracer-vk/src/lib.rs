@@ -12,6 +12,7 @@ pub mod error;
 pub mod kernels;
 pub mod render;
 pub mod shader;
+pub mod tiles;
 
 /// The ash version the raw handles ([`Gpu::ash_device`], [`Recorder::raw`]) come from.
 pub use ash;

@@ -1,10 +1,17 @@
 //! Rendering a scene file with the stream pipeline: upload once (only the layout the method
 //! reads), specialise the kernels for the scene, then per frame dispatch the stages and read back
 //! the image, the AOVs and the ray counts.
+//!
+//! A frame is rendered in tiles sized from the device's limits ([`crate::tiles`]), so any image
+//! the host can hold renders. Per tile, the bounce passes are submitted in growing chunks and stop
+//! once no path is alive. The kernels count what they did, and a count that does not add up (a
+//! pixel whose stage never finished, a traversal that gave up on a ray) refuses the frame: a wrong
+//! image is never returned in silence.
 
 use crate::device::{Buffer, Gpu, Pipeline};
 use crate::error::VkError;
-use crate::kernels::{self, Method, Specialisation, Stage};
+use crate::kernels::{self, Method, Specialisation, Stage, counters};
+use crate::tiles::{self, Tile};
 use bvh_format::camera::CameraSpec;
 use bvh_format::{Light, SceneFile};
 use bytemuck::{Pod, Zeroable};
@@ -26,6 +33,22 @@ pub struct Settings {
     pub mode: Mode,
     pub lights: Vec<Light>,
     pub max_indirections: u32,
+}
+
+/// The most indirections a frame may ask for. Paths end earlier in every scene whose reflective
+/// and refractive materials lose light (the passes stop when none is alive); only perfect mirrors
+/// facing each other go on to the limit, at a cost that grows with it.
+pub const MAX_INDIRECTIONS: u32 = 1024;
+
+/// Bounces in the first submission of a tile (every shipped scene needs at most 5); each later
+/// submission doubles the bounces done so far. Between submissions the live paths are counted.
+const FIRST_BOUNCES: u32 = 8;
+
+/// How far a frame has come: pixels of finished tiles, out of all.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Progress {
+    pub pixels_done: u64,
+    pub pixels: u64,
 }
 
 /// A rendered frame.
@@ -61,16 +84,30 @@ pub enum RenderError {
     MissingLayout { method: &'static str, layout: &'static str },
     #[error("{0} lights are more than the kernels address")]
     TooManyLights(usize),
-    #[error("a {x} x {y} workgroup is empty or larger than the device's {limit} invocations")]
+    #[error("{0} indirections are more than the {MAX_INDIRECTIONS} a frame may trace")]
+    TooManyIndirections(u32),
+    #[error(
+        "a {x} x {y} workgroup is not allowed: width and height must be powers of two with at most {limit} invocations in all on this device, such as 8x8 (the default), 16x16 or 32x4"
+    )]
     Workgroup { x: u32, y: u32, limit: u64 },
     #[error("{0} lacks the subgroup operations the sst-subgroup traversal votes with; use sst")]
     NoSubgroups(String),
-    #[error("SST needs a workgroup of a power-of-two size for its vote reduction, not {x} x {y}")]
-    SstWorkgroup { x: u32, y: u32 },
     #[error(
         "SST needs {needed} bytes of workgroup memory for a tree {depth} deep with leaves of up to {leaf} triangles, more than the device's {limit}; use LST, or rebuild with a smaller --max-leaf-size"
     )]
     SharedMemory { depth: u32, leaf: u32, needed: u64, limit: u64 },
+    #[error(
+        "the scene's {what} need {bytes} bytes in one storage buffer, more than this device's {limit_name} of {limit} bytes; it takes scenes of up to {fits} {what}"
+    )]
+    SceneTooLarge { what: &'static str, bytes: u64, limit_name: &'static str, limit: u64, fits: u64 },
+    #[error("a {width} x {height} image needs {bytes} bytes of host memory, which could not be allocated")]
+    HostMemory { width: u32, height: u32, bytes: u64 },
+    #[error(
+        "the {method} kernels finished {done} of the {expected} {what} they were given, so no image was made: the device or its driver dropped work"
+    )]
+    LostWork { method: &'static str, what: &'static str, done: u64, expected: u64 },
+    #[error("the {method} traversal {what}, so no image was made")]
+    Fault { method: &'static str, what: String },
 }
 
 #[repr(C)]
@@ -84,8 +121,10 @@ struct FrameData {
     background: [f32; 4],
     size: [u32; 4],
     stop: [f32; 4],
+    tile: [u32; 4],
 }
 
+/// The push constant of a pass (`Pass` in common.wgsl).
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct PassData {
@@ -94,10 +133,15 @@ struct PassData {
     pad: [u32; 2],
 }
 
-/// Per-pixel state of one resolution, kept between frames.
+impl PassData {
+    fn bytes(light: u32, depth: u32) -> [u8; kernels::PASS_BYTES as usize] {
+        bytemuck::cast(PassData { light, depth, pad: [0; 2] })
+    }
+}
+
+/// Per-pixel state of one tile, kept between frames and reused by every tile that fits.
 struct Targets {
-    width: u32,
-    height: u32,
+    pixels: u64,
     paths: Buffer,
     hits: Buffer,
     accum: Buffer,
@@ -118,9 +162,65 @@ pub struct Renderer<'g> {
     input_index: Buffer,
     pipelines: HashMap<Stage, Pipeline>,
     targets: Option<Targets>,
+    /// A tile holds at most this many pixels (besides the device's own limits).
+    tile_pixels: u64,
 }
 
-const BINDINGS: u32 = 15;
+const BINDINGS: u32 = 14;
+
+/// What one frame's passes gave, summed over tiles and submissions.
+#[derive(Default)]
+struct Tally {
+    rays: [u64; 3],
+    gpu_ms: f64,
+    passes: Vec<(String, f64)>,
+}
+
+impl Tally {
+    fn add_timings(&mut self, t: &crate::device::Timings) {
+        self.gpu_ms += t.total_ms;
+        for (label, ms) in &t.intervals {
+            match self.passes.iter_mut().find(|(l, _)| l == label) {
+                Some((_, sum)) => *sum += ms,
+                None => self.passes.push((label.clone(), *ms)),
+            }
+        }
+    }
+}
+
+/// The per-pixel results of a frame on the host, filled tile by tile.
+struct HostFrame {
+    width: u32,
+    image: Vec<u32>,
+    aovs: Vec<[u32; 8]>,
+}
+
+impl HostFrame {
+    fn new(width: u32, height: u32, image: bool, aovs: bool) -> Result<Self, RenderError> {
+        let n = width as usize * height as usize;
+        let bytes = n as u64 * (4 * image as u64 + 32 * aovs as u64);
+        let fail = |_| RenderError::HostMemory { width, height, bytes };
+        let mut f = HostFrame { width, image: Vec::new(), aovs: Vec::new() };
+        if image {
+            f.image.try_reserve_exact(n).map_err(fail)?;
+        }
+        if aovs {
+            f.aovs.try_reserve_exact(n).map_err(fail)?;
+        }
+        f.image.resize(if image { n } else { 0 }, 0);
+        f.aovs.resize(if aovs { n } else { 0 }, [0; 8]);
+        Ok(f)
+    }
+
+    /// Copies a tile's rows (`src` holds them one after another) into the frame.
+    fn place<T: Copy>(width: u32, dst: &mut [T], src: &[T], tile: &Tile) {
+        let tw = tile.width as usize;
+        for (r, row) in src.chunks_exact(tw).take(tile.height as usize).enumerate() {
+            let at = (tile.y as usize + r) * width as usize + tile.x as usize;
+            dst[at..at + tw].copy_from_slice(row);
+        }
+    }
+}
 
 impl<'g> Renderer<'g> {
     /// Uploads the scene (only the node layout `method` reads) and specialises the kernels:
@@ -146,25 +246,29 @@ impl<'g> Renderer<'g> {
             reflection: scene.materials.iter().any(|m| m.kr > 0.0),
             refraction: scene.materials.iter().any(|m| m.kt > 0.0),
         };
+        let info = gpu.info();
         let (wx, wy) = workgroup;
-        let invocations = wx as u64 * wy as u64;
-        let limit = gpu.info().max_workgroup_invocations as u64;
-        if wx == 0 || wy == 0 || invocations > limit {
+        let limit = (info.max_workgroup_invocations as u64).min(info.max_workgroup_size[0] as u64);
+        if !wx.is_power_of_two() || !wy.is_power_of_two() || wx as u64 * wy as u64 > limit {
             return Err(RenderError::Workgroup { x: wx, y: wy, limit });
         }
-        if method == Method::SstSubgroup && !gpu.info().supports_subgroup_ops {
-            return Err(RenderError::NoSubgroups(gpu.info().name.clone()));
+        if method == Method::SstSubgroup && !info.supports_subgroup_ops {
+            return Err(RenderError::NoSubgroups(info.name.clone()));
         }
         if matches!(method, Method::Sst | Method::SstSubgroup) {
-            if !invocations.is_power_of_two() {
-                return Err(RenderError::SstWorkgroup { x: wx, y: wy });
-            }
             let needed = kernels::sst_shared_bytes(&spec);
-            let limit = gpu.info().max_shared_memory as u64;
+            let limit = info.max_shared_memory as u64;
             if needed > limit {
                 return Err(RenderError::SharedMemory { depth: spec.stack_size, leaf: spec.leaf_size, needed, limit });
             }
         }
+        let node_what = if method == Method::Stackless { "escape-pointer nodes" } else { "child-pair nodes" };
+        fits(info, node_what, nodes)?;
+        fits(info, "triangles", &scene.triangles)?;
+        fits(info, "triangle normals", &scene.normals)?;
+        fits(info, "material ids", &scene.material_ids)?;
+        fits(info, "materials", &scene.materials)?;
+        fits(info, "input indices", &scene.input_index)?;
         Ok(Self {
             gpu,
             scene,
@@ -177,6 +281,7 @@ impl<'g> Renderer<'g> {
             input_index: gpu.create_buffer_with(&scene.input_index, "input index")?,
             pipelines: HashMap::new(),
             targets: None,
+            tile_pixels: tiles::device_tile_pixels(info),
         })
     }
 
@@ -184,31 +289,37 @@ impl<'g> Renderer<'g> {
         &self.spec
     }
 
+    /// Renders in tiles of at most `pixels` pixels (at least one workgroup's), below what the
+    /// device's limits allow: to bound the memory a frame takes, or to test tiling on small frames.
+    pub fn limit_tile_pixels(&mut self, pixels: u64) {
+        let wg = self.spec.workgroup.0 as u64 * self.spec.workgroup.1 as u64;
+        self.tile_pixels = tiles::device_tile_pixels(self.gpu.info()).min(pixels.max(wg));
+    }
+
     fn pipeline(&mut self, stage: Stage) -> Result<(), VkError> {
         if !self.pipelines.contains_key(&stage) {
             let spirv = kernels::compile(stage, &self.spec)?;
             let label = format!("{} {stage:?}", self.spec.method.name());
-            let p = self.gpu.pipeline(&spirv, BINDINGS, 0, &label)?;
+            let p = self.gpu.pipeline(&spirv, BINDINGS, kernels::PASS_BYTES, &label)?;
             self.pipelines.insert(stage, p);
         }
         Ok(())
     }
 
-    fn targets(&mut self, width: u32, height: u32) -> Result<(), VkError> {
-        if self.targets.as_ref().is_some_and(|t| t.width == width && t.height == height) {
+    /// Per-pixel buffers for tiles of up to `pixels` pixels.
+    fn targets(&mut self, pixels: u64) -> Result<(), VkError> {
+        if self.targets.as_ref().is_some_and(|t| t.pixels >= pixels) {
             return Ok(());
         }
         self.targets = None;
-        let n = width as u64 * height as u64;
         let g = self.gpu;
         self.targets = Some(Targets {
-            width,
-            height,
-            paths: g.create_buffer(n * 32, "paths")?,
-            hits: g.create_buffer(n * 16, "hits")?,
-            accum: g.create_buffer(n * 16, "accumulated colour")?,
-            aovs: g.create_buffer(n * 32, "AOVs")?,
-            image: g.create_buffer(n * 4, "image")?,
+            pixels,
+            paths: g.create_buffer(pixels * 32, "paths")?,
+            hits: g.create_buffer(pixels * 16, "hits")?,
+            accum: g.create_buffer(pixels * 16, "accumulated colour")?,
+            aovs: g.create_buffer(pixels * 32, "AOVs")?,
+            image: g.create_buffer(pixels * 4, "image")?,
         });
         Ok(())
     }
@@ -221,12 +332,27 @@ impl<'g> Renderer<'g> {
     /// Renders one frame; without `readback` only the ray counts and GPU times come back (the
     /// per-pixel vectors of the output are empty), as benchmarks want.
     pub fn render_frame(&mut self, s: &Settings, readback: bool) -> Result<Output, RenderError> {
+        self.render_with_progress(s, readback, readback, &mut |_| {})
+    }
+
+    /// Renders one frame, calling `progress` after every tile. `image` reads back the colours,
+    /// `aovs` the per-pixel outputs; without either only the ray counts and GPU times come back.
+    pub fn render_with_progress(
+        &mut self,
+        s: &Settings,
+        image: bool,
+        aovs: bool,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Output, RenderError> {
         if s.width == 0 || s.height == 0 {
             return Err(RenderError::EmptyImage);
         }
         let f = s.camera.frame(s.width, s.height).map_err(|_| RenderError::Camera)?;
         if s.lights.len() > u32::MAX as usize / 2 {
             return Err(RenderError::TooManyLights(s.lights.len()));
+        }
+        if s.max_indirections > MAX_INDIRECTIONS {
+            return Err(RenderError::TooManyIndirections(s.max_indirections));
         }
         let whitted = s.mode == Mode::Whitted;
         // Bounces only where a material can spawn one: no scene pays for what it lacks.
@@ -240,16 +366,21 @@ impl<'g> Renderer<'g> {
         } else {
             &[Stage::Cast]
         };
+        let info = self.gpu.info();
+        let groups = [info.max_workgroup_count[0], info.max_workgroup_count[1]];
+        let plan = tiles::plan(s.width, s.height, self.tile_pixels, self.spec.workgroup, groups)
+            .ok_or_else(|| VkError::Usage(format!("no tile of {} pixels holds a workgroup", self.tile_pixels)))?;
+        let mut host = HostFrame::new(s.width, s.height, image, aovs)?;
         for &st in stages {
             self.pipeline(st)?;
         }
-        self.targets(s.width, s.height)?;
+        self.targets(plan.iter().map(Tile::pixels).max().unwrap_or(1))?;
 
         let colours: Vec<[f32; 3]> = s.lights.iter().map(|l| l.colour).collect();
         let (bound, k_max) = self.scene.bounce_bound(&colours);
         let v4 = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
         let a3 = |v: [f32; 3]| [v[0], v[1], v[2], 0.0];
-        let frame = FrameData {
+        let mut frame = FrameData {
             eye: v4(f.eye),
             top_left: v4(f.top_left),
             h_step: v4(f.h_step),
@@ -258,85 +389,192 @@ impl<'g> Renderer<'g> {
             background: a3(self.scene.settings.background),
             size: [s.width, s.height, s.lights.len() as u32, indirections],
             stop: [bound, k_max, 0.0, 0.0],
+            tile: [0; 4],
         };
         let g = self.gpu;
-        let frame_buf = g.create_buffer_with(std::slice::from_ref(&frame), "frame")?;
+        let frame_buf = g.create_buffer(size_of::<FrameData>() as u64, "frame")?;
         // Storage buffers may not be empty: a scene without lights binds one unused entry.
         let lights = if s.lights.is_empty() { vec![Light::new([0.0; 3], [0.0; 3])] } else { s.lights.clone() };
         let lights_buf = g.create_buffer_with(&lights, "lights")?;
-        let counters = g.create_buffer(16, "ray counters")?;
-        let shade_passes = s.lights.len().max(1) as u32;
-        let pass_data: Vec<PassData> =
-            (0..shade_passes.max(indirections)).map(|i| PassData { light: i, depth: i, pad: [0; 2] }).collect();
-        let pass_bufs: Vec<Buffer> = pass_data
-            .iter()
-            .map(|p| g.create_buffer_with(std::slice::from_ref(p), "pass"))
-            .collect::<Result<_, _>>()?;
+        let counters = g.create_buffer(4 * (counters::LIVE as u64 + indirections.max(1) as u64), "ray counters")?;
 
-        let t = self.targets.as_ref().expect("targets were just created");
-        let groups = [s.width.div_ceil(self.spec.workgroup.0), s.height.div_ceil(self.spec.workgroup.1), 1];
-        let pipelines = &self.pipelines;
-        let bind = |pass: usize| -> [&Buffer; BINDINGS as usize] {
-            [
+        let mut tally = Tally::default();
+        let total = s.width as u64 * s.height as u64;
+        let mut done = 0;
+        for tile in &plan {
+            frame.tile = [tile.x, tile.y, tile.width, tile.height];
+            g.upload(&frame_buf, bytemuck::bytes_of(&frame))?;
+            self.render_tile(
+                tile,
+                whitted,
+                s.lights.len() as u32,
+                indirections,
                 &frame_buf,
-                &self.nodes,
-                &self.tris,
-                &self.normals,
-                &self.material_ids,
-                &self.materials,
                 &lights_buf,
-                &self.input_index,
-                &t.paths,
-                &t.hits,
-                &t.accum,
-                &t.aovs,
-                &t.image,
                 &counters,
-                &pass_bufs[pass],
-            ]
-        };
-        let timings = g.run(|rec| {
-            rec.zero(&counters);
-            rec.mark("start");
-            if !whitted {
-                rec.dispatch(&pipelines[&Stage::Cast], &bind(0), &[], groups)?;
-                rec.mark("cast");
-                return Ok(());
+                &mut tally,
+            )?;
+            let t = self.targets.as_ref().expect("the targets were made above");
+            let n = tile.pixels() as usize;
+            if image {
+                let px: Vec<u32> = g.download_prefix_as(&t.image, n)?;
+                HostFrame::place(s.width, &mut host.image, &px, tile);
             }
-            rec.dispatch(&pipelines[&Stage::Primary], &bind(0), &[], groups)?;
-            rec.mark("trace primary");
-            for depth in 0..=indirections {
-                for l in 0..shade_passes {
-                    rec.dispatch(&pipelines[&Stage::Shade], &bind(l as usize), &[], groups)?;
-                }
-                rec.mark(&format!("shade {depth}"));
-                if depth < indirections {
-                    rec.dispatch(&pipelines[&Stage::Bounce], &bind(depth as usize), &[], groups)?;
-                    rec.mark(&format!("trace secondary {}", depth + 1));
-                }
+            if aovs {
+                let a: Vec<[u32; 8]> = g.download_prefix_as(&t.aovs, n)?;
+                HostFrame::place(s.width, &mut host.aovs, &a, tile);
             }
-            rec.dispatch(&pipelines[&Stage::Convert], &bind(0), &[], groups)?;
-            rec.mark("convert");
-            Ok(())
-        })?;
-
-        let counts: Vec<u32> = g.download_as(&counters)?;
-        let (image, aovs): (Vec<u32>, Vec<[u32; 8]>) =
-            if readback { (g.download_as(&t.image)?, g.download_as(&t.aovs)?) } else { (Vec::new(), Vec::new()) };
-        let n = if readback { (s.width * s.height) as usize } else { 0 };
+            done += tile.pixels();
+            progress(Progress { pixels_done: done, pixels: total });
+        }
+        debug_assert_eq!(host.width, s.width);
         let f32_of = |u: u32| f32::from_bits(u);
+        let a = &host.aovs;
         Ok(Output {
             width: s.width,
             height: s.height,
-            rgb: image[..n].iter().map(|&p| [p as u8, (p >> 8) as u8, (p >> 16) as u8]).collect(),
-            normal: aovs[..n].iter().map(|a| [f32_of(a[0]), f32_of(a[1]), f32_of(a[2])]).collect(),
-            t: aovs[..n].iter().map(|a| f32_of(a[4])).collect(),
-            prim: aovs[..n].iter().map(|a| a[5]).collect(),
-            nodes: aovs[..n].iter().map(|a| a[6]).collect(),
-            tris: aovs[..n].iter().map(|a| a[7]).collect(),
-            rays: [counts[0] as u64, counts[1] as u64, counts[2] as u64],
-            gpu_ms: timings.total_ms,
-            passes: timings.intervals,
+            rgb: host.image.iter().map(|&p| [p as u8, (p >> 8) as u8, (p >> 16) as u8]).collect(),
+            normal: a.iter().map(|a| [f32_of(a[0]), f32_of(a[1]), f32_of(a[2])]).collect(),
+            t: a.iter().map(|a| f32_of(a[4])).collect(),
+            prim: a.iter().map(|a| a[5]).collect(),
+            nodes: a.iter().map(|a| a[6]).collect(),
+            tris: a.iter().map(|a| a[7]).collect(),
+            rays: tally.rays,
+            gpu_ms: tally.gpu_ms,
+            passes: tally.passes,
         })
     }
+
+    /// Runs one tile's passes: the first submission traces the primary rays, shades and makes
+    /// the first bounces; later ones (each as many bounces as all before it) run only while some
+    /// path is alive. Every submission ends with the conversion to 8 bits, so whichever is last
+    /// leaves the tile's image.
+    #[allow(clippy::too_many_arguments)]
+    fn render_tile(
+        &self,
+        tile: &Tile,
+        whitted: bool,
+        light_count: u32,
+        indirections: u32,
+        frame_buf: &Buffer,
+        lights_buf: &Buffer,
+        counters: &Buffer,
+        tally: &mut Tally,
+    ) -> Result<(), RenderError> {
+        let g = self.gpu;
+        let t = self.targets.as_ref().expect("the targets were made before the tiles");
+        let (wx, wy) = self.spec.workgroup;
+        let groups = [tile.width.div_ceil(wx), tile.height.div_ceil(wy), 1];
+        let buffers: [&Buffer; BINDINGS as usize] = [
+            frame_buf,
+            &self.nodes,
+            &self.tris,
+            &self.normals,
+            &self.material_ids,
+            &self.materials,
+            lights_buf,
+            &self.input_index,
+            &t.paths,
+            &t.hits,
+            &t.accum,
+            &t.aovs,
+            &t.image,
+            counters,
+        ];
+        let p = &self.pipelines;
+        let shade_passes = light_count.max(1);
+        let mut first = 0;
+        loop {
+            // Bounces [first, end) in this submission.
+            let end = if first == 0 { indirections.min(FIRST_BOUNCES) } else { indirections.min(2 * first) };
+            let mut dispatches = 0u64;
+            let timings = g.run(|rec| {
+                let mut pass = |rec: &mut crate::device::Recorder, stage: Stage, light: u32, depth: u32| {
+                    dispatches += 1;
+                    rec.dispatch(&p[&stage], &buffers, &PassData::bytes(light, depth), groups)
+                };
+                rec.zero(counters);
+                rec.mark("start");
+                if !whitted {
+                    pass(rec, Stage::Cast, 0, 0)?;
+                    rec.mark("cast");
+                    return Ok(());
+                }
+                if first == 0 {
+                    pass(rec, Stage::Primary, 0, 0)?;
+                    rec.mark("trace primary");
+                    for l in 0..shade_passes {
+                        pass(rec, Stage::Shade, l, 0)?;
+                    }
+                    rec.mark("shade 0");
+                }
+                for depth in first..end {
+                    pass(rec, Stage::Bounce, 0, depth)?;
+                    rec.mark(&format!("trace secondary {}", depth + 1));
+                    for l in 0..shade_passes {
+                        pass(rec, Stage::Shade, l, depth + 1)?;
+                    }
+                    rec.mark(&format!("shade {}", depth + 1));
+                }
+                pass(rec, Stage::Convert, 0, 0)?;
+                rec.mark("convert");
+                Ok(())
+            })?;
+            tally.add_timings(&timings);
+            let words: Vec<u32> = g.download_as(counters)?;
+            self.check_counts(&words, tile, first == 0, dispatches)?;
+            let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
+            tally.rays[0] += wide(counters::PRIMARY);
+            tally.rays[1] += wide(counters::SHADOW);
+            tally.rays[2] += wide(counters::SECONDARY);
+            if !whitted || end >= indirections || words[counters::LIVE + end as usize - 1] == 0 {
+                return Ok(());
+            }
+            first = end;
+        }
+    }
+
+    /// Refuses a submission whose counts do not add up: every dispatch must have finished every
+    /// pixel of the tile, the first must have traced one primary ray per pixel, and no traversal
+    /// may have given up on a ray.
+    fn check_counts(&self, words: &[u32], tile: &Tile, first: bool, dispatches: u64) -> Result<(), RenderError> {
+        let method = self.spec.method.name();
+        let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
+        let faults = words[counters::FAULTS];
+        if faults & counters::FAULT_STACK != 0 {
+            let what = format!(
+                "found its stack of {} entries full (the tree is deeper than its file says)",
+                self.spec.stack_size
+            );
+            return Err(RenderError::Fault { method, what });
+        }
+        if faults & counters::FAULT_WALK != 0 {
+            return Err(RenderError::Fault { method, what: "took more steps than the tree has nodes".to_owned() });
+        }
+        let primary = wide(counters::PRIMARY);
+        if first && primary != tile.pixels() {
+            return Err(RenderError::LostWork { method, what: "primary rays", done: primary, expected: tile.pixels() });
+        }
+        let finished = wide(counters::FINISHED);
+        let expected = dispatches * tile.pixels();
+        if finished != expected {
+            return Err(RenderError::LostWork { method, what: "pixel passes", done: finished, expected });
+        }
+        Ok(())
+    }
+}
+
+/// Checks that a scene array fits one storage buffer binding and one allocation.
+fn fits<T>(info: &crate::device::DeviceInfo, what: &'static str, data: &[T]) -> Result<(), RenderError> {
+    let bytes = std::mem::size_of_val(data) as u64;
+    let (limit_name, limit) = if info.max_storage_buffer_range <= info.max_memory_allocation {
+        ("maxStorageBufferRange", info.max_storage_buffer_range)
+    } else {
+        ("maxMemoryAllocationSize", info.max_memory_allocation)
+    };
+    if bytes > limit {
+        let fits = limit / size_of::<T>().max(1) as u64;
+        return Err(RenderError::SceneTooLarge { what, bytes, limit_name, limit, fits });
+    }
+    Ok(())
 }

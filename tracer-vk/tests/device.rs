@@ -264,6 +264,27 @@ fn timeout_is_an_error_not_a_hang() {
     finish(gpu);
 }
 
+/// `trace-vk render --method sst --workgroup 1x1` once aborted with "double free or corruption":
+/// after a timeout the renderer's buffers were freed while lavapipe's threads still ran the
+/// kernel that used them. Objects dropped while abandoned work is in flight must outlive it.
+#[test]
+fn buffers_dropped_after_a_timeout_outlive_the_abandoned_work() {
+    let mut gpu = gpu();
+    let buf = gpu.create_buffer_with(&vec![1u32; 1 << 16], "slow").unwrap();
+    let pipeline = gpu.pipeline(&translate(SLOW, "slow", &[]).unwrap(), 1, 0, "slow").unwrap();
+    gpu.set_timeout(Duration::from_nanos(1));
+    let e = gpu.run(|r| r.dispatch(&pipeline, &[&buf], &[], [1 << 10, 1, 1])).unwrap_err();
+    assert!(matches!(e, VkError::Timeout { .. }), "{e:?}");
+    // Dropped while the GPU still runs the dispatch that binds them.
+    drop((pipeline, buf));
+    gpu.timeout = Duration::from_secs(120);
+    // The device stays usable, and nothing was destroyed in use.
+    let other = gpu.create_buffer_with(&[5u32; 4], "after").unwrap();
+    assert_eq!(gpu.download_as::<u32>(&other).unwrap(), [5; 4]);
+    drop(other);
+    finish(gpu);
+}
+
 #[test]
 fn validation_messages_are_recorded() {
     // The other tests assert an empty log; this shows that the log would not be empty if the

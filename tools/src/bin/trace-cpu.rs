@@ -4,9 +4,11 @@ use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
 use std::time::Instant;
-use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed, significant};
-use tools::progress::LateBar;
-use tools::render_args::RenderArgs;
+use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed};
+use tools::cli::{Progress, duration, rays_per_second};
+use tools::output::{self, Frame, Heatmap};
+use tools::render_args::{RenderArgs, parse_count};
+use tools::say;
 use tracer_cpu::{Method, RenderSettings, Tracer};
 
 #[derive(Parser)]
@@ -21,13 +23,14 @@ enum Command {
     /// Render one image (and optionally a cost heatmap and AOVs).
     Render {
         #[command(flatten)]
-        args: RenderArgs,
-        /// Traversal: SIMD packets where the CPU has AVX2, ordered child-pair traversal, or the
-        /// stackless escape-pointer walk.
+        args: Box<RenderArgs>,
+        /// Traversal: SIMD packets where the CPU has AVX2 (else ordered), ordered child-pair
+        /// traversal, or the stackless escape-pointer walk; auto takes the stackless walk for a
+        /// file compiled with only the escape-pointer layout.
         #[arg(long, value_enum, default_value = "auto")]
         method: MethodArg,
-        /// Worker threads [default: all cores].
-        #[arg(long)]
+        /// Worker threads, 1 to 1024 [default: all cores].
+        #[arg(long, value_parser = parse_threads, allow_hyphen_values = true)]
         threads: Option<usize>,
     },
     /// Time the thesis's evaluation matrix: scenes x cameras x sizes x modes x methods, wall-clock
@@ -43,8 +46,8 @@ struct BenchArgs {
     /// Traversals.
     #[arg(long, value_delimiter = ',', value_enum, default_value = "packet,ordered,stackless")]
     methods: Vec<MethodArg>,
-    /// Worker threads [default: all cores].
-    #[arg(long)]
+    /// Worker threads, 1 to 1024 [default: all cores].
+    #[arg(long, value_parser = parse_threads, allow_hyphen_values = true)]
     threads: Option<usize>,
 }
 
@@ -67,72 +70,78 @@ impl MethodArg {
     }
 }
 
+fn parse_threads(s: &str) -> Result<usize, String> {
+    parse_count(s, 1, 1024, "the number of threads").map(|n| n as usize)
+}
+
 fn main() -> ExitCode {
-    let result = match Cli::parse().command {
+    let command = tools::cli::parse::<Cli>().command;
+    tools::cli::run(|| match command {
         Command::Render { args, method, threads } => render(&args, method, threads),
         Command::Bench(b) => bench(&b),
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    })
 }
 
 fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Result<(), String> {
-    let loading = Instant::now();
-    let scene = tools::load_scene(args.scene.as_deref())?;
-    let load_s = loading.elapsed().as_secs_f64();
+    let outputs = args.check()?;
+    let loaded = tools::load_scene(args.scene.as_deref())?;
+    let scene = &loaded.file;
+    let camera = args.camera(scene)?;
     let settings = RenderSettings {
         width: args.res.0,
         height: args.res.1,
-        camera: args.camera(&scene)?,
+        camera,
         mode: args.mode(),
-        lights: args.lights(&scene),
-        max_indirections: args.indirections(&scene),
+        lights: args.lights(scene, &camera),
+        max_indirections: args.indirections(scene),
         method: method.method(),
         aovs: args.aov.is_some() || args.heatmap.is_some(),
     };
     let pool = pool(threads)?;
-    let tracer = Tracer::new(&scene);
-    let bar = LateBar::new(settings.height as u64, "rows");
+    let tracer = Tracer::new(scene);
+    let bar = Progress::new(settings.height as u64, "{bar:40} {pos}/{len} rows ({elapsed}, {eta} left)", false);
     let t0 = Instant::now();
     let image = pool
         .install(|| tracer_cpu::render_with_progress(&tracer, &settings, &|rows| bar.inc(rows as u64)))
         .map_err(|e| e.to_string())?;
-    let ms = t0.elapsed().as_secs_f64() * 1e3;
+    let seconds = t0.elapsed().as_secs_f64();
     bar.finish();
-    tools::output::write_png(&args.output, &image)?;
+
+    // Every file first, the report after: a reader that stops early cannot cut the writing short.
+    let frame = Frame { width: image.width, height: image.height, rgb: &image.rgb };
+    output::write_image(&outputs.image, &frame).map_err(|e| e.to_string())?;
+    let mut lines = Vec::new();
     let r = image.rays;
-    let total = r.primary + r.shadow + r.secondary;
-    println!(
-        "{}x{} {:?} with {:?} on {} threads: {} ms to trace and shade into the 8-bit image{} (not the {:.2} s to load \
-         the scene, nor writing files), rays: {} primary, {} shadow, {} secondary ({} Mrays/s) -> {}",
+    lines.push(format!(
+        "{}x{} {:?} with {:?} on {} threads: {} to trace and shade into the 8-bit image{}{}, rays: {} primary, \
+         {} shadow, {} secondary ({}) -> {}",
         image.width,
         image.height,
         settings.mode,
-        settings.method.resolve(),
+        settings.method.resolve(scene),
         pool.current_num_threads(),
-        significant(ms),
+        duration(seconds),
         if settings.aovs { " and the AOVs" } else { "" },
-        load_s,
+        loaded.timing_note(),
         r.primary,
         r.shadow,
         r.secondary,
-        significant(total as f64 / ms / 1e3),
-        args.output.display()
-    );
+        rays_per_second(r.primary + r.shadow + r.secondary, seconds),
+        outputs.image.path.display()
+    ));
     if let Some(aov) = &image.aov {
-        if let Some(p) = &args.heatmap {
-            let max = tools::output::write_heatmap(p, image.width, image.height, aov)?;
-            println!("heatmap: nodes visited per pixel, 0 (blue) to {max} (red) -> {}", p.display());
+        if let Some(out) = &outputs.heatmap {
+            let h = Heatmap::new(image.width, image.height, &aov.nodes, args.heatmap_max);
+            output::write_heatmap(out, &h).map_err(|e| e.to_string())?;
+            lines.push(tools::render_args::heatmap_line(&h, out));
         }
-        if let Some(p) = &args.aov {
-            tools::output::write_aov(p, image.width, image.height, aov)?;
-            println!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", p.display());
+        if let Some(out) = &outputs.aov {
+            output::write_aov(out, image.width, image.height, aov).map_err(|e| e.to_string())?;
+            lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", out.path.display()));
         }
+    }
+    for line in lines {
+        say!("{line}");
     }
     Ok(())
 }
@@ -168,7 +177,7 @@ impl Bench for CpuBench {
 
     fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<(Tracer<'a>, Method), String> {
         let method = MethodArg::from_str(method, false).map_err(|e| format!("{method:?}: {e}"))?.method();
-        if method == Method::Packet && method.resolve() != method {
+        if method == Method::Packet && method.resolve(scene) != method {
             return Err("this CPU cannot run the packet method: it needs AVX2".to_owned());
         }
         Ok((Tracer::new(scene), method))

@@ -4,7 +4,10 @@ use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
 use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed};
-use tools::render_args::{RenderArgs, parse_res};
+use tools::cli::{duration, rays_per_second};
+use tools::output::{self, Frame, Heatmap};
+use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
+use tools::say;
 use tracer_vk::kernels::Method;
 use tracer_vk::render::{Mode, Renderer, Settings};
 use tracer_vk::{Gpu, list_devices};
@@ -19,7 +22,7 @@ struct Cli {
 #[derive(clap::Args, Clone)]
 struct DeviceArgs {
     /// Vulkan device index (see `trace-vk devices`) [default: the first discrete GPU, else any].
-    #[arg(long)]
+    #[arg(long, value_parser = parse_device, allow_hyphen_values = true)]
     device: Option<usize>,
     /// Enable the Khronos validation layer and fail on any message it reports.
     #[arg(long)]
@@ -41,7 +44,7 @@ enum Command {
         #[arg(long, value_enum, default_value = "lst")]
         method: MethodArg,
         /// Workgroup shape (pixels).
-        #[arg(long, value_parser = parse_res, default_value = "8x8")]
+        #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
         workgroup: (u32, u32),
         #[command(flatten)]
         device: DeviceArgs,
@@ -56,7 +59,7 @@ struct BenchArgs {
     #[arg(long, value_delimiter = ',', value_enum, default_value = "lst,stackless,sst")]
     methods: Vec<MethodArg>,
     /// Workgroup shape (pixels).
-    #[arg(long, value_parser = parse_res, default_value = "8x8")]
+    #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
     workgroup: (u32, u32),
     #[command(flatten)]
     device: DeviceArgs,
@@ -74,25 +77,23 @@ enum MethodArg {
     SstSubgroup,
 }
 
+fn parse_device(s: &str) -> Result<usize, String> {
+    parse_count(s, 0, 1 << 16, "the device index").map(|n| n as usize)
+}
+
 fn main() -> ExitCode {
-    let result = match Cli::parse().command {
+    let command = tools::cli::parse::<Cli>().command;
+    tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
         Command::Render { args, method, workgroup, device } => render(&args, method, workgroup, &device),
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    })
 }
 
 fn devices() -> Result<(), String> {
     let list = list_devices().map_err(|e| e.to_string())?;
     for d in list {
-        println!(
+        say!(
             "{}: {} ({:?}, Vulkan {}.{}.{}, {}), subgroup {}, shared memory {} KiB, storage buffer range {} MiB, device-local memory {} MiB",
             d.index,
             d.name,
@@ -122,42 +123,52 @@ fn check_validation(gpu: &Gpu) -> Result<(), String> {
 }
 
 fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &DeviceArgs) -> Result<(), String> {
-    let scene = tools::load_scene(args.scene.as_deref())?;
+    let outputs = args.check()?;
+    let loaded = tools::load_scene(args.scene.as_deref())?;
+    let scene = &loaded.file;
+    let camera = args.camera(scene)?;
     let settings = Settings {
         width: args.res.0,
         height: args.res.1,
-        camera: args.camera(&scene)?,
+        camera,
         mode: vk_mode(args.mode()),
-        lights: args.lights(&scene),
-        max_indirections: args.indirections(&scene),
+        lights: args.lights(scene, &camera),
+        max_indirections: args.indirections(scene),
     };
     let method = method_of(method);
     let gpu = open(device)?;
-    let mut renderer = Renderer::new(&gpu, &scene, method, workgroup).map_err(|e| e.to_string())?;
+    let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
     let out = renderer.render(&settings).map_err(|e| e.to_string())?;
     check_validation(&gpu)?;
-    let image = tools::output::Frame { width: out.width, height: out.height, rgb: &out.rgb };
-    tools::output::write_frame_png(&args.output, &image)?;
+
+    // Every file first, the report after: a reader that stops early cannot cut the writing short.
+    output::write_image(&outputs.image, &Frame { width: out.width, height: out.height, rgb: &out.rgb })
+        .map_err(|e| e.to_string())?;
     let [p, s, sec] = out.rays;
-    println!(
-        "{}x{} {:?} with {} on {}: {:.3} ms GPU, rays: {p} primary, {s} shadow, {sec} secondary ({:.1} Mrays/s) -> {}",
+    let mut lines = vec![format!(
+        "{}x{} {:?} with {} on {}: {} GPU{}, rays: {p} primary, {s} shadow, {sec} secondary ({}) -> {}",
         out.width,
         out.height,
         settings.mode,
         method.name(),
         gpu.info().name,
-        out.gpu_ms,
-        (p + s + sec) as f64 / out.gpu_ms / 1e3,
-        args.output.display()
-    );
-    let aov = tracer_cpu::Aovs { t: out.t, normal: out.normal, prim: out.prim, nodes: out.nodes, tris: out.tris };
-    if let Some(path) = &args.heatmap {
-        let max = tools::output::write_heatmap(path, out.width, out.height, &aov)?;
-        println!("heatmap: nodes visited per pixel, 0 (blue) to {max} (red) -> {}", path.display());
+        duration(out.gpu_ms / 1e3),
+        loaded.timing_note(),
+        rays_per_second(p + s + sec, out.gpu_ms / 1e3),
+        outputs.image.path.display()
+    )];
+    if let Some(o) = &outputs.heatmap {
+        let h = Heatmap::new(out.width, out.height, &out.nodes, args.heatmap_max);
+        output::write_heatmap(o, &h).map_err(|e| e.to_string())?;
+        lines.push(tools::render_args::heatmap_line(&h, o));
     }
-    if let Some(path) = &args.aov {
-        tools::output::write_aov(path, out.width, out.height, &aov)?;
-        println!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", path.display());
+    if let Some(o) = &outputs.aov {
+        let aov = tracer_cpu::Aovs { t: out.t, normal: out.normal, prim: out.prim, nodes: out.nodes, tris: out.tris };
+        output::write_aov(o, out.width, out.height, &aov).map_err(|e| e.to_string())?;
+        lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", o.path.display()));
+    }
+    for line in lines {
+        say!("{line}");
     }
     Ok(())
 }
