@@ -118,6 +118,25 @@ impl Progress {
         self.bar.finish_and_clear();
     }
 
+    /// Runs `work` on this thread (which may hold what cannot move between threads, such as a
+    /// Vulkan renderer) while a helper thread redraws the bar every 100 ms, so that the elapsed
+    /// time moves on during long steps that report nothing.
+    pub fn ticking<T>(&self, work: impl FnOnce() -> T) -> T {
+        let done = AtomicBool::new(false);
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                while !done.load(Ordering::Relaxed) {
+                    self.tick();
+                    std::thread::sleep(Duration::from_millis(100));
+                }
+            });
+            let result = work();
+            done.store(true, Ordering::Relaxed);
+            self.finish();
+            result
+        })
+    }
+
     /// Runs `work` on a worker thread while calling `poll` (which updates this bar) every 50 ms.
     pub fn around<T: Send>(&self, work: impl FnOnce() -> T + Send, poll: impl Fn(&Progress)) -> T {
         std::thread::scope(|s| {

@@ -235,3 +235,20 @@ fn an_interrupted_compile_leaves_no_partial_file() {
     }
     assert!(caught_writing, "the write was never seen in progress");
 }
+
+/// Faces with fewer than three corners are not dropped silently: bvhc compiles the rest and
+/// warns with the count, on standard error, once.
+#[test]
+fn short_faces_are_counted_in_a_warning() {
+    let dir = scratch("short-faces");
+    let obj = dir.join("short.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\nf 2 3\n").unwrap();
+    let out = dir.join("short.bvh");
+    let o = bvhc(&["compile", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--quiet"]);
+    let (_, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    let warnings: Vec<&str> = err.lines().filter(|l| l.starts_with("warning: ")).collect();
+    assert_eq!(warnings.len(), 1, "{err}");
+    assert!(warnings[0].contains("2 faces with fewer than three corners skipped"), "{err}");
+    assert!(out.exists());
+}

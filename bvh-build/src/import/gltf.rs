@@ -19,6 +19,7 @@ use ::gltf::mesh::{Mode, Semantic};
 use ::gltf::{Accessor, Document, Node, buffer};
 use bvh_format::Camera;
 use glam::{DMat4, DQuat, DVec3, Mat4, Vec3};
+use rayon::prelude::*;
 use std::path::Path;
 
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<(Scene, Vec<Camera>), ImportError> {
@@ -238,7 +239,7 @@ impl Reader<'_> {
                     what: format!("vertex {i} of {label}"),
                 });
             }
-            let positions: Vec<Vec3> = raw.iter().map(|&p| aff.point(p)).collect();
+            let positions: Vec<Vec3> = raw.par_iter().map(|&p| aff.point(p)).collect();
             if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
                 return Err(ImportError::NonFinite {
                     path: self.path.to_owned(),
@@ -253,7 +254,7 @@ impl Reader<'_> {
                     }
                     // A normal the transform collapses becomes zero, which emit replaces by the
                     // triangle's flat normal.
-                    Some(n.iter().map(|&n| aff.normal(n).unwrap_or(Vec3::ZERO)).collect::<Vec<_>>())
+                    Some(n.par_iter().map(|&n| aff.normal(n).unwrap_or(Vec3::ZERO)).collect::<Vec<_>>())
                 }
                 None => None,
             };

@@ -4,7 +4,7 @@ use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
 use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed};
-use tools::cli::{duration, rays_per_second};
+use tools::cli::{Progress, duration, rays_per_second};
 use tools::output::{self, Frame, Heatmap};
 use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
@@ -138,7 +138,12 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let method = method_of(method);
     let gpu = open(device)?;
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
-    let out = renderer.render(&settings).map_err(|e| e.to_string())?;
+    let pixels = u64::from(settings.width) * u64::from(settings.height);
+    let bar = Progress::new(pixels, "rendering {bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
+    let per_pixel = outputs.heatmap.is_some() || outputs.aov.is_some();
+    let out = bar
+        .ticking(|| renderer.render_with_progress(&settings, true, per_pixel, &mut |p| bar.set_position(p.pixels_done)))
+        .map_err(|e| e.to_string())?;
     check_validation(&gpu)?;
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
