@@ -6,9 +6,9 @@
 use crate::output::{self, Kind, Output};
 use crate::render_args::{MAX_LIGHTS, lights_n, parse_count, parse_res, stored_camera};
 use bvh_format::{Light, SceneFile};
+use render_spec::{CameraSpec, Mode};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use tracer_cpu::{CameraSpec, Mode};
 
 /// The options of the matrix, shared by both tracers' `bench` commands.
 #[derive(clap::Args, Debug, Clone)]

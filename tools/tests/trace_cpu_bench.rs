@@ -1,10 +1,11 @@
 //! `trace-cpu bench` end to end on a tiny matrix: the CSV has one row per setting with the shared
 //! columns, and every row's ray counts are those of the image the tracer renders for it.
 
+use render_spec::{Mode, Settings};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use tools::bench::{CSV_HEADER, read_csv};
-use tracer_cpu::{Method, Mode, RenderSettings, Tracer};
+use tracer_cpu::{Method, Tracer};
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("tools/ sits in the workspace").to_path_buf()
@@ -49,16 +50,16 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
         let cam = tools::render_args::stored_camera(&scene, camera).unwrap();
         let image = tracer_cpu::render(
             &tracer,
-            &RenderSettings {
+            &Settings {
                 width: r.width,
                 height: r.height,
                 camera: cam,
                 mode: if lights == 0 { Mode::Cast } else { Mode::Whitted },
                 lights: tools::render_args::lights_n(&scene, lights, &cam),
                 max_indirections: scene.settings.max_indirections,
-                method: Method::Ordered,
                 aovs: false,
             },
+            Method::Ordered,
         )
         .unwrap();
         let rays = image.rays;

@@ -29,13 +29,14 @@ mod rayset;
 
 use bvh_format::SceneFile;
 use rayon::prelude::*;
+use render_spec::{CameraSpec, Mode, Settings};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use tracer_cpu::lanes::{OneByOne, Packets, TraceLanes};
 use tracer_cpu::packet::{Rays, Results};
 use tracer_cpu::render::{Tiles, render_with};
-use tracer_cpu::{CameraSpec, Method, Mode, RenderSettings, Tracer, render};
+use tracer_cpu::{Method, Tracer, render};
 
 struct Options {
     scenes: Vec<(String, PathBuf)>,
@@ -236,14 +237,13 @@ fn main() {
         let (w, h) = opts.size;
         for &mode in &opts.modes {
             for &method in &opts.methods {
-                let settings = RenderSettings {
+                let settings = Settings {
                     width: w,
                     height: h,
                     camera,
                     mode,
                     lights: scene.lights.clone(),
                     max_indirections: scene.settings.max_indirections,
-                    method,
                     aovs: false,
                 };
                 let sink = Mutex::new(Vec::new());
@@ -252,6 +252,7 @@ fn main() {
                         render_with(
                             &tracer,
                             &settings,
+                            method,
                             || Recorder { inner: lanes_for(&tracer, method), calls: Vec::new(), sink: &sink },
                             Tiles::default(),
                             &|_| {},
@@ -273,7 +274,7 @@ fn main() {
                 for (threads, pool) in &pools {
                     let mut out = vec![rayset::NO_RAY; (w * h) as usize];
                     let mut a = || {
-                        pool.install(|| render(&tracer, &settings)).expect("renders");
+                        pool.install(|| render(&tracer, &settings, method)).expect("renders");
                     };
                     let mut b = || {
                         pool.install(|| match method {

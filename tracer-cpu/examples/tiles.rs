@@ -10,9 +10,10 @@
 #[path = "../benches/rayset/mod.rs"]
 mod rayset;
 
+use render_spec::{CameraSpec, Mode, Settings};
 use tracer_cpu::lanes::{OneByOne, Packets};
 use tracer_cpu::render::{Tiles, render_with};
-use tracer_cpu::{CameraSpec, Method, Mode, RenderSettings, Tracer};
+use tracer_cpu::{Method, Tracer};
 
 /// Bands of two rows traced across the whole width (the packet path's first shape), and square
 /// and wide tiles.
@@ -43,20 +44,21 @@ fn main() {
         rayset::loadavg()
     );
     for mode in [Mode::Cast, Mode::Whitted] {
-        let settings = RenderSettings {
+        let settings = Settings {
             width: w,
             height: h,
             camera: CameraSpec::from(scene.camera(camera).expect("the scene has the camera")),
             mode,
             lights: scene.lights.clone(),
             max_indirections: scene.settings.max_indirections,
-            method: Method::Auto,
             aovs: false,
         };
         let frame = |tiles: Tiles| {
-            pool.install(|| match settings.method.resolve(&scene) {
-                Method::Packet => render_with(&tracer, &settings, || Packets::new(&tracer), tiles, &|_| {}),
-                m => render_with(&tracer, &settings, || OneByOne::new(&tracer, m), tiles, &|_| {}),
+            pool.install(|| match Method::Auto.resolve(&scene) {
+                Method::Packet => {
+                    render_with(&tracer, &settings, Method::Packet, || Packets::new(&tracer), tiles, &|_| {})
+                }
+                m => render_with(&tracer, &settings, m, || OneByOne::new(&tracer, m), tiles, &|_| {}),
             })
             .expect("renders");
         };

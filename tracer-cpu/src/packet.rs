@@ -127,8 +127,9 @@ pub struct Entry {
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{Entry, LANES, Rays, Results};
-    use crate::geometry::{Cost, T_SLACK};
+    use crate::geometry::Cost;
     use bvh_format::{Node, Triangle};
+    use render_spec::constants::T_SLACK;
     use std::arch::x86_64::*;
 
     struct Packet {

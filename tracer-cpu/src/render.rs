@@ -1,7 +1,7 @@
 //! Whole images: bands of rows in parallel (rayon), 4 x 2 pixel blocks shaded by the Whitted
 //! driver and written straight into the 8-bit image and, when asked for, the AOVs.
 
-use crate::camera::{CameraError, CameraSpec, Frame};
+use crate::Method;
 use crate::geometry::{Cost, Hit, Ray};
 use crate::lanes::{OneByOne, Packets, TraceLanes};
 use crate::packet::{LANES, Rays};
@@ -9,77 +9,9 @@ use crate::shade;
 use crate::traverse::{self, Stack};
 use crate::whitted::Shading;
 use crate::wide::{F8, Lanes, V3};
-use crate::{Method, RenderError};
-use bvh_format::{Light, Node, SceneFile};
+use bvh_format::{Node, SceneFile};
 use rayon::prelude::*;
-
-/// Ray casting or Whitted ray tracing (DESIGN.md section 7).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Mode {
-    Cast,
-    Whitted,
-}
-
-/// What to render.
-#[derive(Clone, Debug)]
-pub struct RenderSettings {
-    pub width: u32,
-    pub height: u32,
-    pub camera: CameraSpec,
-    pub mode: Mode,
-    /// Lights for Whitted mode (ray casting always uses one white light at the eye).
-    pub lights: Vec<Light>,
-    /// Longest chain of secondary rays.
-    pub max_indirections: u32,
-    pub method: Method,
-    /// Fill [`Image::aov`].
-    pub aovs: bool,
-}
-
-/// Per-pixel outputs besides the colour, row-major from the top-left pixel.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Aovs {
-    /// Distance to the primary hit; +inf on a miss.
-    pub t: Vec<f32>,
-    /// Shading normal at the primary hit, facing the camera; zero on a miss.
-    pub normal: Vec<[f32; 3]>,
-    /// Index of the primary hit's triangle in the input scene; [`NO_TRIANGLE`] on a miss.
-    pub prim: Vec<u32>,
-    /// Node boxes tested, over every ray of the pixel.
-    pub nodes: Vec<u32>,
-    /// Triangles tested, over every ray of the pixel.
-    pub tris: Vec<u32>,
-}
-
-/// Rays traced, by kind.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct RayCounts {
-    pub primary: u64,
-    pub shadow: u64,
-    pub secondary: u64,
-}
-
-impl std::ops::Add for RayCounts {
-    type Output = RayCounts;
-    fn add(self, o: RayCounts) -> RayCounts {
-        RayCounts {
-            primary: self.primary + o.primary,
-            shadow: self.shadow + o.shadow,
-            secondary: self.secondary + o.secondary,
-        }
-    }
-}
-
-/// A rendered image.
-#[derive(Clone, Debug)]
-pub struct Image {
-    pub width: u32,
-    pub height: u32,
-    /// 8-bit RGB, row-major from the top-left pixel.
-    pub rgb: Vec<[u8; 3]>,
-    pub aov: Option<Aovs>,
-    pub rays: RayCounts,
-}
+use render_spec::{Aovs, Frame, Image, RayCounts, RenderError, Settings};
 
 /// The scene prepared for tracing: layouts, and the bounds behind the adaptive bounce stop.
 pub struct Tracer<'a> {
@@ -95,9 +27,11 @@ impl<'a> Tracer<'a> {
 
     fn layout_for(&self, method: Method) -> Result<(), RenderError> {
         match method {
-            Method::Stackless if self.escape.is_none() => Err(RenderError::MissingLayout("escape-pointer")),
+            Method::Stackless if self.escape.is_none() => {
+                Err(RenderError::MissingLayout { method: method.name(), layout: "escape-pointer" })
+            }
             Method::Ordered | Method::Packet if self.child_pair.is_none() => {
-                Err(RenderError::MissingLayout("child-pair"))
+                Err(RenderError::MissingLayout { method: method.name(), layout: "child-pair" })
             }
             _ => Ok(()),
         }
@@ -142,16 +76,6 @@ impl<'a> Tracer<'a> {
     }
 }
 
-fn check(settings: &RenderSettings) -> Result<Frame, RenderError> {
-    if settings.width == 0 || settings.height == 0 {
-        return Err(RenderError::EmptyImage);
-    }
-    settings.camera.frame(settings.width, settings.height).map_err(|e| match e {
-        CameraError::Degenerate => RenderError::DegenerateCamera,
-        CameraError::FieldOfView => RenderError::FieldOfView(settings.camera.fov_deg),
-    })
-}
-
 /// How the image is cut up for the workers: bands of `rows` rows are the unit of parallel work,
 /// of progress and of the output slices a worker writes into; a band is traced in tiles of
 /// `rows` x `columns` pixels, 4 x 2 blocks in each, so that neighbouring blocks find the same
@@ -178,22 +102,24 @@ impl Tiles {
     }
 }
 
-/// Renders an image. Pixels are independent, so the result does not depend on the thread count.
-pub fn render(tracer: &Tracer<'_>, settings: &RenderSettings) -> Result<Image, RenderError> {
-    render_with_progress(tracer, settings, &|_| {})
+/// Renders an image with `method`. Pixels are independent, so the result does not depend on the
+/// thread count.
+pub fn render(tracer: &Tracer<'_>, settings: &Settings, method: Method) -> Result<Image, RenderError> {
+    render_with_progress(tracer, settings, method, &|_| {})
 }
 
 /// [`render`], calling `progress` with the number of rows finished each time a band of rows is
 /// done (from any worker thread).
 pub fn render_with_progress(
     tracer: &Tracer<'_>,
-    settings: &RenderSettings,
+    settings: &Settings,
+    method: Method,
     progress: &(dyn Fn(u32) + Sync),
 ) -> Result<Image, RenderError> {
     let tiles = Tiles::default();
-    match settings.method.resolve(tracer.scene) {
-        Method::Packet => render_with(tracer, settings, || Packets::new(tracer), tiles, progress),
-        m => render_with(tracer, settings, || OneByOne::new(tracer, m), tiles, progress),
+    match method.resolve(tracer.scene) {
+        Method::Packet => render_with(tracer, settings, Method::Packet, || Packets::new(tracer), tiles, progress),
+        m => render_with(tracer, settings, m, || OneByOne::new(tracer, m), tiles, progress),
     }
 }
 
@@ -233,29 +159,31 @@ fn bands<'a>(w: usize, rows: usize, rgb: &'a mut [[u8; 3]], aov: Option<&'a mut 
 
 /// [`render_with_progress`] with the rays of every stage traced by a [`TraceLanes`] made once per
 /// worker by `lanes` (benchmarks wrap the renderer's own to see what it traces), in `tiles`.
+/// `method` is the one `lanes` traces with: the layout it reads must be in the file.
 pub fn render_with<T: TraceLanes>(
     tracer: &Tracer<'_>,
-    settings: &RenderSettings,
+    settings: &Settings,
+    method: Method,
     lanes: impl Fn() -> T + Sync,
     tiles: Tiles,
     progress: &(dyn Fn(u32) + Sync),
 ) -> Result<Image, RenderError> {
-    render_in(tracer, settings, lanes, tiles, progress, crate::packet::available())
+    render_in(tracer, settings, method, lanes, tiles, progress, crate::packet::available())
 }
 
 /// [`render_with`], with AVX lanes for the shading or (`avx` false, or no AVX2) plain arrays.
 fn render_in<T: TraceLanes>(
     tracer: &Tracer<'_>,
-    settings: &RenderSettings,
+    settings: &Settings,
+    method: Method,
     lanes: impl Fn() -> T + Sync,
     tiles: Tiles,
     progress: &(dyn Fn(u32) + Sync),
     avx: bool,
 ) -> Result<Image, RenderError> {
     let tiles = tiles.blocks();
-    let frame = check(settings)?;
-    let method = settings.method.resolve(tracer.scene);
-    tracer.layout_for(method)?;
+    let frame = settings.frame()?;
+    tracer.layout_for(method.resolve(tracer.scene))?;
     let (w, h) = (settings.width as usize, settings.height as usize);
     let sh = Shading::new(tracer.scene, settings);
     let mut rgb = vec![[0u8; 3]; w * h];
@@ -388,6 +316,7 @@ fn block<L: Lanes, T: TraceLanes>(
 mod tests {
     use super::*;
     use glam::Vec3;
+    use render_spec::{CameraSpec, Mode};
 
     fn same_directions<L: Lanes>() {
         let cams = [
@@ -422,24 +351,25 @@ mod tests {
         let tracer = Tracer::new(&scene);
         for mode in [Mode::Cast, Mode::Whitted] {
             for method in [Method::Packet, Method::Ordered, Method::Stackless] {
-                let settings = RenderSettings {
+                let settings = Settings {
                     width: 61,
                     height: 37,
                     camera: CameraSpec::from(scene.camera("medium").unwrap()),
                     mode,
                     lights: scene.lights.clone(),
                     max_indirections: scene.settings.max_indirections,
-                    method,
                     aovs: true,
                 };
                 let tiles = Tiles { rows: 6, columns: 12 };
                 let image = |avx| match method.resolve(&scene) {
-                    Method::Packet => render_in(&tracer, &settings, || Packets::new(&tracer), tiles, &|_| {}, avx),
-                    m => render_in(&tracer, &settings, || OneByOne::new(&tracer, m), tiles, &|_| {}, avx),
+                    Method::Packet => {
+                        render_in(&tracer, &settings, Method::Packet, || Packets::new(&tracer), tiles, &|_| {}, avx)
+                    }
+                    m => render_in(&tracer, &settings, m, || OneByOne::new(&tracer, m), tiles, &|_| {}, avx),
                 };
                 let (a, b) = (image(true).unwrap(), image(false).unwrap());
                 assert_eq!(a.rgb, b.rgb, "{mode:?} {method:?}");
-                assert_eq!(a.rgb, render(&tracer, &settings).unwrap().rgb, "{mode:?} {method:?}: other tiles");
+                assert_eq!(a.rgb, render(&tracer, &settings, method).unwrap().rgb, "{mode:?} {method:?}: other tiles");
                 assert_eq!(a.rays, b.rays, "{mode:?} {method:?}");
                 let (x, y) = (a.aov.unwrap(), b.aov.unwrap());
                 assert_eq!(

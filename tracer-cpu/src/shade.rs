@@ -4,6 +4,8 @@
 use crate::wide::{LANES, Lanes, Real, V3};
 use bvh_format::{Material, Triangle, TriangleNormals};
 use glam::Vec3;
+use render_spec::BounceStop;
+use render_spec::constants::STOP_CONTRIBUTION;
 
 /// Everything shading needs to know about a hit.
 #[derive(Clone, Copy, Debug)]
@@ -181,33 +183,11 @@ pub fn secondary_of<R: Real>(kr: R, kt: R, ior: R, shading: V3<R>, front: R::Mas
     }
 }
 
-/// Whether a secondary ray of weight `w`, with `remaining` indirections left after it (itself
-/// included), can still change an 8-bit pixel: the most the chain can add is
-/// `w * bound * (1 + k + k^2 + ... )` over `remaining` terms, with `k` the largest kr or kt; below
-/// half an 8-bit step it cannot move the rounded value by a full step.
-pub fn worth_tracing(w: f32, remaining: u32, bound: f32, k_max: f32) -> bool {
-    worth_of(w, bound, chain(remaining, k_max))
-}
-
-/// The sum `1 + k + k^2 + ...` of [`worth_tracing`] over `remaining` terms (stopping once the
-/// terms are negligible).
-pub fn chain(remaining: u32, k_max: f32) -> f32 {
-    let mut chain = 0.0f32;
-    let mut f = 1.0f32;
-    for _ in 0..remaining {
-        chain += f;
-        f *= k_max;
-        if f < 1e-9 {
-            break;
-        }
-    }
-    chain
-}
-
-/// [`worth_tracing`] for any lanes, given the [`chain`].
+/// [`BounceStop::worth_tracing`] for any lanes, given the stop's [`BounceStop::chain`] at their
+/// (common) depth: computed once per depth, not once per lane.
 #[inline(always)]
-pub fn worth_of<R: Real>(w: R, bound: f32, chain: f32) -> R::Mask {
-    (w * R::splat(bound) * R::splat(chain)).ge(R::splat(0.5 / 255.0))
+pub fn worth_of<R: Real>(w: R, stop: &BounceStop, chain: f32) -> R::Mask {
+    (w * R::splat(stop.bound) * R::splat(chain)).ge(R::splat(STOP_CONTRIBUTION))
 }
 
 /// Linear radiance to 8 bits: clamp to [0, 1], scale by 255, round to nearest.
@@ -313,11 +293,7 @@ mod tests {
     }
 
     #[test]
-    fn the_bounce_stop_is_exact_at_half_a_step() {
-        assert!(worth_tracing(1.0, 1, 1.0, 0.5));
-        assert!(!worth_tracing(0.5 / 255.0 * 0.99, 1, 1.0, 0.0));
-        assert!(worth_tracing(0.5 / 255.0 * 0.99, 2, 1.0, 0.5), "a longer chain adds more");
-        assert!(!worth_tracing(0.1, 0, 1.0, 1.0), "no indirection left");
+    fn radiance_rounds_to_the_nearest_8_bit_value() {
         assert_eq!(to_u8(Vec3::new(-1.0, 0.5, 2.0)), [0, 128, 255]);
     }
 }

@@ -10,11 +10,11 @@
 use crate::geometry::Cost;
 use crate::lanes::TraceLanes;
 use crate::packet::{LANES, Rays, Results};
-use crate::render::{Mode, RayCounts, RenderSettings};
 use crate::shade;
 use crate::wide::{Lanes, Mask, V3};
-use bvh_format::{Light, Material, NO_TRIANGLE, SceneFile};
+use bvh_format::{Light, Material, SceneFile};
 use glam::Vec3;
+use render_spec::{BounceStop, Mode, NO_TRIANGLE, RayCounts, Settings};
 
 /// Per-frame constants of the pipeline.
 pub struct Shading<'a> {
@@ -24,9 +24,8 @@ pub struct Shading<'a> {
     max_indirections: u32,
     ambient: Vec3,
     background: Vec3,
-    /// The adaptive bounce stop's bound on what a path can still add, and the largest kr or kt.
-    bound: f32,
-    k_max: f32,
+    /// The adaptive bounce stop, computed once per frame.
+    stop: BounceStop,
     /// Whether to fill [`Block::t`], [`Block::normal`] and [`Block::prim`].
     aovs: bool,
 }
@@ -83,9 +82,7 @@ impl<L: Lanes> Materials<L> {
 }
 
 impl<'a> Shading<'a> {
-    pub fn new(scene: &'a SceneFile, s: &'a RenderSettings) -> Self {
-        let colours: Vec<[f32; 3]> = s.lights.iter().map(|l| l.colour).collect();
-        let (bound, k_max) = scene.bounce_bound(&colours);
+    pub fn new(scene: &'a SceneFile, s: &'a Settings) -> Self {
         Self {
             scene,
             mode: s.mode,
@@ -93,8 +90,7 @@ impl<'a> Shading<'a> {
             max_indirections: s.max_indirections,
             ambient: Vec3::from(scene.settings.ambient),
             background: Vec3::from(scene.settings.background),
-            bound,
-            k_max,
+            stop: BounceStop::new(scene, &s.lights),
             aovs: s.aovs,
         }
     }
@@ -194,9 +190,7 @@ impl<'a> Shading<'a> {
                 break;
             }
             let sec = shade::secondary_of(m.kr, m.kt, m.ior, s.shading, s.front, dir);
-            let go = hit
-                & sec.exists
-                & shade::worth_of(weight * sec.factor, self.bound, shade::chain(remaining, self.k_max));
+            let go = hit & sec.exists & shade::worth_of(weight * sec.factor, &self.stop, self.stop.chain(remaining));
             if !go.any() {
                 break;
             }

@@ -596,7 +596,7 @@ mod avx {
                 unsafe {
                     // `(n * 256.0) as i32`: truncation, saturating, NaN to 0 (cvtt gives i32::MIN
                     // for NaN and for anything out of range).
-                    let scaled = _mm256_mul_ps(n, _mm256_set1_ps(crate::geometry::OFFSET_INT_SCALE));
+                    let scaled = _mm256_mul_ps(n, _mm256_set1_ps(render_spec::constants::OFFSET_INT_SCALE));
                     let mut o = _mm256_cvttps_epi32(scaled);
                     let too_big = _mm256_cmp_ps::<_CMP_GE_OQ>(scaled, _mm256_set1_ps(2147483648.0));
                     o = _mm256_castps_si256(_mm256_blendv_ps(
@@ -615,9 +615,9 @@ mod avx {
                     );
                     // Near the origin a fixed float step instead.
                     let abs = _mm256_andnot_ps(_mm256_set1_ps(-0.0), p);
-                    let near = _mm256_cmp_ps::<_CMP_LT_OQ>(abs, _mm256_set1_ps(crate::geometry::OFFSET_ORIGIN));
+                    let near = _mm256_cmp_ps::<_CMP_LT_OQ>(abs, _mm256_set1_ps(render_spec::constants::OFFSET_ORIGIN));
                     let float_step =
-                        _mm256_add_ps(p, _mm256_mul_ps(_mm256_set1_ps(crate::geometry::OFFSET_FLOAT_SCALE), n));
+                        _mm256_add_ps(p, _mm256_mul_ps(_mm256_set1_ps(render_spec::constants::OFFSET_FLOAT_SCALE), n));
                     _mm256_blendv_ps(stepped, float_step, near)
                 }
             }
@@ -754,7 +754,7 @@ mod tests {
                 let p = shade::phong_of(a[0], a[1], a[5].x, a[2], a[3], a[4], true);
                 let front = a[6].y.lt(0.0);
                 let s = shade::secondary_of(a[5].y, a[5].z, a[6].x, a[2], front, a[3]);
-                let w = shade::worth_of(a[6].z, 1.5, 2.0);
+                let w = shade::worth_of(a[6].z, &render_spec::BounceStop { bound: 1.5, k_max: 0.5 }, 2.0);
                 let mut f = flat(&[c, p, s.dir, a[4].normalize_or_zero()]);
                 f.push(s.factor);
                 (f, vec![s.same_side, s.exists, w, a[4].is_zero()])
@@ -765,7 +765,7 @@ mod tests {
                 let p = shade::phong_of(a[0], a[1], a[5].x, a[2], a[3], a[4], all);
                 let front = a[6].y.lt(L::splat(0.0));
                 let s = shade::secondary_of(a[5].y, a[5].z, a[6].x, a[2], front, a[3]);
-                let w = shade::worth_of(a[6].z, 1.5, 2.0);
+                let w = shade::worth_of(a[6].z, &render_spec::BounceStop { bound: 1.5, k_max: 0.5 }, 2.0);
                 let mut f = flat(&[c, p, s.dir, a[4].normalize_or_zero()]);
                 f.push(s.factor);
                 (f, vec![s.same_side, s.exists, w, a[4].is_zero()])

@@ -2,14 +2,14 @@
 
 use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
+use render_spec::Settings;
 use std::process::ExitCode;
 use std::time::Instant;
 use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed};
 use tools::cli::{Progress, duration, rays_per_second};
-use tools::output::{self, Frame, Heatmap};
 use tools::render_args::{RenderArgs, parse_count};
 use tools::say;
-use tracer_cpu::{Method, RenderSettings, Tracer};
+use tracer_cpu::{Method, Tracer};
 
 #[derive(Parser)]
 #[command(name = "trace-cpu", version, about = "Ray cast or Whitted ray trace a BVH scene file on the CPU.")]
@@ -86,30 +86,20 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     let outputs = args.check()?;
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
-    let camera = args.camera(scene)?;
-    let settings = RenderSettings {
-        width: args.res.0,
-        height: args.res.1,
-        camera,
-        mode: args.mode(),
-        lights: args.lights(scene, &camera),
-        max_indirections: args.indirections(scene),
-        method: method.method(),
-        aovs: args.aov.is_some() || args.heatmap.is_some(),
-    };
+    let settings = args.settings(scene)?;
+    let method = method.method();
     let pool = pool(threads)?;
     let tracer = Tracer::new(scene);
     let bar = Progress::new(settings.height as u64, "{bar:40} {pos}/{len} rows ({elapsed}, {eta} left)", false);
     let t0 = Instant::now();
     let image = pool
-        .install(|| tracer_cpu::render_with_progress(&tracer, &settings, &|rows| bar.inc(rows as u64)))
+        .install(|| tracer_cpu::render_with_progress(&tracer, &settings, method, &|rows| bar.inc(rows as u64)))
         .map_err(|e| e.to_string())?;
     let seconds = t0.elapsed().as_secs_f64();
     bar.finish();
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
-    let frame = Frame { width: image.width, height: image.height, rgb: &image.rgb };
-    output::write_image(&outputs.image, &frame).map_err(|e| e.to_string())?;
+    let written = outputs.write(&image, args.heatmap_max)?;
     let mut lines = Vec::new();
     let r = image.rays;
     lines.push(format!(
@@ -118,7 +108,7 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
         image.width,
         image.height,
         settings.mode,
-        settings.method.resolve(scene),
+        method.resolve(scene),
         pool.current_num_threads(),
         duration(seconds),
         if settings.aovs { " and the AOVs" } else { "" },
@@ -126,21 +116,10 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
         r.primary,
         r.shadow,
         r.secondary,
-        rays_per_second(r.primary + r.shadow + r.secondary, seconds),
+        rays_per_second(r.total(), seconds),
         outputs.image.path.display()
     ));
-    if let Some(aov) = &image.aov {
-        if let Some(out) = &outputs.heatmap {
-            let h = Heatmap::new(image.width, image.height, &aov.nodes, args.heatmap_max);
-            output::write_heatmap(out, &h).map_err(|e| e.to_string())?;
-            lines.push(tools::render_args::heatmap_line(&h, out));
-        }
-        if let Some(out) = &outputs.aov {
-            output::write_aov(out, image.width, image.height, aov).map_err(|e| e.to_string())?;
-            lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", out.path.display()));
-        }
-    }
-    for line in lines {
+    for line in lines.into_iter().chain(written) {
         say!("{line}");
     }
     Ok(())
@@ -184,18 +163,17 @@ impl Bench for CpuBench {
     }
 
     fn frame(&self, (tracer, method): &mut (Tracer<'_>, Method), f: &FrameSpec) -> Result<Timed, String> {
-        let settings = RenderSettings {
+        let settings = Settings {
             width: f.width,
             height: f.height,
             camera: f.camera,
             mode: f.mode,
             lights: f.lights.clone(),
             max_indirections: f.max_indirections,
-            method: *method,
             aovs: false,
         };
         let t0 = Instant::now();
-        let image = self.pool.install(|| tracer_cpu::render(tracer, &settings)).map_err(|e| e.to_string())?;
+        let image = self.pool.install(|| tracer_cpu::render(tracer, &settings, *method)).map_err(|e| e.to_string())?;
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         let r = image.rays;
         Ok(Timed { ms, rays: [r.primary, r.shadow, r.secondary] })
