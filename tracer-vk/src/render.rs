@@ -40,6 +40,22 @@ pub struct Settings {
 /// facing each other go on to the limit, at a cost that grows with it.
 pub const MAX_INDIRECTIONS: u32 = 1024;
 
+/// The most invocations a workgroup may have on any device (Vulkan guarantees 128; every desktop
+/// GPU and lavapipe allow 1024); a device's own lower limit is checked when a renderer is made.
+pub const MAX_WORKGROUP_INVOCATIONS: u32 = 1024;
+
+/// Whether the kernels take a `width` x `height` workgroup with at most `limit` invocations: both
+/// sides powers of two (SST's vote reduction halves the workgroup), every shape of them tested.
+pub fn workgroup_allowed(width: u32, height: u32, limit: u32) -> bool {
+    width.is_power_of_two() && height.is_power_of_two() && width as u64 * height as u64 <= limit as u64
+}
+
+/// Every workgroup shape [`workgroup_allowed`] takes with `limit` invocations.
+pub fn allowed_workgroups(limit: u32) -> Vec<(u32, u32)> {
+    let sides = || (0..=limit.ilog2()).map(|k| 1u32 << k);
+    sides().flat_map(|w| sides().map(move |h| (w, h))).filter(|&(w, h)| workgroup_allowed(w, h, limit)).collect()
+}
+
 /// Bounces in the first submission of a tile (every shipped scene needs at most 5); each later
 /// submission doubles the bounces done so far. Between submissions the live paths are counted.
 const FIRST_BOUNCES: u32 = 8;
@@ -248,9 +264,9 @@ impl<'g> Renderer<'g> {
         };
         let info = gpu.info();
         let (wx, wy) = workgroup;
-        let limit = (info.max_workgroup_invocations as u64).min(info.max_workgroup_size[0] as u64);
-        if !wx.is_power_of_two() || !wy.is_power_of_two() || wx as u64 * wy as u64 > limit {
-            return Err(RenderError::Workgroup { x: wx, y: wy, limit });
+        let limit = info.max_workgroup_invocations.min(info.max_workgroup_size[0]).min(MAX_WORKGROUP_INVOCATIONS);
+        if !workgroup_allowed(wx, wy, limit) {
+            return Err(RenderError::Workgroup { x: wx, y: wy, limit: limit as u64 });
         }
         if method == Method::SstSubgroup && !info.supports_subgroup_ops {
             return Err(RenderError::NoSubgroups(info.name.clone()));
