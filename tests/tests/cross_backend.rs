@@ -4,61 +4,12 @@
 //! on. Without a Vulkan loader or device these tests fail with the sentence that says what to
 //! install: a skipped GPU test must never pass.
 
-use bvh_format::{NO_TRIANGLE, SceneFile};
-use std::path::Path;
+use bvh_format::SceneFile;
+use tests::{assert_matches_cpu, compile, gpu};
 use tracer_cpu::{CameraSpec, Method, Tracer};
 use tracer_vk::Gpu;
 use tracer_vk::kernels::Method as VkMethod;
 use tracer_vk::render::{Mode as VkMode, Renderer, Settings};
-
-fn compile(name: &str) -> SceneFile {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name);
-    let scene = bvh_build::import::load(&p, &Default::default()).expect("the scene imports");
-    bvh_build::compile(&scene, &Default::default(), Default::default()).expect("the scene compiles")
-}
-
-fn gpu() -> Gpu {
-    match Gpu::new(None, true) {
-        Ok(g) => g,
-        Err(e) => panic!("the cross-backend tests need a Vulkan device: {e}"),
-    }
-}
-
-struct Diff {
-    within_one: f64,
-    flip_mean: f32,
-    prim_differs: usize,
-    prim_ties: usize,
-}
-
-fn diff(cpu: &tracer_cpu::Image, gpu: &tracer_vk::render::Output) -> Diff {
-    let n = cpu.rgb.len();
-    let within =
-        cpu.rgb.iter().zip(&gpu.rgb).filter(|(a, b)| a.iter().zip(b.iter()).all(|(x, y)| x.abs_diff(*y) <= 1)).count();
-    let flat = |rgb: &[[u8; 3]]| rgb.iter().flatten().copied().collect::<Vec<u8>>();
-    let reference = nv_flip::FlipImageRgb8::with_data(cpu.width, cpu.height, &flat(&cpu.rgb));
-    let test = nv_flip::FlipImageRgb8::with_data(gpu.width, gpu.height, &flat(&gpu.rgb));
-    let error = nv_flip::flip(reference, test, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
-    let flip_mean = nv_flip::FlipPool::from_image(&error).mean();
-
-    // Triangle ids: a different triangle at the same distance is an exact tie or a shared edge
-    // (both backends round differently there); anything else is a real disagreement.
-    let aov = cpu.aov.as_ref().expect("the CPU render keeps AOVs");
-    let (mut differs, mut ties) = (0, 0);
-    for i in 0..n {
-        if aov.prim[i] == gpu.prim[i] {
-            continue;
-        }
-        let (a, b) = (aov.t[i], gpu.t[i]);
-        let both_hit = aov.prim[i] != NO_TRIANGLE && gpu.prim[i] != NO_TRIANGLE;
-        if both_hit && (a - b).abs() <= 1e-4 * a.abs().max(b.abs()) {
-            ties += 1;
-        } else {
-            differs += 1;
-        }
-    }
-    Diff { within_one: within as f64 / n as f64, flip_mean, prim_differs: differs, prim_ties: ties }
-}
 
 fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32, h: u32) {
     let cam = CameraSpec::from(scene.camera(camera).expect("the camera exists"));
@@ -89,24 +40,7 @@ fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32,
                 max_indirections: scene.settings.max_indirections,
             };
             let out = r.render(&settings).expect("the GPU renders");
-            let d = diff(&cpu, &out);
-            let what = format!("{scene_name} {camera} {mode:?} {}", method.name());
-            println!(
-                "{what}: {:.4}% of pixels within 1/255, FLIP mean {:.5}, triangle ids: {} differ at equal distance (ties), {} otherwise; rays GPU {:?} CPU [{}, {}, {}]",
-                d.within_one * 100.0,
-                d.flip_mean,
-                d.prim_ties,
-                d.prim_differs,
-                out.rays,
-                cpu.rays.primary,
-                cpu.rays.shadow,
-                cpu.rays.secondary
-            );
-            assert!(d.within_one >= 0.999, "{what}: only {:.4}% of pixels within 1/255", d.within_one * 100.0);
-            assert!(d.flip_mean < 0.01, "{what}: FLIP mean {}", d.flip_mean);
-            assert_eq!(d.prim_differs, 0, "{what}: triangle ids differ beyond ties");
-            assert!(d.prim_ties * 1000 <= (w * h) as usize, "{what}: {} ties is too many to be ties", d.prim_ties);
-            assert_eq!(out.rays[0], cpu.rays.primary, "{what}: primary rays");
+            assert_matches_cpu(&format!("{scene_name} {camera} {mode:?} {}", method.name()), &cpu, &out);
         }
     }
     let messages = gpu.validation_messages();
@@ -199,20 +133,4 @@ fn an_sst_stack_or_leaf_beyond_shared_memory_is_a_clear_error() {
     assert!(!msg.contains('\n'));
     // LST renders it.
     assert!(Renderer::new(&gpu, &file, VkMethod::Lst, (8, 8)).is_ok());
-}
-
-#[test]
-fn a_frame_beyond_the_storage_buffer_range_fails_naming_the_limit() {
-    let gpu = gpu();
-    let limit = gpu.info().max_storage_buffer_range;
-    let scene = compile("room.toml");
-    let mut r = Renderer::new(&gpu, &scene, VkMethod::Lst, (8, 8)).unwrap();
-    // 32 bytes of path state per pixel: a square image just past the limit.
-    let side = ((limit / 32) as f64).sqrt() as u32 + 2;
-    let cam = CameraSpec::from(scene.camera("medium").unwrap());
-    let s =
-        Settings { width: side, height: side, camera: cam, mode: VkMode::Cast, lights: vec![], max_indirections: 0 };
-    let msg = r.render(&s).expect_err("the frame cannot fit").to_string();
-    assert!(msg.contains("maxStorageBufferRange"), "{msg}");
-    assert!(!msg.contains('\n'));
 }

@@ -47,8 +47,9 @@ pub struct RenderArgs {
     /// scene when it has fewer (the thesis's 1-, 2- and 4-light modes).
     #[arg(long = "lights", conflicts_with = "lights")]
     pub light_count: Option<usize>,
-    /// Longest chain of secondary rays [default: the scene's].
-    #[arg(long)]
+    /// Longest chain of secondary rays, at most 1024 (the passes stop early once every path has
+    /// ended) [default: the scene's].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=tracer_vk::render::MAX_INDIRECTIONS as i64))]
     pub indirections: Option<u32>,
     /// Output image (PNG).
     #[arg(short, long, default_value = "out.png")]

@@ -39,8 +39,8 @@ enum Command {
         /// GPU traversal.
         #[arg(long, value_enum, default_value = "lst")]
         method: MethodArg,
-        /// Workgroup shape (pixels).
-        #[arg(long, value_parser = parse_res, default_value = "8x8")]
+        /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
+        #[arg(long, value_parser = parse_workgroup, default_value = "8x8")]
         workgroup: (u32, u32),
         #[command(flatten)]
         device: DeviceArgs,
@@ -69,8 +69,8 @@ struct BenchArgs {
     /// Untimed frames before the timed ones.
     #[arg(long, default_value_t = 3)]
     warmup: usize,
-    /// Workgroup shape (pixels).
-    #[arg(long, value_parser = parse_res, default_value = "8x8")]
+    /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
+    #[arg(long, value_parser = parse_workgroup, default_value = "8x8")]
     workgroup: (u32, u32),
     /// Write the table as CSV here (and as Markdown next to it, .md).
     #[arg(long, default_value = "bench.csv")]
@@ -89,6 +89,23 @@ enum MethodArg {
     Sst,
     /// SST whose majority vote uses subgroup operations instead of a workgroup-memory reduction.
     SstSubgroup,
+}
+
+/// A workgroup shape the kernels take on every device that runs them: both sides powers of two,
+/// at most 1024 invocations (a device with a lower limit says so when the renderer is made).
+fn parse_workgroup(s: &str) -> Result<(u32, u32), String> {
+    let bad = || {
+        format!(
+            "{s:?} is not a workgroup shape: width and height must be powers of two with at most {} invocations in all, such as 8x8 (the default), 16x16 or 32x4",
+            tracer_vk::render::MAX_WORKGROUP_INVOCATIONS
+        )
+    };
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h) = (w.trim().parse::<u32>().map_err(|_| bad())?, h.trim().parse::<u32>().map_err(|_| bad())?);
+    if !tracer_vk::render::workgroup_allowed(w, h, tracer_vk::render::MAX_WORKGROUP_INVOCATIONS) {
+        return Err(bad());
+    }
+    Ok((w, h))
 }
 
 fn main() -> ExitCode {
@@ -154,7 +171,12 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let method = method_of(method);
     let gpu = open(device)?;
     let mut renderer = Renderer::new(&gpu, &scene, method, workgroup).map_err(|e| e.to_string())?;
-    let out = renderer.render(&settings).map_err(|e| e.to_string())?;
+    let want_aovs = args.heatmap.is_some() || args.aov.is_some();
+    let bar = LateBar::new();
+    let out = renderer
+        .render_with_progress(&settings, true, want_aovs, &mut |p| bar.update(p.pixels_done, p.pixels))
+        .map_err(|e| e.to_string())?;
+    bar.finish();
     check_validation(&gpu)?;
     let image = tools::output::Frame { width: out.width, height: out.height, rgb: &out.rgb };
     tools::output::write_frame_png(&args.output, &image)?;
@@ -180,6 +202,34 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
         println!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", path.display());
     }
     Ok(())
+}
+
+/// A progress bar that shows itself only once the work has taken longer than a second.
+struct LateBar {
+    bar: indicatif::ProgressBar,
+    start: std::time::Instant,
+}
+
+impl LateBar {
+    fn new() -> Self {
+        let bar = indicatif::ProgressBar::hidden().with_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {percent}% of the pixels, {elapsed} (eta {eta})")
+                .expect("the template is valid"),
+        );
+        LateBar { bar, start: std::time::Instant::now() }
+    }
+
+    fn update(&self, done: u64, total: u64) {
+        if self.bar.is_hidden() && self.start.elapsed() > std::time::Duration::from_secs(1) {
+            self.bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+        }
+        self.bar.set_length(total);
+        self.bar.set_position(done);
+    }
+
+    fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
 }
 
 fn method_of(m: MethodArg) -> Method {

@@ -1,0 +1,91 @@
+//! Every workgroup shape `trace-vk --workgroup` accepts, with every GPU traversal, renders the
+//! CPU's image (issue 15, item 1). On main, SST lost rows of rays or looped for minutes with
+//! workgroups narrower than 8 on lavapipe, and rendered wrong images with fewer than 4
+//! invocations on an H100.
+//!
+//! The image size grows with the shape so that every run has full and partial workgroups in both
+//! directions while staying small: lavapipe runs an SST workgroup's barriers one by one.
+
+use bvh_format::SceneFile;
+use tests::{assert_matches_cpu, compile, gpu};
+use tracer_cpu::{CameraSpec, Method, Tracer};
+use tracer_vk::kernels::Method as VkMethod;
+use tracer_vk::render::{MAX_WORKGROUP_INVOCATIONS, Mode as VkMode, Renderer, Settings, allowed_workgroups};
+
+fn cpu_image(tracer: &Tracer, scene: &SceneFile, w: u32, h: u32, mode: tracer_cpu::Mode) -> tracer_cpu::Image {
+    tracer_cpu::render(
+        tracer,
+        &tracer_cpu::RenderSettings {
+            width: w,
+            height: h,
+            camera: CameraSpec::from(scene.camera("medium").expect("room has a medium camera")),
+            mode,
+            lights: scene.lights.clone(),
+            max_indirections: scene.settings.max_indirections,
+            method: Method::Ordered,
+            aovs: true,
+        },
+    )
+    .expect("the CPU renders")
+}
+
+fn render_all_shapes(methods: &[VkMethod]) {
+    let gpu = gpu();
+    let limit = gpu.info().max_workgroup_invocations.min(gpu.info().max_workgroup_size[0]);
+    assert!(limit >= MAX_WORKGROUP_INVOCATIONS, "this device allows only {limit} invocations; the test wants all");
+    let shapes = allowed_workgroups(MAX_WORKGROUP_INVOCATIONS);
+    assert_eq!(shapes.len(), 66, "powers of two from 1 to 1024 with at most 1024 invocations");
+    // Room: reflection, refraction, total internal reflection and shadows from two lights.
+    let scene = compile("room.toml");
+    let tracer = Tracer::new(&scene);
+    let mut references = std::collections::HashMap::new();
+    for &(wx, wy) in &shapes {
+        let (w, h) = ((wx + wx / 2 + 1).max(24), (wy + wy / 2 + 1).max(18));
+        let cpu = references
+            .entry((w, h))
+            .or_insert_with(|| cpu_image(&tracer, &scene, w, h, tracer_cpu::Mode::Whitted));
+        for &method in methods {
+            let mut r = Renderer::new(&gpu, &scene, method, (wx, wy)).expect("an allowed shape is taken");
+            let settings = Settings {
+                width: w,
+                height: h,
+                camera: CameraSpec::from(scene.camera("medium").unwrap()),
+                mode: VkMode::Whitted,
+                lights: scene.lights.clone(),
+                max_indirections: scene.settings.max_indirections,
+            };
+            let out = r.render(&settings).unwrap_or_else(|e| panic!("{} {wx}x{wy}: {e}", method.name()));
+            assert_matches_cpu(&format!("{} {wx}x{wy} at {w}x{h}", method.name()), cpu, &out);
+        }
+    }
+    let messages = gpu.validation_messages();
+    assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
+}
+
+#[test]
+fn every_allowed_shape_renders_the_cpu_image_with_lst_and_stackless() {
+    render_all_shapes(&[VkMethod::Lst, VkMethod::Stackless]);
+}
+
+#[test]
+fn every_allowed_shape_renders_the_cpu_image_with_sst() {
+    render_all_shapes(&[VkMethod::Sst]);
+}
+
+#[test]
+fn every_allowed_shape_renders_the_cpu_image_with_sst_subgroup() {
+    render_all_shapes(&[VkMethod::SstSubgroup]);
+}
+
+#[test]
+fn shapes_outside_the_allowed_set_are_refused_in_one_sentence() {
+    let gpu = gpu();
+    let scene = compile("room.toml");
+    for shape in [(3, 4), (0, 8), (8, 0), (64, 32), (6, 1)] {
+        for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup] {
+            let e = Renderer::new(&gpu, &scene, method, shape).err().expect("the shape is refused");
+            let msg = e.to_string();
+            assert!(msg.contains("powers of two") && msg.contains("8x8") && !msg.contains('\n'), "{msg}");
+        }
+    }
+}
