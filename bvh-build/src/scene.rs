@@ -19,6 +19,8 @@ pub struct Scene {
     pub cameras: Vec<Camera>,
     pub lights: Vec<Light>,
     pub settings: SceneSettings,
+    /// What the importer skipped or changed, one sentence each, for the user to see.
+    pub warnings: Vec<String>,
 }
 
 impl Scene {
@@ -42,5 +44,6 @@ impl Scene {
         self.material_ids.extend(other.material_ids.into_iter().map(|m| m + base));
         self.materials.extend(other.materials);
         self.material_names.extend(other.material_names);
+        self.warnings.extend(other.warnings);
     }
 }

@@ -205,6 +205,24 @@ fn malformed_obj_inputs_are_errors() {
 }
 
 #[test]
+fn obj_errors_carry_line_numbers_and_short_faces_are_counted() {
+    let dir = temp_dir("objlines");
+    for (name, text, needle) in [
+        ("index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n# c\nf 1 2 9\n", "line 5"),
+        ("corner.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 x 3\n", "line 4"),
+        ("coord.obj", "v 0 0 0\nv 1 zero 0\n", "line 2"),
+    ] {
+        let msg = load(&write(&dir, name, text), &opts()).unwrap_err().to_string();
+        assert!(msg.contains(name) && msg.contains(needle), "{name}: {msg}");
+    }
+    let path = write(&dir, "two.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\nf 2 3\nf 1 2 3\n");
+    let s = load(&path, &opts()).unwrap();
+    assert_eq!(s.triangle_count(), 1);
+    assert_eq!(s.warnings.len(), 1);
+    assert!(s.warnings[0].contains("two.obj") && s.warnings[0].contains("2 faces"), "{:?}", s.warnings);
+}
+
+#[test]
 fn obj_material_library_problems_are_errors() {
     let dir = temp_dir("mtl");
     let path = write(&dir, "a.obj", "mtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
@@ -384,7 +402,7 @@ fn gltf_cameras_become_named_cameras_after_the_defaults() {
     let path = write(&dir, "c.gltf", gltf(&TRI, &[0, 1, 2], None, nodes, "0, 1", extra));
     let sc = load(&path, &opts()).unwrap();
     let names: Vec<_> = sc.cameras.iter().map(|c| c.name().unwrap()).collect();
-    assert_eq!(names, ["close-up", "medium", "wide", "top"]);
+    assert_eq!(names, ["medium", "close-up", "wide", "top"]);
     let top = sc.cameras[3];
     assert_eq!(top.eye, [0.0, 0.0, 10.0]);
     assert!(top.at[2] < 10.0 && (top.fov_deg - 0.5f32.to_degrees()).abs() < 1e-4);
@@ -445,6 +463,9 @@ fn malformed_gltf_inputs_are_errors() {
             Err(e) => assert!(e.to_string().contains(name), "{name}: {e}"),
         }
     }
+    // A missing buffer file is named.
+    let msg = load(&dir.join("missing_bin.gltf"), &opts()).unwrap_err().to_string();
+    assert!(msg.contains("missing.bin") && msg.contains("buffer 0"), "{msg}");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -575,7 +596,52 @@ fov = 30
     assert_eq!(s.cameras.len(), 1);
     assert_eq!(s.cameras[0].name(), Some("front"));
     assert_eq!(s.cameras[0].fov_deg, 30.0);
-    assert_eq!(s.lights, defaults::lights(Vec3::splat(-1.0), Vec3::splat(1.0)));
+    // The default light is placed from the first camera (the default view), beside and above it.
+    assert_eq!(s.lights, vec![defaults::light_for(&s.cameras[0], Vec3::splat(-1.0), Vec3::splat(1.0))]);
+    assert!(s.lights[0].position[1] > 0.0 && s.lights[0].position[2] > 5.0, "{:?}", s.lights[0]);
+}
+
+#[test]
+fn the_default_light_of_an_interior_lights_what_its_camera_sees() {
+    // A closed box seen from inside (a cathedral in small): a light derived from the bounds
+    // alone would stand outside the walls and leave the view black.
+    let dir = temp_dir("interior");
+    let s = description(
+        &dir,
+        r#"
+[[object]]
+type = "box"
+size = [10, 6, 20]
+
+[[camera]]
+name = "nave"
+eye = [0, 2, 8]
+at = [0, 2, -8]
+"#,
+    )
+    .unwrap();
+    let p = Vec3::from(s.lights[0].position);
+    assert!(p.abs().cmplt(Vec3::new(5.0, 3.0, 10.0)).all(), "the light {p} lies outside the box");
+    assert!(p.distance(Vec3::new(0.0, 2.0, 8.0)) < 1.0, "the light {p} stands near the eye");
+}
+
+#[test]
+fn an_unknown_key_is_reported_at_its_own_line() {
+    let dir = temp_dir("keyline");
+    let text = "[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\n\n[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\ncolour = 3\n";
+    let msg = description(&dir, text).unwrap_err().to_string();
+    assert!(msg.contains("line 8, object 2") && msg.contains("colour"), "{msg}");
+    let msg = description(&dir, "[[object]]\ntype = \"box\"\n\n[[object]]\ntype = \"box\"\n").unwrap_err().to_string();
+    assert!(msg.contains("line 1, object 1") && msg.contains("size"), "{msg}");
+}
+
+#[test]
+fn huge_coordinates_name_the_values_that_overflow() {
+    let dir = temp_dir("huge");
+    let text = "[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\ntranslate = [3e38, 0, 0]\n[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\n";
+    let msg = description(&dir, text).unwrap_err().to_string();
+    assert!(msg.contains("3.000e38") && msg.contains("camera 'medium'") && msg.contains("inf"), "{msg}");
+    assert!(!msg.contains("section"), "{msg}");
 }
 
 #[test]

@@ -40,6 +40,12 @@ pub fn read_with_sections(bytes: &[u8]) -> Result<(SceneFile, Vec<SectionInfo>),
 /// Reads and validates a scene file held in memory.
 pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
     let len = bytes.len() as u64;
+    // The magic first, so that a short file of another kind (a text file) is named as such
+    // rather than as a truncated scene file.
+    let magic = bytemuck::bytes_of(&MAGIC);
+    if bytes[..bytes.len().min(magic.len())] != magic[..bytes.len().min(magic.len())] {
+        return Err(FormatError::BadMagic);
+    }
     if bytes.len() < HEADER_SIZE {
         return Err(FormatError::Truncated { what: "the header", needed: HEADER_SIZE as u64, len });
     }

@@ -116,8 +116,8 @@ pub fn write_file(scene: &SceneFile, path: &std::path::Path) -> Result<(), FileE
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(".partial");
     let tmp = std::path::PathBuf::from(tmp);
-    std::fs::write(&tmp, &bytes).map_err(werr)?;
-    std::fs::rename(&tmp, path).map_err(|e| {
+    // A failed write (a full disk) or rename removes the temporary file as well.
+    std::fs::write(&tmp, &bytes).and_then(|()| std::fs::rename(&tmp, path)).map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
         werr(e)
     })

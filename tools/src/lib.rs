@@ -1,11 +1,33 @@
-//! What the command-line programs share: loading scenes (the built-in bunny included), the render
-//! options every tracer takes, and writing images, heatmaps and AOV files.
+//! What the command-line programs share: command-line handling ([`cli`]), loading scenes (the
+//! built-in bunny included), the render options every tracer takes ([`render_args`]), and
+//! writing every output safely ([`output`]).
 
+pub mod cli;
 pub mod output;
 pub mod render_args;
 
 use bvh_format::SceneFile;
 use std::path::Path;
+use std::time::Instant;
+
+/// A scene for a tracer, and whether it was compiled on the fly.
+pub struct LoadedScene {
+    pub file: SceneFile,
+    /// Seconds spent importing and compiling a mesh, description or the built-in scene; `None`
+    /// for a compiled `.bvh` read as it is.
+    pub compile_seconds: Option<f64>,
+}
+
+impl LoadedScene {
+    /// How a printed render time relates to loading: it never includes it, and says so when
+    /// the scene was compiled on the fly.
+    pub fn timing_note(&self) -> String {
+        match self.compile_seconds {
+            Some(s) => format!(" (not counting {s:.2} s to compile the scene on the fly)"),
+            None => String::new(),
+        }
+    }
+}
 
 /// The built-in default scene: `scenes/bunny.toml` and `scenes/bunny.glb`, embedded in the binary
 /// and compiled at start-up (a fraction of a second), so that a tracer needs no file to run.
@@ -23,20 +45,34 @@ pub fn builtin_scene() -> Result<SceneFile, String> {
     result
 }
 
-/// Imports a mesh or scene description and compiles it with the default build parameters.
+/// Imports a mesh or scene description and compiles it with the default build parameters; what
+/// the importer skipped is printed as warnings.
 pub fn compile_default(path: &Path) -> Result<SceneFile, String> {
     let scene = bvh_build::import::load(path, &Default::default()).map_err(|e| e.to_string())?;
+    print_warnings(&scene.warnings);
     bvh_build::compile(&scene, &Default::default(), Default::default()).map_err(|e| e.to_string())
+}
+
+/// Import warnings, one line each on standard error.
+pub fn print_warnings(warnings: &[String]) {
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
+}
+
+/// Whether a path names a compiled scene file (by its extension, any case).
+pub fn is_compiled(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("bvh"))
 }
 
 /// A scene for a tracer: a compiled `.bvh` file as it is, a mesh or description compiled on the
 /// fly with default parameters, or the built-in bunny when no path is given.
-pub fn load_scene(path: Option<&Path>) -> Result<SceneFile, String> {
-    match path {
-        None => builtin_scene(),
-        Some(p) if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("bvh")) => {
-            bvh_format::read_file(p).map_err(|e| e.to_string())
-        }
-        Some(p) => compile_default(p),
-    }
+pub fn load_scene(path: Option<&Path>) -> Result<LoadedScene, String> {
+    let t0 = Instant::now();
+    let (file, compiled) = match path {
+        None => (builtin_scene()?, true),
+        Some(p) if is_compiled(p) => (bvh_format::read_file(p).map_err(|e| e.to_string())?, false),
+        Some(p) => (compile_default(p)?, true),
+    };
+    Ok(LoadedScene { file, compile_seconds: compiled.then(|| t0.elapsed().as_secs_f64()) })
 }

@@ -1,5 +1,8 @@
-//! The render options of `trace-cpu render` and `trace-vk render`: same names, same meaning.
+//! The render options of `trace-cpu render` and `trace-vk render`: same names, same meaning, and
+//! the same sentence for the same mistake, because both parse and check them here. Every value
+//! may start with `-` (`--eye -15,-11,0`): a negative number is a value, never an option.
 
+use crate::output::{self, Kind, Output};
 use bvh_format::{Light, SceneFile};
 use clap::{Args, ValueEnum};
 use glam::Vec3;
@@ -14,6 +17,9 @@ pub enum ModeArg {
     Whitted,
 }
 
+/// The most lights a render takes (`--light` repeated, or `--lights N`).
+pub const MAX_LIGHTS: usize = 256;
+
 #[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
     /// Scene: a compiled .bvh file, or a mesh / scene description compiled with default settings
@@ -22,72 +28,152 @@ pub struct RenderArgs {
     /// Shading mode.
     #[arg(long, value_enum, default_value = "whitted")]
     pub mode: ModeArg,
-    /// A camera stored in the scene (close-up, medium, wide for the shipped scenes).
-    #[arg(long, default_value = "medium", conflicts_with_all = ["eye", "at"])]
-    pub camera: String,
-    /// Eye position X,Y,Z (with --at; replaces --camera).
-    #[arg(long, value_parser = parse_vec3, requires = "at")]
+    /// A camera stored in the scene [default: the scene's first camera; the shipped scenes and
+    /// meshes have "medium" first, then "close-up" and "wide"; `bvhc info` lists them].
+    #[arg(long, conflicts_with_all = ["eye", "at"])]
+    pub camera: Option<String>,
+    /// Eye position X,Y,Z (with --at; replaces --camera). Negative numbers need no `=`.
+    #[arg(long, value_parser = parse_vec3, requires = "at", allow_hyphen_values = true)]
     pub eye: Option<Vec3>,
     /// Look-at point X,Y,Z.
-    #[arg(long, value_parser = parse_vec3, requires = "eye")]
+    #[arg(long, value_parser = parse_vec3, requires = "eye", allow_hyphen_values = true)]
     pub at: Option<Vec3>,
     /// Up vector X,Y,Z.
-    #[arg(long, value_parser = parse_vec3, default_value = "0,1,0")]
+    #[arg(long, value_parser = parse_vec3, default_value = "0,1,0", allow_hyphen_values = true)]
     pub up: Vec3,
-    /// Vertical field of view in degrees (with --eye; a stored camera keeps its own unless given).
-    #[arg(long)]
+    /// Vertical field of view in degrees, between 0 and 180 (with --eye: default 45; a stored
+    /// camera keeps its own unless given).
+    #[arg(long, value_parser = parse_fov, allow_hyphen_values = true)]
     pub fov: Option<f32>,
-    /// Image size.
-    #[arg(long, value_parser = parse_res, default_value = "640x480")]
+    /// Image size, at most 2^28 pixels.
+    #[arg(long, value_parser = parse_res, default_value = "640x480", allow_hyphen_values = true)]
     pub res: (u32, u32),
     /// A point light X,Y,Z or X,Y,Z,R,G,B (repeatable); replaces the scene's lights.
-    #[arg(long = "light", value_parser = parse_light)]
+    #[arg(long = "light", value_parser = parse_light, allow_hyphen_values = true)]
     pub lights: Vec<Light>,
-    /// Use this many lights: the scene's first ones, completed by lights placed evenly around the
-    /// scene when it has fewer (the thesis's 1-, 2- and 4-light modes).
-    #[arg(long = "lights", conflicts_with = "lights")]
+    /// Use this many lights: the scene's first ones, completed by lights placed around the
+    /// camera so that what it sees is lit (the thesis's 1-, 2- and 4-light modes).
+    #[arg(long = "lights", conflicts_with = "lights", value_parser = parse_light_count, allow_hyphen_values = true)]
     pub light_count: Option<usize>,
-    /// Longest chain of secondary rays, at most 1024 (the passes stop early once every path has
-    /// ended) [default: the scene's].
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=tracer_vk::render::MAX_INDIRECTIONS as i64))]
+    /// Longest chain of secondary rays, at most 64; the passes stop once every path has ended
+    /// [default: the scene's].
+    #[arg(long, value_parser = parse_indirections, allow_hyphen_values = true)]
     pub indirections: Option<u32>,
-    /// Output image (PNG).
-    #[arg(short, long, default_value = "out.png")]
+    /// Output image: .png, .jpg/.jpeg (quality 95), .bmp (8-bit), or .exr (linear float RGB).
+    #[arg(short, long, default_value = "out.png", allow_hyphen_values = true)]
     pub output: PathBuf,
-    /// Also write the traversal cost (nodes visited per pixel) as a false-colour PNG.
-    #[arg(long)]
+    /// Also write the traversal cost (nodes visited per pixel) as a false-colour image (.png,
+    /// .jpg, .bmp) with its scale drawn below it.
+    #[arg(long, allow_hyphen_values = true)]
     pub heatmap: Option<PathBuf>,
-    /// Also write per-pixel outputs as OpenEXR: t, N.X, N.Y, N.Z, prim, nodes, tris.
-    #[arg(long)]
+    /// The node count shown as red in the heatmap [default: the image's maximum]; a fixed scale
+    /// makes two heatmaps comparable.
+    #[arg(long, value_parser = parse_positive, requires = "heatmap", allow_hyphen_values = true)]
+    pub heatmap_max: Option<u32>,
+    /// Also write per-pixel outputs as OpenEXR (.exr): t, N.X, N.Y, N.Z, prim, nodes, tris.
+    #[arg(long, allow_hyphen_values = true)]
     pub aov: Option<PathBuf>,
 }
 
-fn parse_floats(s: &str, n: &[usize]) -> Result<Vec<f32>, String> {
-    let v: Result<Vec<f32>, _> = s.split(',').map(|p| p.trim().parse::<f32>()).collect();
-    let v = v.map_err(|_| format!("{s:?} is not a comma-separated list of numbers"))?;
-    if !n.contains(&v.len()) || v.iter().any(|x| !x.is_finite()) {
-        return Err(format!("{s:?} must be {} finite numbers separated by commas", n[0]));
+/// The checked outputs of a render.
+pub struct RenderOutputs {
+    pub image: Output,
+    pub heatmap: Option<Output>,
+    pub aov: Option<Output>,
+}
+
+fn parse_floats(s: &str, counts: &[usize], what: &str) -> Result<Vec<f32>, String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if !counts.contains(&parts.len()) {
+        return Err(format!("{s:?} has {} values; {what}", parts.len()));
     }
-    Ok(v)
+    parts
+        .iter()
+        .map(|p| match p.parse::<f32>() {
+            Ok(x) if x.is_finite() => Ok(x),
+            Ok(_) => Err(format!("{p:?} is not a finite number (finite f32 values lie within ±3.4e38)")),
+            Err(_) => Err(format!("{p:?} is not a number; {what}")),
+        })
+        .collect()
 }
 
 pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
-    let v = parse_floats(s, &[3])?;
+    let v = parse_floats(s, &[3], "give 3 numbers X,Y,Z")?;
     Ok(Vec3::new(v[0], v[1], v[2]))
 }
 
-pub fn parse_res(s: &str) -> Result<(u32, u32), String> {
-    let bad = || format!("{s:?} is not a size like 640x480");
+/// A size `WxH`, such as an image size or a workgroup shape, each side at least 1 and the
+/// product at most `max` (named `what` in the message).
+fn parse_size(s: &str, what: &str, max: u64) -> Result<(u32, u32), String> {
+    let bad = || format!("{s:?} is not {what} like 640x480 (two whole numbers joined by x)");
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let (w, h) = (w.trim().parse::<u32>().map_err(|_| bad())?, h.trim().parse::<u32>().map_err(|_| bad())?);
-    if w == 0 || h == 0 || (w as u64) * (h as u64) > 1 << 28 {
-        return Err(format!("{s:?}: width and height must be positive and the image at most 2^28 pixels"));
+    let side = |v: &str| v.trim().parse::<i64>().map_err(|_| bad());
+    let (w, h) = (side(w)?, side(h)?);
+    if w < 1 || h < 1 {
+        return Err(format!("{s:?}: the width and height of {what} must be at least 1"));
+    }
+    if (w as u64).saturating_mul(h as u64) > max || w > u32::MAX as i64 || h > u32::MAX as i64 {
+        return Err(format!("{s:?}: {what} may have at most {max} pixels"));
+    }
+    Ok((w as u32, h as u32))
+}
+
+/// Most pixels of an image: 2^28 (16384 x 16384).
+pub const MAX_PIXELS: u64 = 1 << 28;
+
+pub fn parse_res(s: &str) -> Result<(u32, u32), String> {
+    parse_size(s, "an image size", MAX_PIXELS)
+}
+
+/// A workgroup shape the GPU kernels take on every device that offers enough invocations (see
+/// [`tracer_vk::render::workgroup_allowed`]; a device's own lower limit is checked when the
+/// kernels are built).
+pub fn parse_workgroup(s: &str) -> Result<(u32, u32), String> {
+    let max = tracer_vk::render::MAX_WORKGROUP_INVOCATIONS;
+    let (w, h) = parse_size(s, "a workgroup shape", max as u64)?;
+    if !tracer_vk::render::workgroup_allowed(w, h, max) {
+        return Err(format!(
+            "{s:?}: a workgroup's width and height must be powers of two (1, 2, 4, ... with at most {max} invocations in all), such as 8x8 (the default), 16x16 or 32x4"
+        ));
     }
     Ok((w, h))
 }
 
+pub fn parse_fov(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(f) if f > 0.0 && f < 180.0 => Ok(f),
+        _ => Err(format!("{s:?}: the field of view is in degrees and must lie strictly between 0 and 180")),
+    }
+}
+
+/// A whole number of at least `min` and at most `max`, explained as `what`.
+pub fn parse_count(s: &str, min: u64, max: u64, what: &str) -> Result<u64, String> {
+    match s.trim().parse::<i128>() {
+        Ok(n) if n >= i128::from(min) && n <= i128::from(max) => Ok(n as u64),
+        Ok(_) => Err(format!("{s:?}: {what} must lie between {min} and {max}")),
+        Err(_) => Err(format!("{s:?} is not a whole number; {what} must lie between {min} and {max}")),
+    }
+}
+
+pub fn parse_positive(s: &str) -> Result<u32, String> {
+    parse_count(s, 1, u64::from(u32::MAX), "the value").map(|n| n as u32)
+}
+
+fn parse_light_count(s: &str) -> Result<usize, String> {
+    parse_count(s, 0, MAX_LIGHTS as u64, "the number of lights").map(|n| n as usize)
+}
+
+/// The largest `--indirections` taken: bounce passes stop once no path is alive, so a large
+/// value costs nothing beyond what the scene needs.
+pub const MAX_INDIRECTIONS: u64 = 64;
+const _: () = assert!(MAX_INDIRECTIONS <= tracer_vk::render::MAX_INDIRECTIONS as u64, "trace-vk must take every value");
+
+fn parse_indirections(s: &str) -> Result<u32, String> {
+    parse_count(s, 0, MAX_INDIRECTIONS, "the number of indirections").map(|n| n as u32)
+}
+
 pub fn parse_light(s: &str) -> Result<Light, String> {
-    let v = parse_floats(s, &[3, 6])?;
+    let v = parse_floats(s, &[3, 6], "a light is X,Y,Z (3 numbers) or X,Y,Z,R,G,B (6 numbers)")?;
     let colour = if v.len() == 6 { [v[3], v[4], v[5]] } else { [1.0, 1.0, 1.0] };
     if colour.iter().any(|&c| c < 0.0) {
         return Err(format!("{s:?}: a light's colour must not be negative"));
@@ -103,25 +189,49 @@ impl RenderArgs {
         }
     }
 
-    /// The camera: explicit eye/at, or a stored camera by name.
+    /// Checks, before any work, what clap cannot check alone: every output path (see
+    /// [`crate::output::check`]) and the number of lights.
+    pub fn check(&self) -> Result<RenderOutputs, String> {
+        let mut list = vec![("-o", self.output.as_path(), Kind::Image)];
+        list.extend(self.heatmap.as_deref().map(|p| ("--heatmap", p, Kind::Heatmap)));
+        list.extend(self.aov.as_deref().map(|p| ("--aov", p, Kind::Aov)));
+        let inputs: Vec<&std::path::Path> = self.scene.as_deref().into_iter().collect();
+        let mut checked = output::check(&list, &inputs).map_err(|e| e.to_string())?.into_iter();
+        let image = checked.next().ok_or("no output image")?;
+        let heatmap = if self.heatmap.is_some() { checked.next() } else { None };
+        let aov = if self.aov.is_some() { checked.next() } else { None };
+        if self.lights.len() > MAX_LIGHTS {
+            return Err(format!("{} lights given; at most {MAX_LIGHTS} are taken", self.lights.len()));
+        }
+        Ok(RenderOutputs { image, heatmap, aov })
+    }
+
+    /// The camera: explicit eye/at, a stored camera by name, or the scene's first camera. It is
+    /// checked here, so that both tracers refuse a bad camera with the same sentence.
     pub fn camera(&self, scene: &SceneFile) -> Result<CameraSpec, String> {
-        if let (Some(eye), Some(at)) = (self.eye, self.at) {
-            return Ok(CameraSpec { eye, at, up: self.up, fov_deg: self.fov.unwrap_or(45.0) });
-        }
-        let mut spec = stored_camera(scene, &self.camera)?;
-        if let Some(f) = self.fov {
-            spec.fov_deg = f;
-        }
+        let spec = if let (Some(eye), Some(at)) = (self.eye, self.at) {
+            CameraSpec { eye, at, up: self.up, fov_deg: self.fov.unwrap_or(45.0) }
+        } else {
+            let mut spec = match &self.camera {
+                Some(name) => stored_camera(scene, name)?,
+                None => default_camera(scene)?,
+            };
+            if let Some(f) = self.fov {
+                spec.fov_deg = f;
+            }
+            spec
+        };
+        check_camera(&spec, self.res)?;
         Ok(spec)
     }
 
     /// The lights: explicit ones, or the scene's, completed to `--lights N` when asked.
-    pub fn lights(&self, scene: &SceneFile) -> Vec<Light> {
+    pub fn lights(&self, scene: &SceneFile, camera: &CameraSpec) -> Vec<Light> {
         if !self.lights.is_empty() {
             return self.lights.clone();
         }
         match self.light_count {
-            Some(n) => lights_n(scene, n),
+            Some(n) => lights_n(scene, n, camera),
             None => scene.lights.clone(),
         }
     }
@@ -129,6 +239,34 @@ impl RenderArgs {
     pub fn indirections(&self, scene: &SceneFile) -> u32 {
         self.indirections.unwrap_or(scene.settings.max_indirections)
     }
+}
+
+/// Why a camera cannot be used, in the words both tracers print.
+pub fn check_camera(spec: &CameraSpec, res: (u32, u32)) -> Result<(), String> {
+    if !(spec.at - spec.eye).is_finite() {
+        return Err(format!(
+            "the eye {} and look-at point {} are too far apart to compute a view direction in f32",
+            spec.eye, spec.at
+        ));
+    }
+    spec.frame(res.0, res.1).map(|_| ()).map_err(|e| match e {
+        bvh_format::camera::CameraError::Degenerate => format!(
+            "the camera is degenerate: the eye {} is on the look-at point {} or the up vector {} is zero or parallel to the view",
+            spec.eye, spec.at, spec.up
+        ),
+        bvh_format::camera::CameraError::FieldOfView => {
+            format!("the field of view must lie strictly between 0 and 180 degrees, not {}", spec.fov_deg)
+        }
+    })
+}
+
+/// The scene's first camera: what a render uses without `--camera` or `--eye`.
+pub fn default_camera(scene: &SceneFile) -> Result<CameraSpec, String> {
+    scene
+        .cameras
+        .first()
+        .map(CameraSpec::from)
+        .ok_or_else(|| "the scene has no camera; give one with --eye X,Y,Z --at X,Y,Z".to_owned())
 }
 
 /// A camera stored in the scene, by name.
@@ -140,23 +278,28 @@ pub fn stored_camera(scene: &SceneFile, name: &str) -> Result<CameraSpec, String
     Ok(CameraSpec::from(c))
 }
 
-/// `n` lights: the scene's first ones, completed by lights evenly spaced on a circle above the
-/// scene (dimmer as there are more of them) when it has fewer.
-pub fn lights_n(scene: &SceneFile, n: usize) -> Vec<Light> {
+/// `n` lights: the scene's first ones, completed when it has fewer by lights placed around
+/// `camera` as the compiler places a scene's default light (inside the scene when the camera
+/// stands inside it), each of brightness 1/n.
+pub fn lights_n(scene: &SceneFile, n: usize, camera: &CameraSpec) -> Vec<Light> {
     let mut lights = scene.lights.clone();
     lights.truncate(n);
     let (lo, hi) = scene.bounds();
-    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
-    let centre = (lo + hi) * 0.5;
-    let radius = ((hi - lo).length() * 0.5).max(f32::MIN_POSITIVE);
     let added = n.saturating_sub(lights.len());
-    for k in 0..added {
-        let a = std::f32::consts::TAU * (k as f32 + 0.25) / added as f32;
-        let p = centre + Vec3::new(a.cos() * 2.0 * radius, 2.0 * radius, a.sin() * 2.0 * radius);
-        let c = 1.0 / n as f32;
-        lights.push(Light::new(p.to_array(), [c, c, c]));
-    }
+    let c = 1.0 / n.max(1) as f32;
+    let placed = bvh_build::import::defaults::lights_around(camera.eye, camera.at, camera.up, lo.into(), hi.into(), added);
+    lights.extend(placed.into_iter().map(|p| Light::new(p.to_array(), [c, c, c])));
     lights
+}
+
+/// The line both tracers print for a heatmap: its scale, and how many pixels lie above a fixed one.
+pub fn heatmap_line(h: &output::Heatmap, out: &Output) -> String {
+    let clipped = if h.clipped > 0 { format!(", {} pixels above the scale drawn red", h.clipped) } else { String::new() };
+    format!(
+        "heatmap: nodes visited per pixel, 0 (blue) to {} (red), scale drawn below the image{clipped} -> {}",
+        h.max,
+        out.path.display()
+    )
 }
 
 #[cfg(test)]
@@ -166,12 +309,22 @@ mod tests {
     #[test]
     fn option_values_parse_or_explain() {
         assert_eq!(parse_vec3("1, 2,3").unwrap(), Vec3::new(1.0, 2.0, 3.0));
-        assert!(parse_vec3("1,2").unwrap_err().contains("3 finite numbers"));
-        assert!(parse_vec3("1,2,nan").is_err());
+        assert_eq!(parse_vec3("-15,-11,0").unwrap(), Vec3::new(-15.0, -11.0, 0.0));
+        assert!(parse_vec3("1,2").unwrap_err().contains("3 numbers"));
+        assert!(parse_vec3("1,2,nan").unwrap_err().contains("\"nan\" is not a finite number"));
+        assert!(parse_vec3("1,2,4e38").unwrap_err().contains("not a finite number"));
         assert_eq!(parse_res("640x480").unwrap(), (640, 480));
         assert!(parse_res("640").is_err() && parse_res("0x10").is_err() && parse_res("100000x100000").is_err());
+        assert!(parse_res("-4x4").unwrap_err().contains("at least 1"));
         assert_eq!(parse_light("1,2,3").unwrap(), Light::new([1.0, 2.0, 3.0], [1.0; 3]));
         assert_eq!(parse_light("1,2,3,0.5,0.5,0").unwrap().colour, [0.5, 0.5, 0.0]);
         assert!(parse_light("1,2,3,-1,0,0").is_err());
+        let e = parse_light("0,1,1,1").unwrap_err();
+        assert!(e.contains("has 4 values") && e.contains("3 numbers") && e.contains("6 numbers"), "{e}");
+        let e = parse_workgroup("0x0").unwrap_err();
+        assert!(e.contains("workgroup") && !e.contains("image"), "{e}");
+        assert!(parse_workgroup("64x64").unwrap_err().contains("1024"));
+        assert!(parse_fov("-5").is_err() && parse_fov("180").is_err() && parse_fov("nan").is_err());
+        assert!(parse_count("-1", 1, 10, "x").unwrap_err().contains("between 1 and 10"));
     }
 }

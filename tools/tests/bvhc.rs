@@ -1,34 +1,14 @@
 //! `bvhc` end to end: the real binary on the shipped bunny and on bad input.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use common::{assert_one_sentence_error, repo, scratch, text};
+use std::path::Path;
 use std::process::{Command, Output};
+use std::time::{Duration, Instant};
 
 fn bvhc(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_bvhc")).args(args).output().expect("the bvhc binary runs")
-}
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("tools/ sits in the workspace").to_path_buf()
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("bvhc-test-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir is writable");
-    dir
-}
-
-fn text(o: &Output) -> (String, String) {
-    (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned())
-}
-
-/// An error is one line on stderr starting with "error: ", and the exit status is non-zero.
-fn assert_one_sentence_error(o: &Output, must_contain: &str) {
-    let (_, err) = text(o);
-    assert!(!o.status.success(), "expected failure, got success; stderr: {err}");
-    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(lines.len(), 1, "expected one line of error, got: {err:?}");
-    assert!(lines[0].starts_with("error: "), "{err}");
-    assert!(lines[0].contains(must_contain), "{err:?} should mention {must_contain:?}");
 }
 
 #[test]
@@ -48,6 +28,8 @@ fn compiles_verifies_and_describes_the_bunny() {
     let (info, _) = text(&o);
     for needle in [
         "triangles       69451",
+        "\"medium\"",
+        "light 1",
         "SAH cost",
         "leaf sizes",
         "child-pair nodes",
@@ -133,4 +115,121 @@ fn damaged_files_fail_verification_with_one_sentence() {
 
     let o = bvhc(&["verify", input.to_str().unwrap()]);
     assert_one_sentence_error(&o, "magic");
+}
+
+#[test]
+fn negative_numbers_are_values_not_options() {
+    let dir = scratch("negative");
+    let out = dir.join("n.bvh");
+    let input = repo().join("scenes/bunny.glb");
+    for (option, value, needle) in
+        [("--traversal-cost", "-1", "cost"), ("--bins", "-4", "bin count"), ("--max-leaf-size", "-2", "leaf size")]
+    {
+        let o = bvhc(&["compile", input.to_str().unwrap(), "-o", out.to_str().unwrap(), option, value]);
+        let line = assert_one_sentence_error(&o, needle);
+        assert!(!line.contains("unexpected argument"), "{option} {value}: {line}");
+        assert!(line.contains(value), "the value is named: {line}");
+    }
+    assert!(!out.exists());
+}
+
+/// `bvhc info` lists the cameras (the default first) and the lights by name for every kind of
+/// input: OBJ, glTF, GLB, a scene description and a compiled file.
+#[test]
+fn info_lists_cameras_and_lights_for_every_input_kind() {
+    let dir = scratch("info-kinds");
+    std::fs::write(dir.join("tri.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let compiled = dir.join("room.bvh");
+    let room = repo().join("scenes/room.toml");
+    assert!(bvhc(&["compile", room.to_str().unwrap(), "-o", compiled.to_str().unwrap(), "--quiet"]).status.success());
+    let gltf = bvh_gltf(&dir);
+    let inputs = [
+        (dir.join("tri.obj"), "\"medium\"", 1, true),
+        (gltf, "\"medium\"", 1, true),
+        (repo().join("scenes/bunny.glb"), "\"medium\"", 1, true),
+        (repo().join("scenes/forest.toml"), "\"medium\"", 2, true),
+        (compiled, "\"medium\"", 2, false),
+    ];
+    for (input, first_camera, lights, on_the_fly) in inputs {
+        let o = bvhc(&["info", input.to_str().unwrap()]);
+        let (out, err) = text(&o);
+        assert!(o.status.success(), "{}: {err}", input.display());
+        assert_eq!(out.contains("compiled on the fly"), on_the_fly, "{out}");
+        let cameras: Vec<&str> = out
+            .lines()
+            .skip_while(|l| !l.contains("cameras (the first"))
+            .skip(1)
+            .take_while(|l| !l.trim_start().starts_with("lights"))
+            .collect();
+        assert_eq!(cameras.len(), 3, "{}: {out}", input.display());
+        assert!(cameras[0].trim_start().starts_with(first_camera), "{}: {cameras:?}", input.display());
+        for k in 1..=lights {
+            assert!(out.contains(&format!("light {k} ")), "{}: no light {k} in {out}", input.display());
+        }
+        assert!(!out.contains(&format!("light {} ", lights + 1)), "{out}");
+    }
+    // A text file is named as what it is, not as a truncated scene file.
+    std::fs::write(dir.join("notes.txt"), "hello\n").unwrap();
+    let line = assert_one_sentence_error(&bvhc(&["info", dir.join("notes.txt").to_str().unwrap()]), "not a BVH scene file");
+    assert!(!line.contains("truncated"), "{line}");
+}
+
+/// A minimal glTF (one triangle, embedded buffer) written beside the other inputs.
+fn bvh_gltf(dir: &Path) -> std::path::PathBuf {
+    let floats: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let bytes: Vec<u8> = floats.iter().flat_map(|f| f.to_le_bytes()).collect();
+    const B64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut b64 = String::new();
+    for c in bytes.chunks(3) {
+        let n = (u32::from(c[0]) << 16) | (u32::from(*c.get(1).unwrap_or(&0)) << 8) | u32::from(*c.get(2).unwrap_or(&0));
+        for k in 0..4 {
+            b64.push(if k <= c.len() { B64[(n >> (18 - 6 * k) & 63) as usize] as char } else { '=' });
+        }
+    }
+    let json = format!(
+        r#"{{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0}}],
+        "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}}}]}}],
+        "accessors": [{{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}}],
+        "bufferViews": [{{"buffer": 0, "byteLength": 36}}],
+        "buffers": [{{"byteLength": 36, "uri": "data:application/octet-stream;base64,{b64}"}}]}}"#
+    );
+    let path = dir.join("tri.gltf");
+    std::fs::write(&path, json).unwrap();
+    path
+}
+
+/// Interrupting `bvhc compile` while it writes leaves neither a half-written file nor a damaged
+/// output: the file that was there stays as it was.
+#[test]
+fn an_interrupted_compile_leaves_no_partial_file() {
+    let dir = scratch("interrupt");
+    let out = dir.join("dragon.bvh");
+    std::fs::write(&out, b"the old file").unwrap();
+    let input = repo().join("scenes/dragon.glb");
+    let mut caught_writing = false;
+    for _attempt in 0..3 {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_bvhc"))
+            .args(["compile", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--quiet"])
+            .spawn()
+            .unwrap();
+        let partial = dir.join(format!(".dragon.bvh.{}.partial", child.id()));
+        let start = Instant::now();
+        // Wait for the write to begin, then interrupt it.
+        while child.try_wait().unwrap().is_none() && !partial.exists() && start.elapsed() < Duration::from_secs(300) {
+            std::thread::sleep(Duration::from_micros(200));
+        }
+        let writing = partial.exists();
+        let _ = Command::new("kill").args(["-TERM", &child.id().to_string()]).status();
+        let status = child.wait().unwrap();
+        if writing {
+            caught_writing = true;
+            assert_eq!(status.code(), Some(128 + 15), "{status:?}");
+            assert_eq!(std::fs::read(&out).unwrap(), b"the old file");
+            let left: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+            assert_eq!(left.len(), 1, "only the old output remains: {left:?}");
+            break;
+        }
+        std::fs::write(&out, b"the old file").unwrap();
+    }
+    assert!(caught_writing, "the write was never seen in progress");
 }

@@ -30,14 +30,17 @@ pub enum Method {
     Stackless,
     /// 8-wide SIMD packets (AVX2) for primary and shadow rays, ordered traversal for the rest.
     Packet,
-    /// [`Method::Packet`] where the CPU has AVX2, else [`Method::Ordered`].
+    /// [`Method::Packet`] where the CPU has AVX2, else [`Method::Ordered`]; [`Method::Stackless`]
+    /// for a file that holds only the escape-pointer layout.
     Auto,
 }
 
 impl Method {
-    /// The method actually used: packets fall back to ordered traversal without AVX2.
-    pub fn resolve(self) -> Method {
+    /// The method actually used on `scene`: packets fall back to ordered traversal without AVX2,
+    /// and `Auto` takes the stackless walk when the file has no child-pair layout.
+    pub fn resolve(self, scene: &bvh_format::SceneFile) -> Method {
         match self {
+            Method::Auto if scene.child_pair.is_none() && scene.escape.is_some() => Method::Stackless,
             Method::Auto | Method::Packet if packet::available() => Method::Packet,
             Method::Auto | Method::Packet => Method::Ordered,
             m => m,

@@ -305,7 +305,7 @@ fn check(settings: &RenderSettings) -> Result<Frame, RenderError> {
 /// Renders an image. Pixels are independent, so the result does not depend on the thread count.
 pub fn render(tracer: &Tracer<'_>, settings: &RenderSettings) -> Result<Image, RenderError> {
     let frame = check(settings)?;
-    let method = settings.method.resolve();
+    let method = settings.method.resolve(tracer.scene);
     tracer.layout_for(method)?;
     let (w, h) = (settings.width as usize, settings.height as usize);
     let sh = Shading::new(tracer.scene, settings);

@@ -25,8 +25,10 @@ struct Description {
     smooth_normals: Option<bool>,
     #[serde(default)]
     material: BTreeMap<String, MaterialDesc>,
+    /// Read as tables first and each turned into an [`Object`] on its own: serde reads a tagged
+    /// enum through a buffer that forgets positions, so an error could not say which object.
     #[serde(default)]
-    object: Vec<Object>,
+    object: Vec<toml::Spanned<toml::Table>>,
     #[serde(default)]
     camera: Vec<CameraDesc>,
     #[serde(default)]
@@ -208,7 +210,39 @@ pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
         .map_err(|_| ImportError::Description { path: path.to_owned(), message: "it is not UTF-8 text".to_owned() })?;
     let desc: Description = toml::from_str(&text)
         .map_err(|e| ImportError::Description { path: path.to_owned(), message: toml_message(&text, &e) })?;
-    Builder::new(path, opts, &desc)?.build(&desc)
+    let objects = desc
+        .object
+        .iter()
+        .enumerate()
+        .map(|(k, table)| {
+            toml::Value::Table(table.get_ref().clone()).try_into::<Object>().map_err(|e| {
+                let message = object_message(&text, k, table.span().start, &e);
+                ImportError::Description { path: path.to_owned(), message }
+            })
+        })
+        .collect::<Result<Vec<Object>, _>>()?;
+    Builder::new(path, opts, &desc)?.build(&desc, &objects)
+}
+
+/// An error in object `k` (whose `[[object]]` header starts at `header`) as one line: the line
+/// of the key it is about, when it names one, else the header's.
+fn object_message(text: &str, k: usize, header: usize, e: &toml::de::Error) -> String {
+    let msg = e.message().trim().replace('\n', " ");
+    let at = key_in_object(text, k, &msg).unwrap_or(header);
+    let line = text.get(..at).unwrap_or(text).matches('\n').count() + 1;
+    format!("line {line}, object {}: {msg}", k + 1)
+}
+
+/// Where the key that a serde message names ("unknown field `x`", "invalid type ... for key `x`")
+/// stands in object `k` of the parsed document.
+fn key_in_object(text: &str, k: usize, msg: &str) -> Option<usize> {
+    use toml::de::{DeTable, DeValue};
+    let key = msg.split('`').nth(1)?;
+    let doc = DeTable::parse(text).ok()?;
+    let objects = doc.get_ref().iter().find(|(name, _)| name.get_ref() == "object")?.1;
+    let DeValue::Array(items) = objects.get_ref() else { return None };
+    let DeValue::Table(table) = items.get(k)?.get_ref() else { return None };
+    table.iter().find(|(name, _)| name.get_ref() == key).map(|(name, _)| name.span().start)
 }
 
 /// A TOML error as one line: position and the parser's message.
@@ -296,8 +330,8 @@ impl<'a> Builder<'a> {
         }
     }
 
-    fn build(mut self, desc: &Description) -> Result<Scene, ImportError> {
-        for (k, obj) in desc.object.iter().enumerate() {
+    fn build(mut self, desc: &Description, objects: &[Object]) -> Result<Scene, ImportError> {
+        for (k, obj) in objects.iter().enumerate() {
             self.object(k, obj)?;
         }
         let Some((lo, hi)) = self.scene.bounds() else {
@@ -327,7 +361,11 @@ impl<'a> Builder<'a> {
             self.scene.lights.push(Light::new(l.position, colour));
         }
         if self.scene.lights.is_empty() {
-            self.scene.lights = defaults::lights(flo, fhi);
+            self.scene.lights = vec![defaults::light_for(&self.scene.cameras[0], flo, fhi)];
+        }
+        if desc.camera.is_empty() || desc.light.is_empty() {
+            defaults::check_finite(&self.scene.cameras, &self.scene.lights, flo, fhi)
+                .map_err(|message| ImportError::Defaults { path: self.path.to_owned(), message })?;
         }
 
         let d = SceneSettings::default();
@@ -403,6 +441,7 @@ impl<'a> Builder<'a> {
         let key = (file.clone(), smooth);
         if !self.meshes.contains_key(&key) {
             let (part, _cameras) = load_mesh_file(&file, kind, &ImportOptions { smooth_normals: smooth })?;
+            self.scene.warnings.extend(part.warnings.iter().cloned());
             self.meshes.insert(key.clone(), part);
         }
         // Taken out while its triangles are copied, so that materials can be added meanwhile.

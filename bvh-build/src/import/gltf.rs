@@ -30,6 +30,17 @@ pub fn load(path: &Path, opts: &ImportOptions) -> Result<(Scene, Vec<Camera>), I
         .map_err(|e| err(e.to_string()))?;
     guarded(|| validate(&document)).ok_or_else(parser_failed)?.map_err(err)?;
     let base = path.parent().unwrap_or(Path::new(""));
+    // The gltf crate's error for a missing buffer file does not name it.
+    for buffer in document.buffers() {
+        if let buffer::Source::Uri(uri) = buffer.source()
+            && !uri.starts_with("data:")
+        {
+            let file = base.join(percent_decode(uri));
+            if let Err(e) = std::fs::metadata(&file) {
+                return Err(err(format!("buffer {} refers to {}, which cannot be read ({e})", buffer.index(), file.display())));
+            }
+        }
+    }
     let buffers = guarded(|| ::gltf::import_buffers(&document, Some(base), blob))
         .ok_or_else(parser_failed)?
         .map_err(|e| err(format!("its buffers cannot be loaded ({e})")))?;
@@ -160,6 +171,27 @@ fn camera(node: &Node<'_>, world: &DMat4, centre: Option<DVec3>) -> Option<Camer
     let c = Camera::new(&name, eye.as_vec3().into(), at.as_vec3().into(), up.as_vec3().into(), fov);
     let finite = [c.eye, c.at, c.up].iter().flatten().all(|v| v.is_finite());
     (finite && fov > 0.0 && fov < 180.0 && c.eye != c.at).then_some(c)
+}
+
+/// A URI's `%XX` escapes decoded (glTF buffer URIs are URI references; a space is `%20`).
+fn percent_decode(uri: &str) -> String {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let hex = bytes.get(i + 1..i + 3).and_then(|h| std::str::from_utf8(h).ok()).and_then(|h| u8::from_str_radix(h, 16).ok());
+        match (bytes[i], hex) {
+            (b'%', Some(v)) => {
+                out.push(v);
+                i += 3;
+            }
+            (b, _) => {
+                out.push(b);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
 }
 
 /// Most elements of an accessor without a buffer view (all zeros).

@@ -59,12 +59,14 @@ pub enum ImportError {
     MissingMesh { path: PathBuf, mesh: PathBuf, source: std::io::Error },
     #[error("{} holds no triangles", path.display())]
     Empty { path: PathBuf },
+    #[error("{}: {message}", path.display())]
+    Defaults { path: PathBuf, message: String },
 }
 
 /// Reads a scene, choosing the reader by extension (`.obj`, `.gltf`, `.glb`, `.toml`; any case).
 ///
 /// A mesh file (OBJ, glTF) gets the three default cameras of [`defaults::cameras`] (followed by
-/// the glTF file's own perspective cameras, if any), the default light of [`defaults::lights`]
+/// the glTF file's own perspective cameras, if any), the default light of [`defaults::light_for`]
 /// and default settings, with `max_indirections` 2 when a material reflects or refracts and 0
 /// otherwise. A description sets all of these itself (see `docs/scene-description.md`).
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
@@ -75,7 +77,9 @@ pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
             let (lo, hi) = scene.bounds().ok_or_else(|| ImportError::Empty { path: path.to_owned() })?;
             scene.cameras = defaults::cameras(lo, hi);
             scene.cameras.extend(file_cameras);
-            scene.lights = defaults::lights(lo, hi);
+            scene.lights = vec![defaults::light_for(&scene.cameras[0], lo, hi)];
+            defaults::check_finite(&scene.cameras, &scene.lights, lo, hi)
+                .map_err(|message| ImportError::Defaults { path: path.to_owned(), message })?;
             scene.settings = SceneSettings {
                 max_indirections: if scene.materials.iter().any(|m| m.kr > 0.0 || m.kt > 0.0) { 2 } else { 0 },
                 ..SceneSettings::default()

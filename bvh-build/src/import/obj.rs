@@ -16,7 +16,7 @@ use std::path::Path;
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
     let bytes = read_file(path)?;
     let err = |message: String| ImportError::Obj { path: path.to_owned(), message };
-    check_vertex_lines(path, &bytes)?;
+    let short_faces = check_lines(path, &bytes)?;
 
     let dir = path.parent().unwrap_or(Path::new(""));
     // tobj's loader callback cannot return our error, so the reason is kept aside.
@@ -60,6 +60,15 @@ pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
     let mtls = mtl_result.unwrap_or_default();
 
     let mut scene = Scene {
+        warnings: if short_faces > 0 {
+            vec![format!(
+                "{}: {short_faces} face{} with fewer than three corners skipped",
+                path.display(),
+                if short_faces == 1 { "" } else { "s" }
+            )]
+        } else {
+            Vec::new()
+        },
         materials: mtls.iter().map(materials::from_mtl).collect(),
         material_names: mtls.iter().map(|m| m.name.clone()).collect(),
         ..Scene::default()
@@ -110,27 +119,61 @@ fn triples(v: &[u32]) -> Vec<[u32; 3]> {
     v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
 }
 
-/// Rejects `v` lines with a coordinate that is not finite, naming the OBJ vertex number (1-based,
-/// as faces refer to it) and the line. tobj would accept "nan" and "inf" silently.
-fn check_vertex_lines(path: &Path, bytes: &[u8]) -> Result<(), ImportError> {
-    let mut vertex = 0usize;
-    for (line_no, line) in bytes.split(|&b| b == b'\n').enumerate() {
+/// Checks, with line numbers, what tobj would reject without saying where or accept silently:
+/// a `v` line needs three numbers, all finite (tobj takes "nan" and "inf"); each corner of an `f`
+/// line must name a vertex defined before it (1-based, or negative counting back). Returns how
+/// many faces have fewer than three corners: tobj drops them.
+fn check_lines(path: &Path, bytes: &[u8]) -> Result<usize, ImportError> {
+    let err = |line: usize, message: String| ImportError::Obj { path: path.to_owned(), message: format!("line {line}: {message}") };
+    let mut vertices = 0i64;
+    let mut short_faces = 0;
+    for (i, line) in bytes.split(|&b| b == b'\n').enumerate() {
         let Ok(line) = std::str::from_utf8(line) else { continue };
         let mut words = line.split_whitespace();
-        if words.next() != Some("v") {
-            continue;
-        }
-        vertex += 1;
-        // Only x, y, z: a fourth value (w) or vertex colours do not place the vertex.
-        let bad = words.take(3).any(|w| w.parse::<f32>().is_ok_and(|x| !x.is_finite()));
-        if bad {
-            return Err(ImportError::NonFinite {
-                path: path.to_owned(),
-                what: format!("vertex {vertex} (line {})", line_no + 1),
-            });
+        match words.next() {
+            Some("v") => {
+                vertices += 1;
+                // Only x, y, z: a fourth value (w) or vertex colours do not place the vertex.
+                let xyz: Vec<&str> = words.take(3).collect();
+                if xyz.len() < 3 {
+                    return Err(err(i + 1, format!("vertex {vertices} has {} coordinates instead of 3", xyz.len())));
+                }
+                for w in xyz {
+                    match w.parse::<f32>() {
+                        Ok(x) if x.is_finite() => {}
+                        Ok(_) => {
+                            return Err(ImportError::NonFinite {
+                                path: path.to_owned(),
+                                what: format!("vertex {vertices} (line {}, {w:?})", i + 1),
+                            });
+                        }
+                        Err(_) => return Err(err(i + 1, format!("vertex {vertices} has {w:?}, which is not a number"))),
+                    }
+                }
+            }
+            Some("f") => {
+                let corners: Vec<&str> = words.collect();
+                for c in &corners {
+                    let first = c.split('/').next().unwrap_or("");
+                    let index = first.parse::<i64>().map_err(|_| {
+                        err(i + 1, format!("face corner {c:?} does not start with a vertex number"))
+                    })?;
+                    let resolved = if index < 0 { vertices + 1 + index } else { index };
+                    if index == 0 || resolved < 1 || resolved > vertices {
+                        return Err(err(
+                            i + 1,
+                            format!("a face refers to vertex {index}, but {vertices} vertices are defined before it"),
+                        ));
+                    }
+                }
+                if corners.len() < 3 {
+                    short_faces += 1;
+                }
+            }
+            _ => {}
         }
     }
-    Ok(())
+    Ok(short_faces)
 }
 
 /// Makes an MTL file safe for tobj, which panics on a colour with fewer than three values: a
@@ -163,6 +206,18 @@ fn normalize_mtl(text: &[u8]) -> Result<Vec<u8>, usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn obj_lines_are_checked_with_their_numbers() {
+        let p = Path::new("t.obj");
+        let msg = |text: &str| check_lines(p, text.as_bytes()).unwrap_err().to_string();
+        assert_eq!(check_lines(p, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\nf 1 2 3\nf -3/1 -2//1 -1\n").unwrap(), 1);
+        assert!(msg("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 x 3\n").contains("line 4: face corner \"x\""));
+        assert!(msg("v 0 0 0\nf 1 2 3\n").contains("line 2: a face refers to vertex 2, but 1 vertices"));
+        assert!(msg("v 0 0\n").contains("line 1: vertex 1 has 2 coordinates"));
+        assert!(msg("v 0 0 0\nv 0 nan 0\n").contains("vertex 2 (line 2"));
+        assert!(msg("v 0 0 0\nv 0 y 0\n").contains("line 2: vertex 2 has \"y\""));
+    }
 
     #[test]
     fn short_mtl_colours_are_widened_or_rejected() {

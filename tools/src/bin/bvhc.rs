@@ -5,11 +5,15 @@ use bvh_build::Layouts;
 use bvh_build::import::{self, ImportOptions};
 use bvh_format::{BuildParams, SceneFile, Strategy};
 use clap::{Parser, Subcommand, ValueEnum};
-use indicatif::{ProgressBar, ProgressStyle};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Instant;
+use tools::cli::Progress;
+use tools::output::{self, Kind};
+use tools::render_args::parse_count;
+use tools::say;
 
 #[derive(Parser)]
 #[command(name = "bvhc", version, about = "Compile triangle scenes into SAH BVH files, and explain or verify them.")]
@@ -22,9 +26,11 @@ struct Cli {
 enum Command {
     /// Compile an OBJ, glTF/GLB or scene description (.toml) into a BVH scene file.
     Compile(CompileArgs),
-    /// Print what a scene file holds: counts, tree depth and leaf statistics, SAH cost, sizes.
+    /// Print what a scene holds: counts, tree depth and leaf statistics, SAH cost, sizes, and
+    /// its cameras (the first is the tracers' default) and lights. A mesh or description is
+    /// compiled on the fly with the default parameters first.
     Info {
-        /// The scene file.
+        /// A compiled .bvh file, or an .obj, .gltf, .glb or scene description .toml.
         file: PathBuf,
     },
     /// Run the full validation of a scene file; exit status 0 when it passes.
@@ -64,17 +70,17 @@ struct CompileArgs {
     /// Builder.
     #[arg(long, value_enum, default_value = "binned")]
     strategy: StrategyArg,
-    /// Bins per axis for the binned builder.
-    #[arg(long, default_value_t = BuildParams::default().bins)]
+    /// Bins per axis for the binned builder (2 to 256).
+    #[arg(long, default_value_t = BuildParams::default().bins, value_parser = parse_bins, allow_hyphen_values = true)]
     bins: u32,
-    /// SAH cost of traversing one inner node (relative to --intersection-cost).
-    #[arg(long, default_value_t = BuildParams::default().traversal_cost)]
+    /// SAH cost of traversing one inner node (relative to --intersection-cost; 0 or more).
+    #[arg(long, default_value_t = BuildParams::default().traversal_cost, value_parser = parse_cost, allow_hyphen_values = true)]
     traversal_cost: f32,
-    /// SAH cost of intersecting one triangle.
-    #[arg(long, default_value_t = BuildParams::default().intersection_cost)]
+    /// SAH cost of intersecting one triangle (above 0).
+    #[arg(long, default_value_t = BuildParams::default().intersection_cost, value_parser = parse_cost, allow_hyphen_values = true)]
     intersection_cost: f32,
-    /// Most triangles in one leaf.
-    #[arg(long, default_value_t = BuildParams::default().max_leaf_size)]
+    /// Most triangles in one leaf (1 or more).
+    #[arg(long, default_value_t = BuildParams::default().max_leaf_size, value_parser = parse_leaf_size, allow_hyphen_values = true)]
     max_leaf_size: u32,
     /// Interpolate vertex normals where the input has none (default: flat normals, as glTF asks).
     #[arg(long)]
@@ -84,27 +90,33 @@ struct CompileArgs {
     quiet: bool,
 }
 
+fn parse_bins(s: &str) -> Result<u32, String> {
+    parse_count(s, 2, u64::from(bvh_build::MAX_BINS), "the bin count").map(|n| n as u32)
+}
+
+fn parse_leaf_size(s: &str) -> Result<u32, String> {
+    parse_count(s, 1, u64::from(u32::MAX), "the maximum leaf size").map(|n| n as u32)
+}
+
+fn parse_cost(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(c) if c.is_finite() && c >= 0.0 => Ok(c),
+        _ => Err(format!("{s:?}: a cost must be a finite number, 0 or more")),
+    }
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    let result = match cli.command {
+    let cli: Cli = tools::cli::parse();
+    tools::cli::run(|| match cli.command {
         Command::Compile(args) => compile(&args),
         Command::Info { file } => info(&file),
         Command::Verify { file } => verify(&file),
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(message) => {
-            eprintln!("error: {message}");
-            ExitCode::FAILURE
-        }
-    }
+    })
 }
 
 fn compile(args: &CompileArgs) -> Result<(), String> {
     let output = args.output.clone().unwrap_or_else(|| args.input.with_extension("bvh"));
-    if output == args.input {
-        return Err(format!("the output {} would overwrite the input; choose another with -o", output.display()));
-    }
+    let checked = output::check(&[("-o", &output, Kind::Scene)], &[&args.input]).map_err(|e| e.to_string())?;
     let params = BuildParams {
         strategy: match args.strategy {
             StrategyArg::Binned => Strategy::Binned,
@@ -122,49 +134,36 @@ fn compile(args: &CompileArgs) -> Result<(), String> {
         LayoutArg::Escape => Layouts { child_pair: false, escape: true },
     };
 
-    let spinner = |msg: &str| {
-        let pb = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new_spinner() };
-        pb.set_message(msg.to_owned());
-        pb.enable_steady_tick(Duration::from_millis(100));
-        pb
-    };
     let t0 = Instant::now();
-    let pb = spinner(&format!("reading {}", args.input.display()));
+    let reading = Progress::new(0, "reading {msg} ({elapsed})", args.quiet);
+    reading.set_message(args.input.display().to_string());
     let opts = ImportOptions { smooth_normals: args.smooth_normals };
-    let scene = import::load(&args.input, &opts).map_err(|e| e.to_string())?;
-    pb.finish_and_clear();
+    let scene = reading.around(|| import::load(&args.input, &opts), Progress::tick).map_err(|e| e.to_string())?;
+    tools::print_warnings(&scene.warnings);
     let t_import = t0.elapsed();
 
     let n = scene.triangle_count();
     let t1 = Instant::now();
     let placed = AtomicUsize::new(0);
-    let file = if args.quiet {
-        bvh_build::compile(&scene, &params, layouts).map_err(|e| e.to_string())?
-    } else {
-        let pb = ProgressBar::new(n as u64).with_style(
-            ProgressStyle::with_template("building {bar:40} {pos}/{len} triangles placed ({elapsed})")
-                .expect("the template is valid"),
-        );
-        std::thread::scope(|s| {
-            let worker = s.spawn(|| bvh_build::compile_with_progress(&scene, &params, layouts, Some(&placed)));
-            while !worker.is_finished() {
-                pb.set_position(placed.load(Ordering::Relaxed) as u64);
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            pb.finish_and_clear();
-            worker.join().unwrap_or_else(|p| std::panic::resume_unwind(p))
-        })
-        .map_err(|e| e.to_string())?
-    };
+    let building = Progress::new(n as u64, "building {bar:40} {pos}/{len} triangles placed ({elapsed})", args.quiet);
+    let file = building
+        .around(
+            || bvh_build::compile_with_progress(&scene, &params, layouts, Some(&placed)),
+            |bar| bar.set_position(placed.load(Ordering::Relaxed) as u64),
+        )
+        .map_err(|e| e.to_string())?;
     let t_build = t1.elapsed();
 
     let t2 = Instant::now();
-    bvh_format::write_file(&file, &output).map_err(|e| e.to_string())?;
+    let bytes = bvh_format::write(&file).map_err(|e| e.to_string())?;
+    let out = &checked[0];
+    output::write_atomically(&out.path, |w| w.write_all(&bytes).map_err(|e| e.to_string()))
+        .map_err(|e| e.to_string())?;
     let t_write = t2.elapsed();
     if !args.quiet {
         let s = file.stats();
-        let bytes = std::fs::metadata(&output).map(|m| m.len()).unwrap_or(0);
-        println!(
+        let bytes = bytes.len() as u64;
+        say!(
             "{} -> {}: {} triangles, {} nodes, depth {}, SAH cost {:.3}, {}",
             args.input.display(),
             output.display(),
@@ -174,7 +173,7 @@ fn compile(args: &CompileArgs) -> Result<(), String> {
             s.sah_cost,
             human_bytes(bytes)
         );
-        println!(
+        say!(
             "  import {:.2} s, build {:.2} s ({} {}), write {:.2} s",
             t_import.as_secs_f64(),
             t_build.as_secs_f64(),
@@ -191,10 +190,24 @@ fn load(file: &Path) -> Result<(SceneFile, Vec<bvh_format::SectionInfo>), String
     bvh_format::read_with_sections(&bytes).map_err(|e| format!("{} is not a valid scene file: {e}", file.display()))
 }
 
+/// A compiled file as it is, or a mesh or description compiled with the default parameters (and
+/// serialised, so that the section sizes are those of the file `bvhc compile` would write).
+fn load_any(file: &Path) -> Result<(SceneFile, Vec<bvh_format::SectionInfo>, bool), String> {
+    let ext = file.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    if !matches!(ext.as_deref(), Some("obj" | "gltf" | "glb" | "toml")) {
+        let (scene, sections) = load(file)?;
+        return Ok((scene, sections, false));
+    }
+    let compiled = tools::compile_default(file)?;
+    let bytes = bvh_format::write(&compiled).map_err(|e| e.to_string())?;
+    let (scene, sections) = bvh_format::read_with_sections(&bytes).map_err(|e| e.to_string())?;
+    Ok((scene, sections, true))
+}
+
 fn verify(file: &Path) -> Result<(), String> {
     let (scene, _) = load(file)?;
     let s = scene.stats();
-    println!(
+    say!(
         "{}: valid ({} triangles, {} nodes, depth {}, layouts: {})",
         file.display(),
         scene.triangles.len(),
@@ -222,19 +235,19 @@ fn human_bytes(b: u64) -> String {
 }
 
 fn info(file: &Path) -> Result<(), String> {
-    let (scene, sections) = load(file)?;
+    let (scene, sections, compiled) = load_any(file)?;
     let s = scene.stats();
     let (lo, hi) = scene.bounds();
     let b = &scene.build;
-    println!("{}", file.display());
-    println!("  triangles       {}", scene.triangles.len());
-    println!("  materials       {}", scene.materials.len());
-    println!(
+    say!("{}{}", file.display(), if compiled { " (compiled on the fly with the default parameters)" } else { "" });
+    say!("  triangles       {}", scene.triangles.len());
+    say!("  materials       {}", scene.materials.len());
+    say!(
         "  bounds          ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4})",
         lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]
     );
-    println!("  layouts         {}", layout_names(&scene));
-    println!(
+    say!("  layouts         {}", layout_names(&scene));
+    say!(
         "  build           {}{}, traversal cost {}, intersection cost {}, max leaf size {}",
         b.strategy.name(),
         if b.strategy == Strategy::Binned { format!(" ({} bins)", b.bins) } else { String::new() },
@@ -242,31 +255,31 @@ fn info(file: &Path) -> Result<(), String> {
         b.intersection_cost,
         b.max_leaf_size
     );
-    println!("  nodes           {} ({} inner, {} leaves)", s.node_count, s.node_count - s.leaf_count, s.leaf_count);
-    println!("  depth           max {}, mean leaf depth {:.2}", s.max_depth, s.mean_leaf_depth);
-    println!("  SAH cost        {:.4}", s.sah_cost);
-    println!("  mean leaf size  {:.2}", scene.triangles.len() as f64 / s.leaf_count.max(1) as f64);
-    println!("  leaf sizes");
+    say!("  nodes           {} ({} inner, {} leaves)", s.node_count, s.node_count - s.leaf_count, s.leaf_count);
+    say!("  depth           max {}, mean leaf depth {:.2}", s.max_depth, s.mean_leaf_depth);
+    say!("  SAH cost        {:.4}", s.sah_cost);
+    say!("  mean leaf size  {:.2}", scene.triangles.len() as f64 / s.leaf_count.max(1) as f64);
+    say!("  leaf sizes");
     let widest = s.leaf_sizes.iter().copied().max().unwrap_or(1).max(1);
     for (size, &count) in s.leaf_sizes.iter().enumerate().filter(|(_, c)| **c > 0) {
         let bar = "#".repeat(((count as f64 / widest as f64) * 40.0).ceil() as usize);
-        println!("    {size:>4} {count:>9}  {bar}");
+        say!("    {size:>4} {count:>9}  {bar}");
     }
-    println!("  sections");
+    say!("  sections");
     let total: u64 = sections.iter().map(|x| x.bytes).sum();
     for sec in &sections {
-        println!("    {:<22} {:>10} entries {:>12}", sec.kind.name(), sec.count, human_bytes(sec.bytes));
+        say!("    {:<22} {:>10} entries {:>12}", sec.kind.name(), sec.count, human_bytes(sec.bytes));
     }
-    println!("    {:<22} {:>10}         {:>12}", "total", "", human_bytes(total));
-    println!(
+    say!("    {:<22} {:>10}         {:>12}", "total", "", human_bytes(total));
+    say!(
         "  shading         ambient {:?}, background {:?}, up to {} indirections",
         scene.settings.ambient, scene.settings.background, scene.settings.max_indirections
     );
-    println!("  cameras");
+    say!("  cameras (the first is the tracers' default)");
     for c in &scene.cameras {
-        println!(
+        say!(
             "    {:<16} eye ({:.3}, {:.3}, {:.3}) at ({:.3}, {:.3}, {:.3}) fov {}",
-            c.name().unwrap_or("?"),
+            format!("\"{}\"", c.name().unwrap_or("?")),
             c.eye[0],
             c.eye[1],
             c.eye[2],
@@ -276,14 +289,15 @@ fn info(file: &Path) -> Result<(), String> {
             c.fov_deg
         );
     }
-    println!("  lights");
-    for l in &scene.lights {
-        println!(
-            "    at ({:.3}, {:.3}, {:.3}) colour ({:.2}, {:.2}, {:.2})",
+    say!("  lights");
+    for (i, l) in scene.lights.iter().enumerate() {
+        say!(
+            "    light {:<10} at ({:.3}, {:.3}, {:.3}) colour ({:.2}, {:.2}, {:.2})",
+            i + 1,
             l.position[0], l.position[1], l.position[2], l.colour[0], l.colour[1], l.colour[2]
         );
     }
-    println!("  materials");
+    say!("  materials");
     for (i, (m, name)) in scene.materials.iter().zip(&scene.material_names).enumerate() {
         let kind = if m.kr > 0.0 {
             format!("mirror kr {}", m.kr)
@@ -292,7 +306,7 @@ fn info(file: &Path) -> Result<(), String> {
         } else {
             "opaque".to_owned()
         };
-        println!("    {i:>3} {:<20} kd {:?} ks {:?} n {} {kind}", name, m.kd, m.ks, m.shininess);
+        say!("    {i:>3} {:<20} kd {:?} ks {:?} n {} {kind}", name, m.kd, m.ks, m.shininess);
     }
     Ok(())
 }

@@ -3,7 +3,10 @@
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
 use std::time::Instant;
-use tools::render_args::RenderArgs;
+use tools::cli::{duration, rays_per_second};
+use tools::output::{self, Frame, Heatmap};
+use tools::render_args::{RenderArgs, parse_count};
+use tools::say;
 use tracer_cpu::{Method, RenderSettings, Tracer};
 
 #[derive(Parser)]
@@ -19,12 +22,13 @@ enum Command {
     Render {
         #[command(flatten)]
         args: RenderArgs,
-        /// Traversal: SIMD packets where the CPU has AVX2, ordered child-pair traversal, or the
-        /// stackless escape-pointer walk.
+        /// Traversal: SIMD packets where the CPU has AVX2 (else ordered), ordered child-pair
+        /// traversal, or the stackless escape-pointer walk; auto takes the stackless walk for a
+        /// file compiled with only the escape-pointer layout.
         #[arg(long, value_enum, default_value = "auto")]
         method: MethodArg,
-        /// Worker threads [default: all cores].
-        #[arg(long)]
+        /// Worker threads, 1 to 1024 [default: all cores].
+        #[arg(long, value_parser = parse_threads, allow_hyphen_values = true)]
         threads: Option<usize>,
     },
 }
@@ -37,26 +41,27 @@ enum MethodArg {
     Stackless,
 }
 
+fn parse_threads(s: &str) -> Result<usize, String> {
+    parse_count(s, 1, 1024, "the number of threads").map(|n| n as usize)
+}
+
 fn main() -> ExitCode {
-    let Command::Render { args, method, threads } = Cli::parse().command;
-    match render(&args, method, threads) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    let Command::Render { args, method, threads } = tools::cli::parse::<Cli>().command;
+    tools::cli::run(|| render(&args, method, threads))
 }
 
 fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Result<(), String> {
-    let scene = tools::load_scene(args.scene.as_deref())?;
+    let outputs = args.check()?;
+    let loaded = tools::load_scene(args.scene.as_deref())?;
+    let scene = &loaded.file;
+    let camera = args.camera(scene)?;
     let settings = RenderSettings {
         width: args.res.0,
         height: args.res.1,
-        camera: args.camera(&scene)?,
+        camera,
         mode: args.mode(),
-        lights: args.lights(&scene),
-        max_indirections: args.indirections(&scene),
+        lights: args.lights(scene, &camera),
+        max_indirections: args.indirections(scene),
         method: match method {
             MethodArg::Auto => Method::Auto,
             MethodArg::Packet => Method::Packet,
@@ -69,36 +74,44 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
         .num_threads(threads.unwrap_or(0))
         .build()
         .map_err(|e| format!("cannot start the worker threads: {e}"))?;
-    let tracer = Tracer::new(&scene);
+    let tracer = Tracer::new(scene);
     let t0 = Instant::now();
     let image = pool.install(|| tracer_cpu::render(&tracer, &settings)).map_err(|e| e.to_string())?;
-    let ms = t0.elapsed().as_secs_f64() * 1e3;
-    tools::output::write_png(&args.output, &image)?;
+    let seconds = t0.elapsed().as_secs_f64();
+
+    // Every file first, the report after: a reader that stops early cannot cut the writing short.
+    let frame = Frame { width: image.width, height: image.height, rgb: &image.rgb };
+    output::write_image(&outputs.image, &frame).map_err(|e| e.to_string())?;
+    let mut lines = Vec::new();
     let r = image.rays;
-    let total = r.primary + r.shadow + r.secondary;
-    println!(
-        "{}x{} {:?} with {:?} on {} threads: {:.1} ms, rays: {} primary, {} shadow, {} secondary ({:.2} Mrays/s) -> {}",
+    lines.push(format!(
+        "{}x{} {:?} with {:?} on {} threads: {}{}, rays: {} primary, {} shadow, {} secondary ({}) -> {}",
         image.width,
         image.height,
         settings.mode,
-        settings.method.resolve(),
+        settings.method.resolve(scene),
         pool.current_num_threads(),
-        ms,
+        duration(seconds),
+        loaded.timing_note(),
         r.primary,
         r.shadow,
         r.secondary,
-        total as f64 / ms / 1e3,
-        args.output.display()
-    );
+        rays_per_second(r.primary + r.shadow + r.secondary, seconds),
+        outputs.image.path.display()
+    ));
     if let Some(aov) = &image.aov {
-        if let Some(p) = &args.heatmap {
-            let max = tools::output::write_heatmap(p, image.width, image.height, aov)?;
-            println!("heatmap: nodes visited per pixel, 0 (blue) to {max} (red) -> {}", p.display());
+        if let Some(out) = &outputs.heatmap {
+            let h = Heatmap::new(image.width, image.height, &aov.nodes, args.heatmap_max);
+            output::write_heatmap(out, &h).map_err(|e| e.to_string())?;
+            lines.push(tools::render_args::heatmap_line(&h, out));
         }
-        if let Some(p) = &args.aov {
-            tools::output::write_aov(p, image.width, image.height, aov)?;
-            println!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", p.display());
+        if let Some(out) = &outputs.aov {
+            output::write_aov(out, image.width, image.height, aov).map_err(|e| e.to_string())?;
+            lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", out.path.display()));
         }
+    }
+    for line in lines {
+        say!("{line}");
     }
     Ok(())
 }

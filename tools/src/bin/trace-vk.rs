@@ -3,7 +3,10 @@
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use tools::render_args::{RenderArgs, lights_n, parse_res};
+use tools::cli::{Progress, duration, rays_per_second};
+use tools::output::{self, Frame, Heatmap, Kind};
+use tools::render_args::{RenderArgs, lights_n, parse_count, parse_res, parse_workgroup};
+use tools::say;
 use tracer_vk::kernels::Method;
 use tracer_vk::render::{Mode, Renderer, Settings};
 use tracer_vk::{Gpu, list_devices};
@@ -18,7 +21,7 @@ struct Cli {
 #[derive(clap::Args, Clone)]
 struct DeviceArgs {
     /// Vulkan device index (see `trace-vk devices`) [default: the first discrete GPU, else any].
-    #[arg(long)]
+    #[arg(long, value_parser = parse_device, allow_hyphen_values = true)]
     device: Option<usize>,
     /// Enable the Khronos validation layer and fail on any message it reports.
     #[arg(long)]
@@ -40,7 +43,7 @@ enum Command {
         #[arg(long, value_enum, default_value = "lst")]
         method: MethodArg,
         /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
-        #[arg(long, value_parser = parse_workgroup, default_value = "8x8")]
+        #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
         workgroup: (u32, u32),
         #[command(flatten)]
         device: DeviceArgs,
@@ -52,28 +55,28 @@ struct BenchArgs {
     /// Scenes: compiled .bvh files, meshes or scene descriptions [default: the built-in bunny].
     scenes: Vec<PathBuf>,
     /// Stored cameras to render from.
-    #[arg(long, value_delimiter = ',', default_value = "close-up,medium,wide")]
+    #[arg(long, value_delimiter = ',', default_value = "close-up,medium,wide", allow_hyphen_values = true)]
     cameras: Vec<String>,
     /// Image sizes.
-    #[arg(long, value_delimiter = ',', value_parser = parse_res, default_value = "640x480,1280x960,1920x1440")]
+    #[arg(long, value_delimiter = ',', value_parser = parse_res, default_value = "640x480,1280x960,1920x1440", allow_hyphen_values = true)]
     res: Vec<(u32, u32)>,
     /// Modes: cast, or whitted with a light count (whitted1, whitted2, whitted4).
-    #[arg(long, value_delimiter = ',', default_value = "cast,whitted1,whitted2")]
-    modes: Vec<String>,
+    #[arg(long, value_delimiter = ',', value_parser = parse_mode, default_value = "cast,whitted1,whitted2", allow_hyphen_values = true)]
+    modes: Vec<(Mode, usize)>,
     /// Traversals.
     #[arg(long, value_delimiter = ',', value_enum, default_value = "lst,stackless,sst")]
     methods: Vec<MethodArg>,
-    /// Timed frames per setting (the median is reported).
-    #[arg(long, default_value_t = 50)]
+    /// Timed frames per setting, 1 to 100000 (the median is reported).
+    #[arg(long, default_value_t = 50, value_parser = parse_frames, allow_hyphen_values = true)]
     frames: usize,
-    /// Untimed frames before the timed ones.
-    #[arg(long, default_value_t = 3)]
+    /// Untimed frames before the timed ones, 0 to 100000.
+    #[arg(long, default_value_t = 3, value_parser = parse_warmup, allow_hyphen_values = true)]
     warmup: usize,
     /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
-    #[arg(long, value_parser = parse_workgroup, default_value = "8x8")]
+    #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
     workgroup: (u32, u32),
     /// Write the table as CSV here (and as Markdown next to it, .md).
-    #[arg(long, default_value = "bench.csv")]
+    #[arg(long, default_value = "bench.csv", allow_hyphen_values = true)]
     csv: PathBuf,
     #[command(flatten)]
     device: DeviceArgs,
@@ -91,42 +94,31 @@ enum MethodArg {
     SstSubgroup,
 }
 
-/// A workgroup shape the kernels take on every device that runs them: both sides powers of two,
-/// at most 1024 invocations (a device with a lower limit says so when the renderer is made).
-fn parse_workgroup(s: &str) -> Result<(u32, u32), String> {
-    let bad = || {
-        format!(
-            "{s:?} is not a workgroup shape: width and height must be powers of two with at most {} invocations in all, such as 8x8 (the default), 16x16 or 32x4",
-            tracer_vk::render::MAX_WORKGROUP_INVOCATIONS
-        )
-    };
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let (w, h) = (w.trim().parse::<u32>().map_err(|_| bad())?, h.trim().parse::<u32>().map_err(|_| bad())?);
-    if !tracer_vk::render::workgroup_allowed(w, h, tracer_vk::render::MAX_WORKGROUP_INVOCATIONS) {
-        return Err(bad());
-    }
-    Ok((w, h))
+fn parse_device(s: &str) -> Result<usize, String> {
+    parse_count(s, 0, 1 << 16, "the device index").map(|n| n as usize)
+}
+
+fn parse_frames(s: &str) -> Result<usize, String> {
+    parse_count(s, 1, 100_000, "the number of frames").map(|n| n as usize)
+}
+
+fn parse_warmup(s: &str) -> Result<usize, String> {
+    parse_count(s, 0, 100_000, "the number of warm-up frames").map(|n| n as usize)
 }
 
 fn main() -> ExitCode {
-    let result = match Cli::parse().command {
+    let command = tools::cli::parse::<Cli>().command;
+    tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
         Command::Render { args, method, workgroup, device } => render(&args, method, workgroup, &device),
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    })
 }
 
 fn devices() -> Result<(), String> {
     let list = list_devices().map_err(|e| e.to_string())?;
     for d in list {
-        println!(
+        say!(
             "{}: {} ({:?}, Vulkan {}.{}.{}, {}), subgroup {}, shared memory {} KiB, storage buffer range {} MiB, device-local memory {} MiB",
             d.index,
             d.name,
@@ -156,81 +148,70 @@ fn check_validation(gpu: &Gpu) -> Result<(), String> {
 }
 
 fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &DeviceArgs) -> Result<(), String> {
-    let scene = tools::load_scene(args.scene.as_deref())?;
+    let outputs = args.check()?;
+    let loaded = tools::load_scene(args.scene.as_deref())?;
+    let scene = &loaded.file;
+    let camera = args.camera(scene)?;
     let settings = Settings {
         width: args.res.0,
         height: args.res.1,
-        camera: args.camera(&scene)?,
+        camera,
         mode: match args.mode() {
             tracer_cpu::Mode::Cast => Mode::Cast,
             tracer_cpu::Mode::Whitted => Mode::Whitted,
         },
-        lights: args.lights(&scene),
-        max_indirections: args.indirections(&scene),
+        lights: args.lights(scene, &camera),
+        max_indirections: args.indirections(scene),
     };
     let method = method_of(method);
     let gpu = open(device)?;
-    let mut renderer = Renderer::new(&gpu, &scene, method, workgroup).map_err(|e| e.to_string())?;
-    let want_aovs = args.heatmap.is_some() || args.aov.is_some();
-    let bar = LateBar::new();
+    let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
+    // Tiles of a million pixels give a large frame's progress bar steps to show; a tile that size
+    // still fills every GPU, and smaller frames stay one tile.
+    renderer.limit_tile_pixels(PROGRESS_TILE_PIXELS);
+    let pixels = settings.width as u64 * settings.height as u64;
+    let bar = Progress::new(pixels, "{bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
+    let want_aovs = outputs.heatmap.is_some() || outputs.aov.is_some();
     let out = renderer
-        .render_with_progress(&settings, true, want_aovs, &mut |p| bar.update(p.pixels_done, p.pixels))
+        .render_with_progress(&settings, true, want_aovs, &mut |p| bar.set_position(p.pixels_done))
         .map_err(|e| e.to_string())?;
     bar.finish();
     check_validation(&gpu)?;
-    let image = tools::output::Frame { width: out.width, height: out.height, rgb: &out.rgb };
-    tools::output::write_frame_png(&args.output, &image)?;
+
+    // Every file first, the report after: a reader that stops early cannot cut the writing short.
+    output::write_image(&outputs.image, &Frame { width: out.width, height: out.height, rgb: &out.rgb })
+        .map_err(|e| e.to_string())?;
     let [p, s, sec] = out.rays;
-    println!(
-        "{}x{} {:?} with {} on {}: {:.3} ms GPU, rays: {p} primary, {s} shadow, {sec} secondary ({:.1} Mrays/s) -> {}",
+    let mut lines = vec![format!(
+        "{}x{} {:?} with {} on {}: {} GPU{}, rays: {p} primary, {s} shadow, {sec} secondary ({}) -> {}",
         out.width,
         out.height,
         settings.mode,
         method.name(),
         gpu.info().name,
-        out.gpu_ms,
-        (p + s + sec) as f64 / out.gpu_ms / 1e3,
-        args.output.display()
-    );
-    let aov = tracer_cpu::Aovs { t: out.t, normal: out.normal, prim: out.prim, nodes: out.nodes, tris: out.tris };
-    if let Some(path) = &args.heatmap {
-        let max = tools::output::write_heatmap(path, out.width, out.height, &aov)?;
-        println!("heatmap: nodes visited per pixel, 0 (blue) to {max} (red) -> {}", path.display());
+        duration(out.gpu_ms / 1e3),
+        loaded.timing_note(),
+        rays_per_second(p + s + sec, out.gpu_ms / 1e3),
+        outputs.image.path.display()
+    )];
+    if let Some(o) = &outputs.heatmap {
+        let h = Heatmap::new(out.width, out.height, &out.nodes, args.heatmap_max);
+        output::write_heatmap(o, &h).map_err(|e| e.to_string())?;
+        lines.push(tools::render_args::heatmap_line(&h, o));
     }
-    if let Some(path) = &args.aov {
-        tools::output::write_aov(path, out.width, out.height, &aov)?;
-        println!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", path.display());
+    if let Some(o) = &outputs.aov {
+        let aov = tracer_cpu::Aovs { t: out.t, normal: out.normal, prim: out.prim, nodes: out.nodes, tris: out.tris };
+        output::write_aov(o, out.width, out.height, &aov).map_err(|e| e.to_string())?;
+        lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", o.path.display()));
+    }
+    for line in lines {
+        say!("{line}");
     }
     Ok(())
 }
 
-/// A progress bar that shows itself only once the work has taken longer than a second.
-struct LateBar {
-    bar: indicatif::ProgressBar,
-    start: std::time::Instant,
-}
-
-impl LateBar {
-    fn new() -> Self {
-        let bar = indicatif::ProgressBar::hidden().with_style(
-            indicatif::ProgressStyle::with_template("{bar:40} {percent}% of the pixels, {elapsed} (eta {eta})")
-                .expect("the template is valid"),
-        );
-        LateBar { bar, start: std::time::Instant::now() }
-    }
-
-    fn update(&self, done: u64, total: u64) {
-        if self.bar.is_hidden() && self.start.elapsed() > std::time::Duration::from_secs(1) {
-            self.bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-        }
-        self.bar.set_length(total);
-        self.bar.set_position(done);
-    }
-
-    fn finish(&self) {
-        self.bar.finish_and_clear();
-    }
-}
+/// Most pixels of one tile of `trace-vk render` (its progress bar moves once per tile).
+const PROGRESS_TILE_PIXELS: u64 = 1 << 20;
 
 fn method_of(m: MethodArg) -> Method {
     match m {
@@ -245,11 +226,11 @@ fn method_of(m: MethodArg) -> Method {
 fn parse_mode(s: &str) -> Result<(Mode, usize), String> {
     match s {
         "cast" => Ok((Mode::Cast, 0)),
-        _ => s
-            .strip_prefix("whitted")
-            .and_then(|n| n.parse::<usize>().ok())
-            .map(|n| (Mode::Whitted, n))
-            .ok_or_else(|| format!("{s:?} is not a mode (cast, whitted1, whitted2, ...)")),
+        _ => match s.strip_prefix("whitted") {
+            Some(n) => parse_count(n, 0, tools::render_args::MAX_LIGHTS as u64, "the light count after \"whitted\"")
+                .map(|n| (Mode::Whitted, n as usize)),
+            None => Err(format!("{s:?} is not a mode (cast, whitted1, whitted2, ...)")),
+        },
     }
 }
 
@@ -260,17 +241,15 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
-    let modes: Vec<(Mode, usize)> = b.modes.iter().map(|m| parse_mode(m)).collect::<Result<_, _>>()?;
-    if b.frames == 0 {
-        return Err("--frames must be at least 1".to_owned());
-    }
+    let md_path = b.csv.with_extension("md");
+    let checked = output::check(&[("--csv", &b.csv, Kind::Table), ("--csv (its Markdown copy)", &md_path, Kind::Markdown)], &[])
+        .map_err(|e| e.to_string())?;
+    let modes = &b.modes;
     let gpu = open(&b.device)?;
     let scenes: Vec<Option<PathBuf>> =
         if b.scenes.is_empty() { vec![None] } else { b.scenes.iter().cloned().map(Some).collect() };
     let total = scenes.len() * b.cameras.len() * b.res.len() * modes.len() * b.methods.len();
-    let bar = indicatif::ProgressBar::new(total as u64).with_style(
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}").expect("the template is valid"),
-    );
+    let bar = Progress::new(total as u64, "{bar:40} {pos}/{len} settings ({elapsed}, {eta} left) {msg}", false);
     let header =
         "scene,triangles,camera,width,height,mode,lights,method,median_ms,min_ms,primary,shadow,secondary,mrays_per_s";
     let mut csv = vec![header.to_owned()];
@@ -284,7 +263,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
             b.warmup
         ),
         String::new(),
-        "| scene | camera | size | mode | method | median ms | Mrays/s | primary | shadow | secondary |".to_owned(),
+        "| scene | camera | size | mode | method | median ms | rays/s | primary | shadow | secondary |".to_owned(),
         "|---|---|---|---|---|---:|---:|---:|---:|---:|".to_owned(),
     ];
     for path in &scenes {
@@ -294,14 +273,14 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "bunny (built-in)".to_owned());
         bar.set_message(format!("loading {name}"));
-        let scene = tools::load_scene(path.as_deref())?;
+        let scene = tools::load_scene(path.as_deref())?.file;
         for &m in &b.methods {
             let method = method_of(m);
             let mut renderer = Renderer::new(&gpu, &scene, method, b.workgroup).map_err(|e| e.to_string())?;
             for cam in &b.cameras {
                 let camera = tools::render_args::stored_camera(&scene, cam)?;
                 for &(w, h) in &b.res {
-                    for &(mode, nl) in &modes {
+                    for &(mode, nl) in modes {
                         bar.set_message(format!(
                             "{name} {cam} {w}x{h} {mode:?}{} {}",
                             if nl > 0 { nl.to_string() } else { String::new() },
@@ -312,7 +291,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                             height: h,
                             camera,
                             mode,
-                            lights: lights_n(&scene, nl),
+                            lights: lights_n(&scene, nl, &camera),
                             max_indirections: scene.settings.max_indirections,
                         };
                         let mut times = Vec::with_capacity(b.frames);
@@ -326,13 +305,14 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                         }
                         let min = times.iter().copied().fold(f64::INFINITY, f64::min);
                         let med = median(&mut times);
-                        let mrays = (rays[0] + rays[1] + rays[2]) as f64 / med / 1e3;
+                        let all_rays = rays[0] + rays[1] + rays[2];
+                        let mrays = all_rays as f64 / med / 1e3;
                         let mode_name = match mode {
                             Mode::Cast => "cast".to_owned(),
                             Mode::Whitted => format!("whitted{nl}"),
                         };
                         csv.push(format!(
-                            "{name},{},{cam},{w},{h},{mode_name},{nl},{},{med:.4},{min:.4},{},{},{},{mrays:.1}",
+                            "{name},{},{cam},{w},{h},{mode_name},{nl},{},{med:.4},{min:.4},{},{},{},{mrays:.4}",
                             scene.triangles.len(),
                             method.name(),
                             rays[0],
@@ -340,8 +320,9 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                             rays[2]
                         ));
                         md.push(format!(
-                            "| {name} | {cam} | {w}x{h} | {mode_name} | {} | {med:.3} | {mrays:.0} | {} | {} | {} |",
+                            "| {name} | {cam} | {w}x{h} | {mode_name} | {} | {med:.3} | {} | {} | {} | {} |",
                             method.name(),
+                            rays_per_second(all_rays, med / 1e3),
                             rays[0],
                             rays[1],
                             rays[2]
@@ -352,15 +333,11 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
             }
         }
     }
-    bar.finish_and_clear();
+    bar.finish();
     check_validation(&gpu)?;
-    let write = |p: &std::path::Path, lines: &[String]| {
-        std::fs::write(p, lines.join("\n") + "\n").map_err(|e| format!("cannot write {}: {e}", p.display()))
-    };
-    write(&b.csv, &csv)?;
-    let md_path = b.csv.with_extension("md");
-    write(&md_path, &md)?;
-    println!("{}", md.join("\n"));
-    println!("\n-> {} and {}", b.csv.display(), md_path.display());
+    output::write_text(&checked[0], &(csv.join("\n") + "\n")).map_err(|e| e.to_string())?;
+    output::write_text(&checked[1], &(md.join("\n") + "\n")).map_err(|e| e.to_string())?;
+    say!("{}", md.join("\n"));
+    say!("\n-> {} and {}", b.csv.display(), md_path.display());
     Ok(())
 }

@@ -1,0 +1,202 @@
+//! `trace-cpu render` and `trace-vk render` end to end: negative values, the default camera,
+//! outputs checked before work and written whole, the same sentence from both tracers for the
+//! same mistake, and a reader that stops early. trace-vk runs on whatever Vulkan device is present
+//! (lavapipe in CI) and fails, never skips, without one.
+
+mod common;
+
+use common::{assert_ok, assert_one_sentence_error, run, scene, scratch, snapshot, text};
+use std::path::Path;
+
+/// A compiled room, small and with every material kind, for fast renders.
+fn room(dir: &Path) -> String {
+    let out = dir.join("room.bvh");
+    let o = run(dir, "bvhc", &["compile", scene("room.toml").to_str().unwrap(), "-o", "room.bvh", "--quiet"]);
+    assert_ok(&o, "compiling the room");
+    out.to_str().unwrap().to_owned()
+}
+
+#[test]
+fn negative_numbers_are_accepted_as_values_by_both_tracers() {
+    let dir = scratch("negative");
+    let room = room(&dir);
+    for tracer in ["trace-cpu", "trace-vk"] {
+        let o = run(
+            &dir,
+            tracer,
+            &[
+                "render", &room, "--eye", "-1.5,1,-1.5", "--at", "0,-0.5,0", "--up", "0,1,0", "--light", "-1,2.5,-1,0.5,0.5,0.5",
+                "--res", "8x6", "-o", "neg.png",
+            ],
+        );
+        assert_ok(&o, tracer);
+        assert_eq!(image::image_dimensions(dir.join("neg.png")).unwrap(), (8, 6));
+    }
+}
+
+/// A description with its own cameras and none called "medium" renders without --camera, from
+/// its first camera, and `--help` says so.
+#[test]
+fn the_default_camera_is_the_files_first() {
+    let dir = scratch("first-camera");
+    std::fs::write(
+        dir.join("two.toml"),
+        "[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\n\n[[camera]]\nname = \"north\"\neye = [0, 0.5, 3]\nat = [0, 0, 0]\n\n\
+         [[camera]]\nname = \"south\"\neye = [0, 0.5, -3]\nat = [0.3, 0, 0]\n",
+    )
+    .unwrap();
+    for tracer in ["trace-cpu", "trace-vk"] {
+        assert_ok(&run(&dir, tracer, &["render", "two.toml", "--res", "16x12", "-o", "default.png"]), tracer);
+        assert_ok(&run(&dir, tracer, &["render", "two.toml", "--res", "16x12", "-o", "north.png", "--camera", "north"]), tracer);
+        assert_ok(&run(&dir, tracer, &["render", "two.toml", "--res", "16x12", "-o", "south.png", "--camera", "south"]), tracer);
+        let read = |n: &str| image::open(dir.join(n)).unwrap().to_rgb8().into_raw();
+        assert_eq!(read("default.png"), read("north.png"), "{tracer}");
+        assert_ne!(read("default.png"), read("south.png"), "{tracer}: the two cameras see different images");
+        let (help, _) = text(&run(&dir, tracer, &["render", "--help"]));
+        assert!(help.contains("the scene's first camera"), "{tracer} --help: {help}");
+    }
+}
+
+/// Every output is checked before any work, and a refused or failed run leaves existing files
+/// as they were.
+#[test]
+fn outputs_are_checked_before_work_and_never_destroyed() {
+    let dir = scratch("outputs");
+    let room = room(&dir);
+    for name in ["y.tiff", "y.png", "y.gif", "keep.exr"] {
+        std::fs::write(dir.join(name), b"precious").unwrap();
+    }
+    let before = snapshot(&dir);
+    for tracer in ["trace-cpu", "trace-vk"] {
+        let cases: &[(&[&str], &str)] = &[
+            (&["-o", "y.tiff"], ".png, .jpg, .bmp, .exr"),
+            (&["-o", "y.gif"], "-o y.gif"),
+            (&["-o", "y.png", "--heatmap", "y.tiff"], "--heatmap y.tiff"),
+            (&["-o", "y.png", "--aov", "a.png"], "--aov a.png: the AOVs can be written as .exr"),
+            (&["-o", "y.png", "--heatmap", "./y.png"], "-o and --heatmap both name ./y.png"),
+            (&["-o", "keep.exr", "--aov", "keep.exr"], "-o and --aov both name keep.exr"),
+            (&["-o", "no/such/folder/y.png"], "the folder no/such/folder does not exist"),
+            (&["-o", "y.png", "--aov", "missing/a.exr"], "the folder missing does not exist"),
+            (&["-o", "room.bvh"], "-o room.bvh"),
+        ];
+        for (args, needle) in cases {
+            // The scene is missing too: the outputs are refused first, before anything is read.
+            let mut all = vec!["render", "no-such-scene.bvh", "--res", "8x8"];
+            all.extend_from_slice(args);
+            assert_one_sentence_error(&run(&dir, tracer, &all), needle);
+        }
+        // A failure after the work (here: the validation layer cannot fail, so a scene that
+        // cannot be read) also leaves everything in place.
+        assert_one_sentence_error(&run(&dir, tracer, &["render", "missing.bvh", "-o", "y.png"]), "missing.bvh");
+        assert_eq!(snapshot(&dir), before, "{tracer} changed a file it refused to write");
+        let _ = &room;
+    }
+}
+
+#[test]
+fn colour_image_as_exr_and_heatmap_with_its_scale() {
+    let dir = scratch("exr");
+    let room = room(&dir);
+    for tracer in ["trace-cpu", "trace-vk"] {
+        let o = run(
+            &dir,
+            tracer,
+            &["render", &room, "--res", "20x10", "-o", "c.exr", "--heatmap", "h.png", "--heatmap-max", "3", "--aov", "a.exr"],
+        );
+        let out = assert_ok(&o, tracer);
+        assert!(out.contains("0 (blue) to 3 (red)") && out.contains("pixels above the scale"), "{out}");
+        let rays = out.lines().next().unwrap();
+        assert!(!rays.contains(" 0.0 ") && rays.contains("rays/s"), "{rays}");
+        let (w, h) = image::image_dimensions(dir.join("h.png")).unwrap();
+        assert!(w == 20 && h > 10, "the legend adds rows below the image: {w}x{h}");
+        let exr = exr::prelude::read_all_flat_layers_from_file(dir.join("c.exr")).unwrap();
+        let layer = &exr.layer_data[0];
+        assert_eq!((layer.size.0, layer.size.1), (20, 10));
+        let names: Vec<String> = layer.channel_data.list.iter().map(|c| c.name.to_string()).collect();
+        assert_eq!(names, ["B", "G", "R"]);
+        // Linear float: the same values as the 8-bit image, over 255.
+        assert_ok(&run(&dir, tracer, &["render", &room, "--res", "20x10", "-o", "c.png"]), tracer);
+        let png = image::open(dir.join("c.png")).unwrap().to_rgb8();
+        let exr::prelude::FlatSamples::F32(r) = &layer.channel_data.list[2].sample_data else { panic!("R is f32") };
+        for (i, p) in png.pixels().enumerate() {
+            assert_eq!((r[i] * 255.0).round() as u8, p[0]);
+        }
+    }
+}
+
+/// The same mistake gets the same sentence from both tracers: their options are parsed and
+/// checked once, in `tools::render_args`.
+#[test]
+fn both_tracers_explain_a_mistake_in_the_same_words() {
+    let dir = scratch("same-words");
+    let room = room(&dir);
+    let cases: &[&[&str]] = &[
+        &["--light", "0,1,1,1"],
+        &["--eye", "1,2", "--at", "0,0,0"],
+        &["--eye", "0,0,0", "--at", "0,0,0"],
+        &["--fov", "-5"],
+        &["--res", "0x0"],
+        &["--lights", "-3"],
+        &["--indirections", "-1"],
+        &["--camera", "nope"],
+        &["--eye", "3e38,0,0", "--at", "-3e38,0,0"],
+        &["--heatmap-max", "0", "--heatmap", "h.png"],
+    ];
+    for args in cases {
+        let mut all = vec!["render", room.as_str(), "--res", "8x8", "-o", "x.png"];
+        all.extend_from_slice(args);
+        let cpu = assert_one_sentence_error(&run(&dir, "trace-cpu", &all), "");
+        let vk = assert_one_sentence_error(&run(&dir, "trace-vk", &all), "");
+        assert_eq!(cpu, vk, "{args:?}");
+        assert!(!cpu.contains("unexpected argument"), "{cpu}");
+    }
+    // A workgroup shape is not an image size.
+    let line = assert_one_sentence_error(&run(&dir, "trace-vk", &["render", &room, "--workgroup", "0x0"]), "workgroup");
+    assert!(!line.contains("image"), "{line}");
+}
+
+/// `trace-cpu render ... | head -1`: the reader goes away, the program ends quietly.
+#[test]
+fn a_closed_pipe_ends_the_program_quietly() {
+    let dir = scratch("pipe");
+    let room = room(&dir);
+    for tracer in ["trace-cpu", "trace-vk"] {
+        let mut child = std::process::Command::new(common::bin(tracer))
+            .args(["render", &room, "--res", "8x8", "-o", "p.png", "--heatmap", "h.png"])
+            .current_dir(&dir)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let o = child.wait_with_output().unwrap();
+        let (_, err) = text(&o);
+        assert!(o.status.success(), "{tracer}: {:?} {err}", o.status);
+        assert!(err.trim().is_empty(), "{tracer}: {err}");
+        assert!(dir.join("p.png").exists() && dir.join("h.png").exists(), "every file was written first");
+    }
+}
+
+/// `--method auto` on a file with only the escape-pointer layout takes the stackless walk.
+#[test]
+fn auto_method_on_an_escape_only_file_is_stackless() {
+    let dir = scratch("escape-only");
+    let o = run(&dir, "bvhc", &["compile", scene("room.toml").to_str().unwrap(), "-o", "e.bvh", "--layout", "escape", "--quiet"]);
+    assert_ok(&o, "compile");
+    let out = assert_ok(&run(&dir, "trace-cpu", &["render", "e.bvh", "--res", "8x8", "-o", "e.png"]), "auto");
+    assert!(out.contains("with Stackless"), "{out}");
+}
+
+/// `--lights N` on a closed room places the added lights inside it, where they light the view.
+#[test]
+fn added_lights_stay_inside_a_closed_room() {
+    let room = tools::compile_default(&scene("room.toml")).unwrap();
+    let camera = tools::render_args::default_camera(&room).unwrap();
+    let (lo, hi) = room.bounds();
+    let lights = tools::render_args::lights_n(&room, 6, &camera);
+    assert_eq!(lights.len(), 6);
+    for l in &lights {
+        let p = glam::Vec3::from(l.position);
+        assert!(p.cmpgt(lo.into()).all() && p.cmplt(hi.into()).all(), "{p} lies outside the room");
+    }
+}
