@@ -167,7 +167,8 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
         }
         var votes = sst_votes[0];
         if WG_SIZE > 1u {
-            votes += sst_votes[1];
+            // (An index naga can bound when the workgroup has one invocation.)
+            votes += sst_votes[min(1u, WG_SIZE - 1u)];
         }
 //#endif
 //#if VOTE_SUBGROUP
