@@ -384,13 +384,21 @@ impl<'g> Renderer<'g> {
         };
         let info = self.gpu.info();
         let groups = [info.max_workgroup_count[0], info.max_workgroup_count[1]];
-        let plan = tiles::plan(s.width, s.height, self.tile_pixels, self.spec.workgroup, groups)
-            .ok_or_else(|| VkError::Usage(format!("no tile of {} pixels holds a workgroup", self.tile_pixels)))?;
         let mut host = HostFrame::new(s.width, s.height, image, aovs)?;
         for &st in stages {
             self.pipeline(st)?;
         }
-        self.targets(plan.iter().map(Tile::pixels).max().unwrap_or(1))?;
+        // Tiles sized from the device's limits may still not fit the memory other programs left:
+        // halve them until they do, down to one workgroup.
+        let plan = loop {
+            let plan = tiles::plan(s.width, s.height, self.tile_pixels, self.spec.workgroup, groups)
+                .ok_or_else(|| VkError::Usage(format!("no tile of {} pixels holds a workgroup", self.tile_pixels)))?;
+            let wg = self.spec.workgroup.0 as u64 * self.spec.workgroup.1 as u64;
+            match self.targets(plan.iter().map(Tile::pixels).max().unwrap_or(1)) {
+                Err(VkError::OutOfDeviceMemory { .. }) if self.tile_pixels / 2 >= wg => self.tile_pixels /= 2,
+                result => break result.map(|()| plan)?,
+            }
+        };
 
         let colours: Vec<[f32; 3]> = s.lights.iter().map(|l| l.colour).collect();
         let (bound, k_max) = self.scene.bounce_bound(&colours);
@@ -420,7 +428,16 @@ impl<'g> Renderer<'g> {
         for tile in &plan {
             frame.tile = [tile.x, tile.y, tile.width, tile.height];
             g.upload(&frame_buf, bytemuck::bytes_of(&frame))?;
-            self.render_tile(tile, whitted, s.lights.len() as u32, indirections, &frame_buf, &lights_buf, &counters, &mut tally)?;
+            self.render_tile(
+                tile,
+                whitted,
+                s.lights.len() as u32,
+                indirections,
+                &frame_buf,
+                &lights_buf,
+                &counters,
+                &mut tally,
+            )?;
             let t = self.targets.as_ref().expect("the targets were made above");
             let n = tile.pixels() as usize;
             if image {
@@ -529,7 +546,7 @@ impl<'g> Renderer<'g> {
             })?;
             tally.add_timings(&timings);
             let words: Vec<u32> = g.download_as(counters)?;
-            self.check_counts(&words, tile, first == 0, dispatches)?;
+            check_counts(&self.spec, &words, tile.pixels(), first == 0, dispatches)?;
             let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
             tally.rays[0] += wide(counters::PRIMARY);
             tally.rays[1] += wide(counters::SHADOW);
@@ -540,32 +557,39 @@ impl<'g> Renderer<'g> {
             first = end;
         }
     }
+}
 
-    /// Refuses a submission whose counts do not add up: every dispatch must have finished every
-    /// pixel of the tile, the first must have traced one primary ray per pixel, and no traversal
-    /// may have given up on a ray.
-    fn check_counts(&self, words: &[u32], tile: &Tile, first: bool, dispatches: u64) -> Result<(), RenderError> {
-        let method = self.spec.method.name();
-        let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
-        let faults = words[counters::FAULTS];
-        if faults & counters::FAULT_STACK != 0 {
-            let what = format!("found its stack of {} entries full (the tree is deeper than its file says)", self.spec.stack_size);
-            return Err(RenderError::Fault { method, what });
-        }
-        if faults & counters::FAULT_WALK != 0 {
-            return Err(RenderError::Fault { method, what: "took more steps than the tree has nodes".to_owned() });
-        }
-        let primary = wide(counters::PRIMARY);
-        if first && primary != tile.pixels() {
-            return Err(RenderError::LostWork { method, what: "primary rays", done: primary, expected: tile.pixels() });
-        }
-        let finished = wide(counters::FINISHED);
-        let expected = dispatches * tile.pixels();
-        if finished != expected {
-            return Err(RenderError::LostWork { method, what: "pixel passes", done: finished, expected });
-        }
-        Ok(())
+/// Refuses a submission whose counts do not add up: every dispatch must have finished every
+/// pixel of the tile, the first must have traced one primary ray per pixel, and no traversal may
+/// have given up on a ray.
+fn check_counts(
+    spec: &Specialisation,
+    words: &[u32],
+    pixels: u64,
+    first: bool,
+    dispatches: u64,
+) -> Result<(), RenderError> {
+    let method = spec.method.name();
+    let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
+    let faults = words[counters::FAULTS];
+    if faults & counters::FAULT_STACK != 0 {
+        let what =
+            format!("found its stack of {} entries full (the tree is deeper than its file says)", spec.stack_size);
+        return Err(RenderError::Fault { method, what });
     }
+    if faults & counters::FAULT_WALK != 0 {
+        return Err(RenderError::Fault { method, what: "took more steps than the tree has nodes".to_owned() });
+    }
+    let primary = wide(counters::PRIMARY);
+    if first && primary != pixels {
+        return Err(RenderError::LostWork { method, what: "primary rays", done: primary, expected: pixels });
+    }
+    let finished = wide(counters::FINISHED);
+    let expected = dispatches * pixels;
+    if finished != expected {
+        return Err(RenderError::LostWork { method, what: "pixel passes", done: finished, expected });
+    }
+    Ok(())
 }
 
 /// Checks that a scene array fits one storage buffer binding and one allocation.
@@ -581,4 +605,62 @@ fn fits<T>(info: &crate::device::DeviceInfo, what: &'static str, data: &[T]) -> 
         return Err(RenderError::SceneTooLarge { what, bytes, limit_name, limit, fits });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec() -> Specialisation {
+        Specialisation {
+            method: Method::Sst,
+            stack_size: 12,
+            leaf_size: 4,
+            workgroup: (8, 8),
+            reflection: false,
+            refraction: false,
+        }
+    }
+
+    /// Counters as the kernels leave them after `dispatches` passes over `pixels` pixels.
+    fn words(primary: u64, finished: u64, faults: u32) -> Vec<u32> {
+        let mut w = vec![0u32; counters::LIVE + 1];
+        w[counters::PRIMARY] = primary as u32;
+        w[counters::PRIMARY + 1] = (primary >> 32) as u32;
+        w[counters::FINISHED] = finished as u32;
+        w[counters::FINISHED + 1] = (finished >> 32) as u32;
+        w[counters::FAULTS] = faults;
+        w
+    }
+
+    #[test]
+    fn counts_that_add_up_pass() {
+        check_counts(&spec(), &words(100, 400, 0), 100, true, 4).unwrap();
+        // Later submissions trace no primary rays.
+        check_counts(&spec(), &words(0, 300, 0), 100, false, 3).unwrap();
+        // 64-bit counts: more than 2^32 pixel passes in one tile.
+        let n = 1u64 << 31;
+        check_counts(&spec(), &words(n, 3 * n, 0), n, true, 3).unwrap();
+    }
+
+    #[test]
+    fn lost_work_and_faults_refuse_the_frame_in_one_sentence() {
+        let cases = [
+            (words(99, 400, 0), true, "finished 99 of the 100 primary rays"),
+            (words(100, 399, 0), true, "finished 399 of the 400 pixel passes"),
+            (words(0, 400, 0), false, ""),
+            (words(100, 400, counters::FAULT_STACK), true, "stack of 12 entries full"),
+            (words(100, 400, counters::FAULT_WALK), true, "more steps than the tree has nodes"),
+        ];
+        for (w, first, says) in cases {
+            let r = check_counts(&spec(), &w, 100, first, 4);
+            if says.is_empty() {
+                assert!(r.is_ok(), "{r:?}");
+                continue;
+            }
+            let msg = r.expect_err(says).to_string();
+            assert!(msg.contains(says) && msg.contains("sst") && msg.contains("no image"), "{msg}");
+            assert!(!msg.contains('\n'));
+        }
+    }
 }
