@@ -85,7 +85,12 @@ pub fn assert_matches_cpu(what: &str, cpu: &tracer_cpu::Image, gpu: &tracer_vk::
     assert!(d.prim_ties * 1000 <= n, "{what}: {} ties is too many to be ties", d.prim_ties);
     assert_eq!(gpu.rays[0], cpu.rays.primary, "{what}: primary rays");
     let close = |g: u64, c: u64| g.abs_diff(c) * 1000 <= c.max(1);
-    assert!(close(gpu.rays[1], cpu.rays.shadow), "{what}: {} shadow rays, the CPU traced {}", gpu.rays[1], cpu.rays.shadow);
+    assert!(
+        close(gpu.rays[1], cpu.rays.shadow),
+        "{what}: {} shadow rays, the CPU traced {}",
+        gpu.rays[1],
+        cpu.rays.shadow
+    );
     assert!(
         close(gpu.rays[2], cpu.rays.secondary),
         "{what}: {} secondary rays, the CPU traced {}",

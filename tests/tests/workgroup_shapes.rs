@@ -3,8 +3,12 @@
 //! workgroups narrower than 8 on lavapipe, and rendered wrong images with fewer than 4
 //! invocations on an H100.
 //!
-//! The image size grows with the shape so that every run has full and partial workgroups in both
-//! directions while staying small: lavapipe runs an SST workgroup's barriers one by one.
+//! Images stay small, because lavapipe resumes an SST workgroup at every barrier in chunks of 8
+//! invocations and runs workgroups of fewer than 8 invocations a hundred times slower than 8:
+//! shapes of up to 32 invocations render an image one pixel larger than the shape in each
+//! direction (three workgroups where a side is 1), so full and partial workgroups meet; larger
+//! shapes render exactly one full workgroup. Partial workgroups of 8 x 8 are also tested in
+//! `frames.rs` and `cross_backend.rs`.
 
 use bvh_format::SceneFile;
 use tests::{assert_matches_cpu, compile, gpu};
@@ -40,10 +44,19 @@ fn render_all_shapes(methods: &[VkMethod]) {
     let tracer = Tracer::new(&scene);
     let mut references = std::collections::HashMap::new();
     for &(wx, wy) in &shapes {
-        let (w, h) = ((wx + wx / 2 + 1).max(24), (wy + wy / 2 + 1).max(18));
-        let cpu = references
-            .entry((w, h))
-            .or_insert_with(|| cpu_image(&tracer, &scene, w, h, tracer_cpu::Mode::Whitted));
+        let side = |n: u32| {
+            if wx * wy > 32 {
+                n
+            } else if n == 1 {
+                3
+            } else {
+                n + 1
+            }
+        };
+        let (w, h) = (side(wx), side(wy));
+        let start = std::time::Instant::now();
+        let cpu =
+            references.entry((w, h)).or_insert_with(|| cpu_image(&tracer, &scene, w, h, tracer_cpu::Mode::Whitted));
         for &method in methods {
             let mut r = Renderer::new(&gpu, &scene, method, (wx, wy)).expect("an allowed shape is taken");
             let settings = Settings {
@@ -57,6 +70,7 @@ fn render_all_shapes(methods: &[VkMethod]) {
             let out = r.render(&settings).unwrap_or_else(|e| panic!("{} {wx}x{wy}: {e}", method.name()));
             assert_matches_cpu(&format!("{} {wx}x{wy} at {w}x{h}", method.name()), cpu, &out);
         }
+        println!("{wx}x{wy}: {:.1} s", start.elapsed().as_secs_f64());
     }
     let messages = gpu.validation_messages();
     assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
