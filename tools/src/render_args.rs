@@ -287,14 +287,16 @@ pub fn lights_n(scene: &SceneFile, n: usize, camera: &CameraSpec) -> Vec<Light> 
     let (lo, hi) = scene.bounds();
     let added = n.saturating_sub(lights.len());
     let c = 1.0 / n.max(1) as f32;
-    let placed = bvh_build::import::defaults::lights_around(camera.eye, camera.at, camera.up, lo.into(), hi.into(), added);
+    let placed =
+        bvh_build::import::defaults::lights_around(camera.eye, camera.at, camera.up, lo.into(), hi.into(), added);
     lights.extend(placed.into_iter().map(|p| Light::new(p.to_array(), [c, c, c])));
     lights
 }
 
 /// The line both tracers print for a heatmap: its scale, and how many pixels lie above a fixed one.
 pub fn heatmap_line(h: &output::Heatmap, out: &Output) -> String {
-    let clipped = if h.clipped > 0 { format!(", {} pixels above the scale drawn red", h.clipped) } else { String::new() };
+    let clipped =
+        if h.clipped > 0 { format!(", {} pixels above the scale drawn red", h.clipped) } else { String::new() };
     format!(
         "heatmap: nodes visited per pixel, 0 (blue) to {} (red), scale drawn below the image{clipped} -> {}",
         h.max,

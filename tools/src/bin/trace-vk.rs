@@ -242,8 +242,9 @@ fn median(v: &mut [f64]) -> f64 {
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
     let md_path = b.csv.with_extension("md");
-    let checked = output::check(&[("--csv", &b.csv, Kind::Table), ("--csv (its Markdown copy)", &md_path, Kind::Markdown)], &[])
-        .map_err(|e| e.to_string())?;
+    let checked =
+        output::check(&[("--csv", &b.csv, Kind::Table), ("--csv (its Markdown copy)", &md_path, Kind::Markdown)], &[])
+            .map_err(|e| e.to_string())?;
     let modes = &b.modes;
     let gpu = open(&b.device)?;
     let scenes: Vec<Option<PathBuf>> =
