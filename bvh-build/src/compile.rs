@@ -54,6 +54,16 @@ pub fn build_tree_with_progress(
     p: &BuildParams,
     progress: Option<&AtomicUsize>,
 ) -> Result<build::BuiltTree, BuildError> {
+    tree_with(positions, p, progress, false)
+}
+
+fn tree_with(
+    positions: &[[glam::Vec3; 3]],
+    p: &BuildParams,
+    progress: Option<&AtomicUsize>,
+    escape: bool,
+) -> Result<build::BuiltTree, BuildError> {
+    use rayon::prelude::*;
     check_params(p)?;
     if positions.is_empty() {
         return Err(BuildError::Empty);
@@ -61,7 +71,7 @@ pub fn build_tree_with_progress(
     if positions.len() >= (u32::MAX / 2) as usize {
         return Err(BuildError::TooLarge(positions.len()));
     }
-    if let Some(t) = positions.iter().position(|t| t.iter().any(|v| !v.is_finite())) {
+    if let Some(t) = positions.par_iter().position_first(|t| t.iter().any(|v| !v.is_finite())) {
         return Err(BuildError::NonFinite { triangle: t });
     }
     let mut refs = build::prim_refs(positions);
@@ -72,8 +82,10 @@ pub fn build_tree_with_progress(
         depth_limit: build::DEPTH_LIMIT,
     };
     Ok(match p.strategy {
-        Strategy::Binned => build::build(&mut refs, &BinnedSah { bins: p.bins as usize, costs }, costs, progress),
-        Strategy::Sweep => build::build(&mut refs, &SweepSah { costs }, costs, progress),
+        Strategy::Binned => {
+            build::build(&mut refs, &BinnedSah { bins: p.bins as usize, costs }, costs, progress, escape)
+        }
+        Strategy::Sweep => build::build(&mut refs, &SweepSah { costs }, costs, progress, escape),
     })
 }
 
@@ -96,25 +108,35 @@ pub fn compile_with_progress(
     if scene.normals.len() != n || scene.material_ids.len() != n {
         return Err(BuildError::Params("the scene's normals or material ids do not match its triangles".to_owned()));
     }
-    let tree = build_tree_with_progress(&scene.positions, params, progress)?;
+    use rayon::prelude::*;
+    let tree = tree_with(&scene.positions, params, progress, layouts.escape)?;
     let pad = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
     let order = &tree.order;
-    let triangles = order
-        .iter()
-        .map(|&i| {
-            let [a, b, c] = scene.positions[i as usize];
-            Triangle::from_vertices(a.into(), b.into(), c.into())
-        })
-        .collect();
-    let normals = order
-        .iter()
-        .map(|&i| {
-            let [a, b, c] = scene.normals[i as usize];
-            TriangleNormals { n: [pad(a), pad(b), pad(c)] }
-        })
-        .collect();
-    let material_ids = order.iter().map(|&i| scene.material_ids[i as usize]).collect();
-    let escape = layouts.escape.then(|| bvh_format::tree::escape_from_child_pair(&tree.nodes));
+    let ((triangles, normals), material_ids) = rayon::join(
+        || {
+            rayon::join(
+                || {
+                    order
+                        .par_iter()
+                        .map(|&i| {
+                            let [a, b, c] = scene.positions[i as usize];
+                            Triangle::from_vertices(a.into(), b.into(), c.into())
+                        })
+                        .collect()
+                },
+                || {
+                    order
+                        .par_iter()
+                        .map(|&i| {
+                            let [a, b, c] = scene.normals[i as usize];
+                            TriangleNormals { n: [pad(a), pad(b), pad(c)] }
+                        })
+                        .collect()
+                },
+            )
+        },
+        || order.par_iter().map(|&i| scene.material_ids[i as usize]).collect(),
+    );
     let file = SceneFile {
         build: *params,
         settings: scene.settings,
@@ -123,9 +145,9 @@ pub fn compile_with_progress(
         material_ids,
         materials: scene.materials.clone(),
         material_names: scene.material_names.clone(),
-        input_index: tree.order.clone(),
+        input_index: tree.order,
         child_pair: layouts.child_pair.then_some(tree.nodes),
-        escape,
+        escape: tree.escape,
         cameras: scene.cameras.clone(),
         lights: scene.lights.clone(),
     };

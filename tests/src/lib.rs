@@ -1,100 +1,31 @@
-//! Workspace-level tests live in `tests/`; this library holds what several of them share: the
-//! shipped scenes compiled in memory, the Vulkan device, and the comparison of a GPU image with
-//! the CPU's.
+//! Workspace-level tests live in `tests/`; this library holds what tests in several crates share.
 
-use bvh_format::{NO_TRIANGLE, SceneFile};
-use std::path::Path;
-use tracer_vk::Gpu;
+/// xorshift64* (Vigna 2016): deterministic numbers from a seed, so that every generated input of a
+/// test (damaged files, random buffers) is reproducible without a dependency.
+#[derive(Clone, Debug)]
+pub struct Rng(pub u64);
 
-/// A scene of `scenes/`, compiled with default settings.
-pub fn compile(name: &str) -> SceneFile {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name);
-    let scene = bvh_build::import::load(&p, &Default::default()).expect("the scene imports");
-    bvh_build::compile(&scene, &Default::default(), Default::default()).expect("the scene compiles")
-}
-
-/// The first Vulkan device, with the validation layer on. Fails, never skips, without one.
-pub fn gpu() -> Gpu {
-    match Gpu::new(None, true) {
-        Ok(g) => g,
-        Err(e) => panic!("the GPU tests need a Vulkan device: {e}"),
+impl Rng {
+    /// The next 64 random bits. The seed must not be zero.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
     }
-}
 
-/// How a GPU image differs from the CPU's.
-pub struct Diff {
-    /// Share of pixels whose channels all lie within 1/255 of the CPU's.
-    pub within_one: f64,
-    pub flip_mean: f32,
-    /// Pixels whose primary ray hit another triangle at another distance.
-    pub prim_differs: usize,
-    /// Pixels whose primary ray hit another triangle at the same distance (ties, shared edges).
-    pub prim_ties: usize,
-}
-
-pub fn diff(cpu: &tracer_cpu::Image, gpu: &tracer_vk::render::Output) -> Diff {
-    let n = cpu.rgb.len();
-    assert_eq!(gpu.rgb.len(), n, "the GPU image has {} pixels, the CPU's {n}", gpu.rgb.len());
-    let within =
-        cpu.rgb.iter().zip(&gpu.rgb).filter(|(a, b)| a.iter().zip(b.iter()).all(|(x, y)| x.abs_diff(*y) <= 1)).count();
-    let flat = |rgb: &[[u8; 3]]| rgb.iter().flatten().copied().collect::<Vec<u8>>();
-    let reference = nv_flip::FlipImageRgb8::with_data(cpu.width, cpu.height, &flat(&cpu.rgb));
-    let test = nv_flip::FlipImageRgb8::with_data(gpu.width, gpu.height, &flat(&gpu.rgb));
-    let error = nv_flip::flip(reference, test, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
-    let flip_mean = nv_flip::FlipPool::from_image(&error).mean();
-
-    // Triangle ids: a different triangle at the same distance is an exact tie or a shared edge
-    // (both backends round differently there); anything else is a real disagreement.
-    let aov = cpu.aov.as_ref().expect("the CPU render keeps AOVs");
-    let (mut differs, mut ties) = (0, 0);
-    for i in 0..n {
-        if aov.prim[i] == gpu.prim[i] {
-            continue;
-        }
-        let (a, b) = (aov.t[i], gpu.t[i]);
-        let both_hit = aov.prim[i] != NO_TRIANGLE && gpu.prim[i] != NO_TRIANGLE;
-        if both_hit && (a - b).abs() <= 1e-4 * a.abs().max(b.abs()) {
-            ties += 1;
-        } else {
-            differs += 1;
-        }
+    /// A number in `0..n` (with the negligible bias of a modulo).
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
     }
-    Diff { within_one: within as f64 / n as f64, flip_mean, prim_differs: differs, prim_ties: ties }
-}
 
-/// Asserts that a GPU frame (with AOVs) is the CPU's image: colours within 1/255 almost
-/// everywhere, FLIP below 0.01, the same triangles but for ties, one primary ray per pixel, and
-/// shadow and secondary ray counts within 0.1% of the CPU's (ties can turn a few).
-pub fn assert_matches_cpu(what: &str, cpu: &tracer_cpu::Image, gpu: &tracer_vk::render::Output) {
-    let d = diff(cpu, gpu);
-    let n = cpu.rgb.len();
-    println!(
-        "{what}: {:.4}% of pixels within 1/255, FLIP mean {:.5}, triangle ids: {} differ at equal distance (ties), {} otherwise; rays GPU {:?} CPU [{}, {}, {}]",
-        d.within_one * 100.0,
-        d.flip_mean,
-        d.prim_ties,
-        d.prim_differs,
-        gpu.rays,
-        cpu.rays.primary,
-        cpu.rays.shadow,
-        cpu.rays.secondary
-    );
-    assert!(d.within_one >= 0.999, "{what}: only {:.4}% of pixels within 1/255", d.within_one * 100.0);
-    assert!(d.flip_mean < 0.01, "{what}: FLIP mean {}", d.flip_mean);
-    assert_eq!(d.prim_differs, 0, "{what}: triangle ids differ beyond ties");
-    assert!(d.prim_ties * 1000 <= n, "{what}: {} ties is too many to be ties", d.prim_ties);
-    assert_eq!(gpu.rays[0], cpu.rays.primary, "{what}: primary rays");
-    let close = |g: u64, c: u64| g.abs_diff(c) * 1000 <= c.max(1);
-    assert!(
-        close(gpu.rays[1], cpu.rays.shadow),
-        "{what}: {} shadow rays, the CPU traced {}",
-        gpu.rays[1],
-        cpu.rays.shadow
-    );
-    assert!(
-        close(gpu.rays[2], cpu.rays.secondary),
-        "{what}: {} secondary rays, the CPU traced {}",
-        gpu.rays[2],
-        cpu.rays.secondary
-    );
+    /// A float in `[0, 1)` from the top 24 bits, which an f32 holds exactly.
+    pub fn unit(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// `n` random bytes (the top byte of each number).
+    pub fn bytes(&mut self, n: usize) -> Vec<u8> {
+        (0..n).map(|_| (self.next_u64() >> 56) as u8).collect()
+    }
 }

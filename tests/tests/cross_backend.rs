@@ -4,43 +4,34 @@
 //! on. Without a Vulkan loader or device these tests fail with the sentence that says what to
 //! install: a skipped GPU test must never pass.
 
+mod common;
+
 use bvh_format::SceneFile;
-use tests::{assert_matches_cpu, compile, gpu};
-use tracer_cpu::{CameraSpec, Method, Tracer};
+use common::{compile, gpu};
+use render_spec::{CameraSpec, Mode, Settings};
+use tracer_cpu::{Method, Tracer};
 use tracer_vk::Gpu;
 use tracer_vk::kernels::Method as VkMethod;
-use tracer_vk::render::{Mode as VkMode, Renderer, Settings};
+use tracer_vk::render::Renderer;
 
 fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32, h: u32) {
     let cam = CameraSpec::from(scene.camera(camera).expect("the camera exists"));
     let tracer = Tracer::new(scene);
-    for (mode, vk_mode) in [(tracer_cpu::Mode::Cast, VkMode::Cast), (tracer_cpu::Mode::Whitted, VkMode::Whitted)] {
-        let cpu = tracer_cpu::render(
-            &tracer,
-            &tracer_cpu::RenderSettings {
-                width: w,
-                height: h,
-                camera: cam,
-                mode,
-                lights: scene.lights.clone(),
-                max_indirections: scene.settings.max_indirections,
-                method: Method::Ordered,
-                aovs: true,
-            },
-        )
-        .expect("the CPU renders");
+    for mode in [Mode::Cast, Mode::Whitted] {
+        let settings = Settings {
+            width: w,
+            height: h,
+            camera: cam,
+            mode,
+            lights: scene.lights.clone(),
+            max_indirections: scene.settings.max_indirections,
+            aovs: true,
+        };
+        let cpu = tracer_cpu::render(&tracer, &settings, Method::Ordered).expect("the CPU renders");
         for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup] {
             let mut r = Renderer::new(gpu, scene, method, (8, 8)).expect("the scene uploads");
-            let settings = Settings {
-                width: w,
-                height: h,
-                camera: cam,
-                mode: vk_mode,
-                lights: scene.lights.clone(),
-                max_indirections: scene.settings.max_indirections,
-            };
-            let out = r.render(&settings).expect("the GPU renders");
-            assert_matches_cpu(&format!("{scene_name} {camera} {mode:?} {}", method.name()), &cpu, &out);
+            let out = r.render(&settings).expect("the GPU renders").image;
+            common::assert_matches_cpu(&format!("{scene_name} {camera} {mode:?} {}", method.name()), &cpu, &out);
         }
     }
     let messages = gpu.validation_messages();
@@ -102,12 +93,13 @@ fn a_tree_deeper_than_32_levels_renders_with_stacks_sized_from_the_file() {
             width: 96,
             height: 64,
             camera: cam,
-            mode: VkMode::Cast,
+            mode: Mode::Cast,
             lights: vec![],
             max_indirections: 0,
+            aovs: true,
         })
         .unwrap();
-    let deepest = out.nodes.iter().copied().max().unwrap_or(0);
+    let deepest = out.image.aov.expect("AOVs were asked for").nodes.iter().copied().max().unwrap_or(0);
     assert!(deepest > 2 * 33, "some ray must walk below level 32 (most nodes tested by one ray: {deepest})");
     println!("deep scene: {} triangles, depth {depth}", scene.triangles.len());
     compare("deep", &scene, "medium", &gpu, 96, 64);
@@ -133,4 +125,30 @@ fn an_sst_stack_or_leaf_beyond_shared_memory_is_a_clear_error() {
     assert!(!msg.contains('\n'));
     // LST renders it.
     assert!(Renderer::new(&gpu, &file, VkMethod::Lst, (8, 8)).is_ok());
+}
+
+/// The per-pixel buffers of a frame this large exceed one storage buffer binding: the renderer
+/// splits it into tiles, and every pixel still gets its primary ray.
+#[test]
+fn a_frame_beyond_the_storage_buffer_range_renders_in_tiles() {
+    let gpu = gpu();
+    let limit = gpu.info().max_storage_buffer_range;
+    let scene = compile("room.toml");
+    let mut r = Renderer::new(&gpu, &scene, VkMethod::Lst, (8, 8)).unwrap();
+    // 32 bytes of path state per pixel: a square image just past the limit.
+    let side = ((limit / 32) as f64).sqrt() as u32 + 2;
+    let cam = CameraSpec::from(scene.camera("medium").unwrap());
+    let s = Settings {
+        width: side,
+        height: side,
+        camera: cam,
+        mode: Mode::Cast,
+        lights: vec![],
+        max_indirections: 0,
+        aovs: false,
+    };
+    let out = r.render(&s).expect("the frame renders in tiles").image;
+    assert_eq!(out.rays.primary, side as u64 * side as u64);
+    assert_eq!(out.rgb.len(), side as usize * side as usize);
+    assert!(out.aov.is_none(), "AOVs were not asked for");
 }

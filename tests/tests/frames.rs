@@ -2,10 +2,12 @@
 //! frame rendered in one, and bounce passes stop once every path has ended, so a huge
 //! `--indirections` costs nothing beyond what the scene needs.
 
-use tests::{compile, gpu};
-use tracer_cpu::CameraSpec;
+mod common;
+
+use common::{compile, gpu};
+use render_spec::{CameraSpec, MAX_INDIRECTIONS, Mode, Settings};
 use tracer_vk::kernels::Method;
-use tracer_vk::render::{MAX_INDIRECTIONS, Mode, Output, Renderer, Settings};
+use tracer_vk::render::{Output, Renderer};
 
 fn room_settings(scene: &bvh_format::SceneFile, width: u32, height: u32, max_indirections: u32) -> Settings {
     Settings {
@@ -15,12 +17,15 @@ fn room_settings(scene: &bvh_format::SceneFile, width: u32, height: u32, max_ind
         mode: Mode::Whitted,
         lights: scene.lights.clone(),
         max_indirections,
+        aovs: true,
     }
 }
 
 fn assert_same_frame(what: &str, a: &Output, b: &Output) {
+    let (a, b) = (&a.image, &b.image);
     assert_eq!(a.rays, b.rays, "{what}: ray counts");
     assert!(a.rgb == b.rgb, "{what}: colours differ");
+    let (a, b) = (a.aov.as_ref().expect("AOVs were asked for"), b.aov.as_ref().expect("AOVs were asked for"));
     assert!(a.prim == b.prim && a.normal == b.normal, "{what}: triangles or normals differ");
     assert!(a.t.iter().zip(&b.t).all(|(x, y)| x.to_bits() == y.to_bits()), "{what}: distances differ");
     assert!(a.nodes == b.nodes && a.tris == b.tris, "{what}: traversal costs differ");
@@ -39,7 +44,7 @@ fn a_frame_in_many_tiles_is_the_frame_in_one() {
         r.limit_tile_pixels(3 * 64);
         let mut steps = Vec::new();
         let tiled = r
-            .render_with_progress(&s, true, true, &mut |p| steps.push((p.pixels_done, p.pixels)))
+            .render_with_progress(&s, true, &mut |p| steps.push((p.pixels_done, p.pixels)))
             .expect("the GPU renders in tiles");
         assert_same_frame(&format!("{} in tiles", method.name()), &whole, &tiled);
         assert!(steps.len() > 10, "{}: {} tiles, expected many", method.name(), steps.len());

@@ -10,27 +10,26 @@
 //! shapes render exactly one full workgroup. Partial workgroups of 8 x 8 are also tested in
 //! `frames.rs` and `cross_backend.rs`.
 
-use bvh_format::SceneFile;
-use tests::{assert_matches_cpu, compile, gpu};
-use tracer_cpu::{CameraSpec, Method, Tracer};
-use tracer_vk::kernels::Method as VkMethod;
-use tracer_vk::render::{MAX_WORKGROUP_INVOCATIONS, Mode as VkMode, Renderer, Settings, allowed_workgroups};
+mod common;
 
-fn cpu_image(tracer: &Tracer, scene: &SceneFile, w: u32, h: u32, mode: tracer_cpu::Mode) -> tracer_cpu::Image {
-    tracer_cpu::render(
-        tracer,
-        &tracer_cpu::RenderSettings {
-            width: w,
-            height: h,
-            camera: CameraSpec::from(scene.camera("medium").expect("room has a medium camera")),
-            mode,
-            lights: scene.lights.clone(),
-            max_indirections: scene.settings.max_indirections,
-            method: Method::Ordered,
-            aovs: true,
-        },
-    )
-    .expect("the CPU renders")
+use bvh_format::SceneFile;
+use common::{assert_matches_cpu, compile, gpu};
+use render_spec::{CameraSpec, Mode, Settings};
+use tracer_cpu::{Method, Tracer};
+use tracer_vk::kernels::Method as VkMethod;
+use tracer_vk::render::{MAX_WORKGROUP_INVOCATIONS, Renderer, allowed_workgroups};
+
+/// Room from its medium camera, Whitted with the scene's lights, AOVs on.
+fn settings(scene: &SceneFile, width: u32, height: u32) -> Settings {
+    Settings {
+        width,
+        height,
+        camera: CameraSpec::from(scene.camera("medium").expect("room has a medium camera")),
+        mode: Mode::Whitted,
+        lights: scene.lights.clone(),
+        max_indirections: scene.settings.max_indirections,
+        aovs: true,
+    }
 }
 
 fn render_all_shapes(methods: &[VkMethod]) {
@@ -55,19 +54,13 @@ fn render_all_shapes(methods: &[VkMethod]) {
         };
         let (w, h) = (side(wx), side(wy));
         let start = std::time::Instant::now();
-        let cpu =
-            references.entry((w, h)).or_insert_with(|| cpu_image(&tracer, &scene, w, h, tracer_cpu::Mode::Whitted));
+        let cpu = references.entry((w, h)).or_insert_with(|| {
+            tracer_cpu::render(&tracer, &settings(&scene, w, h), Method::Ordered).expect("the CPU renders")
+        });
         for &method in methods {
             let mut r = Renderer::new(&gpu, &scene, method, (wx, wy)).expect("an allowed shape is taken");
-            let settings = Settings {
-                width: w,
-                height: h,
-                camera: CameraSpec::from(scene.camera("medium").unwrap()),
-                mode: VkMode::Whitted,
-                lights: scene.lights.clone(),
-                max_indirections: scene.settings.max_indirections,
-            };
-            let out = r.render(&settings).unwrap_or_else(|e| panic!("{} {wx}x{wy}: {e}", method.name()));
+            let out =
+                r.render(&settings(&scene, w, h)).unwrap_or_else(|e| panic!("{} {wx}x{wy}: {e}", method.name())).image;
             assert_matches_cpu(&format!("{} {wx}x{wy} at {w}x{h}", method.name()), cpu, &out);
         }
         println!("{wx}x{wy}: {:.1} s", start.elapsed().as_secs_f64());

@@ -6,8 +6,8 @@ use crate::output::{self, Kind, Output};
 use bvh_format::{Light, SceneFile};
 use clap::{Args, ValueEnum};
 use glam::Vec3;
+use render_spec::{CameraSpec, Image, Mode, Settings};
 use std::path::PathBuf;
-use tracer_cpu::{CameraSpec, Mode};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum ModeArg {
@@ -38,9 +38,9 @@ pub struct RenderArgs {
     /// Look-at point X,Y,Z.
     #[arg(long, value_parser = parse_vec3, requires = "eye", allow_hyphen_values = true)]
     pub at: Option<Vec3>,
-    /// Up vector X,Y,Z.
-    #[arg(long, value_parser = parse_vec3, default_value = "0,1,0", allow_hyphen_values = true)]
-    pub up: Vec3,
+    /// Up vector X,Y,Z [default: with --eye 0,1,0; a stored camera keeps its own unless given].
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub up: Option<Vec3>,
     /// Vertical field of view in degrees, between 0 and 180 (with --eye: default 45; a stored
     /// camera keeps its own unless given).
     #[arg(long, value_parser = parse_fov, allow_hyphen_values = true)]
@@ -48,14 +48,14 @@ pub struct RenderArgs {
     /// Image size, at most 2^28 pixels.
     #[arg(long, value_parser = parse_res, default_value = "640x480", allow_hyphen_values = true)]
     pub res: (u32, u32),
-    /// A point light X,Y,Z or X,Y,Z,R,G,B (repeatable); replaces the scene's lights.
+    /// A point light X,Y,Z or X,Y,Z,R,G,B (repeatable, up to 256); replaces the scene's lights.
     #[arg(long = "light", value_parser = parse_light, allow_hyphen_values = true)]
     pub lights: Vec<Light>,
     /// Use this many lights: the scene's first ones, completed by lights placed around the
-    /// camera so that what it sees is lit (the thesis's 1-, 2- and 4-light modes).
+    /// camera so that what it sees is lit (the thesis's 1-, 2- and 4-light modes); 0 to 256.
     #[arg(long = "lights", conflicts_with = "lights", value_parser = parse_light_count, allow_hyphen_values = true)]
     pub light_count: Option<usize>,
-    /// Longest chain of secondary rays, at most 64; the passes stop once every path has ended
+    /// Longest chain of secondary rays, 0 to 64; rendering stops early once no path is alive
     /// [default: the scene's].
     #[arg(long, value_parser = parse_indirections, allow_hyphen_values = true)]
     pub indirections: Option<u32>,
@@ -80,6 +80,29 @@ pub struct RenderOutputs {
     pub image: Output,
     pub heatmap: Option<Output>,
     pub aov: Option<Output>,
+}
+
+impl RenderOutputs {
+    /// Writes every output of a rendered image (the colour image, then the heatmap and the AOVs
+    /// where asked for) and returns the report lines of the heatmap and the AOVs, so that a caller
+    /// prints only after every file is complete.
+    pub fn write(&self, image: &Image, heatmap_max: Option<u32>) -> Result<Vec<String>, String> {
+        let frame = output::Frame { width: image.width, height: image.height, rgb: &image.rgb };
+        output::write_image(&self.image, &frame).map_err(|e| e.to_string())?;
+        let mut lines = Vec::new();
+        if let Some(aov) = &image.aov {
+            if let Some(out) = &self.heatmap {
+                let h = output::Heatmap::new(image.width, image.height, &aov.nodes, heatmap_max);
+                output::write_heatmap(out, &h).map_err(|e| e.to_string())?;
+                lines.push(heatmap_line(&h, out));
+            }
+            if let Some(out) = &self.aov {
+                output::write_aov(out, image.width, image.height, aov).map_err(|e| e.to_string())?;
+                lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", out.path.display()));
+            }
+        }
+        Ok(lines)
+    }
 }
 
 fn parse_floats(s: &str, counts: &[usize], what: &str) -> Result<Vec<f32>, String> {
@@ -166,7 +189,7 @@ fn parse_light_count(s: &str) -> Result<usize, String> {
 /// The largest `--indirections` taken: bounce passes stop once no path is alive, so a large
 /// value costs nothing beyond what the scene needs.
 pub const MAX_INDIRECTIONS: u64 = 64;
-const _: () = assert!(MAX_INDIRECTIONS <= tracer_vk::render::MAX_INDIRECTIONS as u64, "trace-vk must take every value");
+const _: () = assert!(MAX_INDIRECTIONS <= render_spec::MAX_INDIRECTIONS as u64, "both tracers must take every value");
 
 fn parse_indirections(s: &str) -> Result<u32, String> {
     parse_count(s, 0, MAX_INDIRECTIONS, "the number of indirections").map(|n| n as u32)
@@ -182,6 +205,20 @@ pub fn parse_light(s: &str) -> Result<Light, String> {
 }
 
 impl RenderArgs {
+    /// The settings both tracers take; AOVs are kept when an AOV file or a heatmap is asked for.
+    pub fn settings(&self, scene: &SceneFile) -> Result<Settings, String> {
+        let camera = self.camera(scene)?;
+        Ok(Settings {
+            width: self.res.0,
+            height: self.res.1,
+            camera,
+            mode: self.mode(),
+            lights: self.lights(scene, &camera),
+            max_indirections: self.indirections(scene),
+            aovs: self.aov.is_some() || self.heatmap.is_some(),
+        })
+    }
+
     pub fn mode(&self) -> Mode {
         match self.mode {
             ModeArg::Cast => Mode::Cast,
@@ -210,7 +247,7 @@ impl RenderArgs {
     /// checked here, so that both tracers refuse a bad camera with the same sentence.
     pub fn camera(&self, scene: &SceneFile) -> Result<CameraSpec, String> {
         let spec = if let (Some(eye), Some(at)) = (self.eye, self.at) {
-            CameraSpec { eye, at, up: self.up, fov_deg: self.fov.unwrap_or(45.0) }
+            CameraSpec { eye, at, up: self.up.unwrap_or(Vec3::Y), fov_deg: self.fov.unwrap_or(45.0) }
         } else {
             let mut spec = match &self.camera {
                 Some(name) => stored_camera(scene, name)?,
@@ -218,6 +255,9 @@ impl RenderArgs {
             };
             if let Some(f) = self.fov {
                 spec.fov_deg = f;
+            }
+            if let Some(up) = self.up {
+                spec.up = up;
             }
             spec
         };
@@ -250,11 +290,11 @@ pub fn check_camera(spec: &CameraSpec, res: (u32, u32)) -> Result<(), String> {
         ));
     }
     spec.frame(res.0, res.1).map(|_| ()).map_err(|e| match e {
-        bvh_format::camera::CameraError::Degenerate => format!(
+        render_spec::camera::CameraError::Degenerate => format!(
             "the camera is degenerate: the eye {} is on the look-at point {} or the up vector {} is zero or parallel to the view",
             spec.eye, spec.at, spec.up
         ),
-        bvh_format::camera::CameraError::FieldOfView => {
+        render_spec::camera::CameraError::FieldOfView => {
             format!("the field of view must lie strictly between 0 and 180 degrees, not {}", spec.fov_deg)
         }
     })

@@ -5,21 +5,25 @@
 //! - [`traverse`]: scalar ordered child-pair traversal and stackless escape-pointer traversal.
 //! - [`packet`]: 8-wide AVX2 packets for coherent primary and shadow rays.
 //! - [`reference`]: the exact f64 brute-force closest hit tests compare against.
-//! - [`shade`] and [`render`]: ray casting and Whitted shading of whole images, with AOVs.
+//! - [`lanes`]: the rays of one stage of a 4 x 2 pixel block, traced as a packet or one by one.
+//! - [`shade`]: the shading formulas; [`whitted`]: the stages of ray casting and Whitted ray
+//!   tracing for a block of pixels.
+//! - [`render`]: whole images in parallel bands, written straight into the 8-bit image and AOVs.
 
-pub use bvh_format::camera;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod geometry;
+pub mod lanes;
 pub mod packet;
 pub mod reference;
 pub mod render;
 pub mod shade;
 pub mod traverse;
+pub mod whitted;
+pub mod wide;
 
-pub use camera::CameraSpec;
 pub use geometry::{Cost, Hit, Ray};
-pub use render::{Aovs, Image, Mode, RayCounts, RenderSettings, Tracer, render};
+pub use render::{Tracer, render, render_with_progress};
 
 /// How rays find their closest hit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -46,17 +50,14 @@ impl Method {
             m => m,
         }
     }
-}
 
-/// Why an image cannot be rendered. One sentence each.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum RenderError {
-    #[error("the image must be at least 1 x 1 pixels")]
-    EmptyImage,
-    #[error("the camera is degenerate: the eye is on the look-at point or the up vector is parallel to the view")]
-    DegenerateCamera,
-    #[error("the field of view must lie between 0 and 180 degrees, not {0}")]
-    FieldOfView(f32),
-    #[error("this method needs the {0} layout, which the scene file does not contain (compile it with --layout both)")]
-    MissingLayout(&'static str),
+    /// The name `trace-cpu --method` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Ordered => "ordered",
+            Method::Stackless => "stackless",
+            Method::Packet => "packet",
+            Method::Auto => "auto",
+        }
+    }
 }

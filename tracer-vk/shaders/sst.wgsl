@@ -57,7 +57,7 @@ fn sst_publish(node: Node, how: u32) {
 }
 
 fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec {
-    var best = HitRec(t_max, NO_HIT, 0.0, 0.0);
+    var best = HitRec(t_max, NO_TRIANGLE, 0.0, 0.0);
     // `live`: still looking; `taking_part`: takes part in the current node; `code`: which children
     // of the last inner node this ray hit (bit 0 left, bit 1 right).
     var live = enabled;
