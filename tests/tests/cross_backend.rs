@@ -4,63 +4,15 @@
 //! on. Without a Vulkan loader or device these tests fail with the sentence that says what to
 //! install: a skipped GPU test must never pass.
 
+mod common;
+
 use bvh_format::SceneFile;
-use render_spec::{CameraSpec, Image, Mode, NO_TRIANGLE, Settings};
-use std::path::Path;
+use common::{compile, gpu};
+use render_spec::{CameraSpec, Mode, Settings};
 use tracer_cpu::{Method, Tracer};
 use tracer_vk::Gpu;
 use tracer_vk::kernels::Method as VkMethod;
 use tracer_vk::render::Renderer;
-
-fn compile(name: &str) -> SceneFile {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name);
-    let scene = bvh_build::import::load(&p, &Default::default()).expect("the scene imports");
-    bvh_build::compile(&scene, &Default::default(), Default::default()).expect("the scene compiles")
-}
-
-fn gpu() -> Gpu {
-    match Gpu::new(None, true) {
-        Ok(g) => g,
-        Err(e) => panic!("the cross-backend tests need a Vulkan device: {e}"),
-    }
-}
-
-struct Diff {
-    within_one: f64,
-    flip_mean: f32,
-    prim_differs: usize,
-    prim_ties: usize,
-}
-
-fn diff(cpu: &Image, gpu: &Image) -> Diff {
-    let n = cpu.rgb.len();
-    let within =
-        cpu.rgb.iter().zip(&gpu.rgb).filter(|(a, b)| a.iter().zip(b.iter()).all(|(x, y)| x.abs_diff(*y) <= 1)).count();
-    let flat = |rgb: &[[u8; 3]]| rgb.iter().flatten().copied().collect::<Vec<u8>>();
-    let reference = nv_flip::FlipImageRgb8::with_data(cpu.width, cpu.height, &flat(&cpu.rgb));
-    let test = nv_flip::FlipImageRgb8::with_data(gpu.width, gpu.height, &flat(&gpu.rgb));
-    let error = nv_flip::flip(reference, test, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
-    let flip_mean = nv_flip::FlipPool::from_image(&error).mean();
-
-    // Triangle ids: a different triangle at the same distance is an exact tie or a shared edge
-    // (both backends round differently there); anything else is a real disagreement.
-    let aov = cpu.aov.as_ref().expect("the CPU render keeps AOVs");
-    let gpu = gpu.aov.as_ref().expect("the GPU render keeps AOVs");
-    let (mut differs, mut ties) = (0, 0);
-    for i in 0..n {
-        if aov.prim[i] == gpu.prim[i] {
-            continue;
-        }
-        let (a, b) = (aov.t[i], gpu.t[i]);
-        let both_hit = aov.prim[i] != NO_TRIANGLE && gpu.prim[i] != NO_TRIANGLE;
-        if both_hit && (a - b).abs() <= 1e-4 * a.abs().max(b.abs()) {
-            ties += 1;
-        } else {
-            differs += 1;
-        }
-    }
-    Diff { within_one: within as f64 / n as f64, flip_mean, prim_differs: differs, prim_ties: ties }
-}
 
 fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32, h: u32) {
     let cam = CameraSpec::from(scene.camera(camera).expect("the camera exists"));
@@ -79,22 +31,7 @@ fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32,
         for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup] {
             let mut r = Renderer::new(gpu, scene, method, (8, 8)).expect("the scene uploads");
             let out = r.render(&settings).expect("the GPU renders").image;
-            let d = diff(&cpu, &out);
-            let what = format!("{scene_name} {camera} {mode:?} {}", method.name());
-            println!(
-                "{what}: {:.4}% of pixels within 1/255, FLIP mean {:.5}, triangle ids: {} differ at equal distance (ties), {} otherwise; rays GPU {:?} CPU {:?}",
-                d.within_one * 100.0,
-                d.flip_mean,
-                d.prim_ties,
-                d.prim_differs,
-                out.rays,
-                cpu.rays
-            );
-            assert!(d.within_one >= 0.999, "{what}: only {:.4}% of pixels within 1/255", d.within_one * 100.0);
-            assert!(d.flip_mean < 0.01, "{what}: FLIP mean {}", d.flip_mean);
-            assert_eq!(d.prim_differs, 0, "{what}: triangle ids differ beyond ties");
-            assert!(d.prim_ties * 1000 <= (w * h) as usize, "{what}: {} ties is too many to be ties", d.prim_ties);
-            assert_eq!(out.rays, cpu.rays, "{what}: primary, shadow and secondary rays");
+            common::assert_matches_cpu(&format!("{scene_name} {camera} {mode:?} {}", method.name()), &cpu, &out);
         }
     }
     let messages = gpu.validation_messages();

@@ -148,12 +148,18 @@ pub fn parse_res(s: &str) -> Result<(u32, u32), String> {
     parse_size(s, "an image size", MAX_PIXELS)
 }
 
-/// Most invocations of a workgroup any Vulkan device may have to offer (the device's own limit
-/// is checked when the kernels are built).
-pub const MAX_WORKGROUP: u64 = 1024;
-
+/// A workgroup shape the GPU kernels take on every device that offers enough invocations (see
+/// [`tracer_vk::render::workgroup_allowed`]; a device's own lower limit is checked when the
+/// kernels are built).
 pub fn parse_workgroup(s: &str) -> Result<(u32, u32), String> {
-    parse_size(s, "a workgroup shape", MAX_WORKGROUP)
+    let max = tracer_vk::render::MAX_WORKGROUP_INVOCATIONS;
+    let (w, h) = parse_size(s, "a workgroup shape", max as u64)?;
+    if !tracer_vk::render::workgroup_allowed(w, h, max) {
+        return Err(format!(
+            "{s:?}: a workgroup's width and height must be powers of two (1, 2, 4, ... with at most {max} invocations in all), such as 8x8 (the default), 16x16 or 32x4"
+        ));
+    }
+    Ok((w, h))
 }
 
 pub fn parse_fov(s: &str) -> Result<f32, String> {
@@ -183,6 +189,7 @@ fn parse_light_count(s: &str) -> Result<usize, String> {
 /// The largest `--indirections` taken: bounce passes stop once no path is alive, so a large
 /// value costs nothing beyond what the scene needs.
 pub const MAX_INDIRECTIONS: u64 = 64;
+const _: () = assert!(MAX_INDIRECTIONS <= render_spec::MAX_INDIRECTIONS as u64, "both tracers must take every value");
 
 fn parse_indirections(s: &str) -> Result<u32, String> {
     parse_count(s, 0, MAX_INDIRECTIONS, "the number of indirections").map(|n| n as u32)

@@ -1,12 +1,18 @@
 // SST (thesis 4.3.3, code examples 4.9-4.13, after Günther et al. 2007): the whole workgroup (a
 // block of pixels) walks ONE path through the child-pair tree. The children of the current node
-// and a leaf's triangles are loaded cooperatively into workgroup memory; every ray records in a
-// 4-entry hit code whether it hit neither, the left, the right or both children; when both are
-// needed, each ray that hit both votes -1 (left first) or +1 (right first), a parallel reduction
-// sums the votes (or, in the subgroup variant, subgroupAdd and one barrier), and the majority
-// decides which child comes first. The other goes on a stack of
-// whole nodes in workgroup memory. Rays that miss the child taken go inactive until the next pop,
-// which re-activates all of them. STACK_SIZE is the file's max depth; LEAF_SIZE its largest leaf.
+// and a leaf's triangles are held in workgroup memory (a leaf's loaded cooperatively); every ray
+// records whether it hit neither, the left, the right or both children in a shared hit code; when
+// both are needed, each ray that hit both votes -1 (left first) or +1 (right first), a parallel
+// reduction sums the votes (or, in the subgroup variant, subgroupAdd and one barrier), and the
+// majority decides which child comes first. The other goes on a stack of whole nodes in workgroup
+// memory. Rays that miss the child taken go inactive until the next pop, which re-activates all of
+// them. STACK_SIZE is the file's max depth; LEAF_SIZE its largest leaf.
+//
+// Invocation 0 makes every decision and publishes it as one step (the node to visit and how the
+// rays take part), read by all at the top of the next iteration: an inner node costs the barriers
+// of that read and of the vote, a leaf those of the read, its load and one more. Every loop over
+// the workgroup's invocations (loading, resetting, reducing) strides by WG_SIZE, so any workgroup
+// from one invocation up works, whatever the device's subgroup size.
 
 const WG_SIZE: u32 = WG_X * WG_Y;
 
@@ -18,47 +24,71 @@ var<private> sg_id: u32;
 var<private> sg_count: u32;
 //#endif
 
+// How the rays take part in a step's node.
+const STEP_KEEP: u32 = 0u; // as in the last step (the root)
+const STEP_LEFT: u32 = 1u; // the rays that hit the left child
+const STEP_RIGHT: u32 = 2u; // the rays that hit the right child
+const STEP_POP: u32 = 3u; // every ray still looking (the node came off the stack)
+const STEP_DONE: u32 = 4u; // the walk is over
+
+struct SstStep {
+    node: Node,
+    how: u32,
+}
+
+var<workgroup> sst_step: SstStep;
 var<workgroup> sst_stack: array<Node, STACK_SIZE>;
+// The children of the step's node, when it is an inner node.
 var<workgroup> sst_children: array<Node, 2>;
 var<workgroup> sst_tris: array<Tri, LEAF_SIZE>;
 var<workgroup> sst_votes: array<i32, WG_SIZE>;
-var<workgroup> sst_hitcode: array<atomic<u32>, 4>;
+// Bit 1 << code for each hit code (1 left, 2 right, 3 both) some ray had.
+var<workgroup> sst_hits: atomic<u32>;
+// Whether some ray is still looking (any-hit rays stop at their first hit).
 var<workgroup> sst_live: atomic<u32>;
-var<workgroup> sst_node: Node;
-var<workgroup> sst_sp: u32;
-// 0: continue with sst_node, 1: the walk is over
-var<workgroup> sst_done: u32;
-// Which child the workgroup enters: 0 left, 1 right, 2 none (pop)
-var<workgroup> sst_next: u32;
+
+// Invocation 0 only: publishes `node` as the next step, with its children when it is inner.
+fn sst_publish(node: Node, how: u32) {
+    sst_step = SstStep(node, how);
+    if node.count == 0u && how != STEP_DONE {
+        sst_children[0] = nodes[node.index];
+        sst_children[1] = nodes[node.index + 1u];
+    }
+}
 
 fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec {
     var best = HitRec(t_max, NO_TRIANGLE, 0.0, 0.0);
-    // `live`: still looking (an any-hit ray stops at its first hit); `taking_part`: takes part in the
-    // current node.
+    // `live`: still looking; `taking_part`: takes part in the current node; `code`: which children
+    // of the last inner node this ray hit (bit 0 left, bit 1 right).
     var live = enabled;
+    var taking_part = false;
+    var code = 0u;
+    // Invocation 0's stack pointer: only it pushes and pops.
+    var sp = 0u;
     if lid == 0u {
-        sst_node = nodes[0];
-        sst_sp = 0u;
-        sst_done = 0u;
+        atomicStore(&sst_hits, 0u);
         atomicStore(&sst_live, 0u);
     }
     workgroupBarrier();
-    var taking_part = false;
     if live {
         cost_nodes += 1u;
-        taking_part = slab(sst_node, r, best.t) >= 0.0;
-        atomicOr(&sst_live, u32(taking_part));
+        taking_part = slab(nodes[0], r, best.t) >= 0.0;
+        if taking_part {
+            atomicOr(&sst_live, 1u);
+        }
     }
     workgroupBarrier();
-    if lid == 0u && atomicLoad(&sst_live) == 0u {
-        sst_done = 1u;
+    if lid == 0u {
+        sst_publish(nodes[0], select(STEP_DONE, STEP_KEEP, atomicLoad(&sst_live) != 0u));
+        atomicStore(&sst_live, 0u);
     }
-    // A walk enters each node at most once: more steps than nodes means the walk went wrong, and
-    // the frame is refused instead of hanging (every invocation counts the same steps).
+    // A walk visits each node at most once: more steps than nodes means it went wrong, and the
+    // frame is refused instead of hanging (every invocation counts the same steps).
     let node_count = arrayLength(&nodes);
     var steps = 0u;
     loop {
-        if workgroupUniformLoad(&sst_done) != 0u {
+        let step = workgroupUniformLoad(&sst_step);
+        if step.how == STEP_DONE {
             break;
         }
         steps += 1u;
@@ -68,8 +98,12 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
             }
             break;
         }
-        let node = workgroupUniformLoad(&sst_node);
-        var pop = false;
+        if step.how == STEP_POP {
+            taking_part = live;
+        } else if step.how != STEP_KEEP {
+            taking_part = taking_part && (code & step.how) != 0u;
+        }
+        let node = step.node;
         if node.count > 0u {
             for (var i = lid; i < node.count; i += WG_SIZE) {
                 sst_tris[i] = tris[node.index + i];
@@ -89,107 +123,100 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
                     }
                 }
             }
-            pop = true;
-        } else {
-            // Loops, not `lid < 2u`: a workgroup may have fewer invocations than entries.
-            for (var i = lid; i < 2u; i += WG_SIZE) {
-                sst_children[i] = nodes[node.index + i];
-            }
-            for (var i = lid; i < 4u; i += WG_SIZE) {
-                atomicStore(&sst_hitcode[i], 0u);
+            if live {
+                atomicOr(&sst_live, 1u);
             }
             workgroupBarrier();
-            var code = 0u;
-            var vote = 0;
-            if taking_part {
-                cost_nodes += 2u;
-                let tl = slab(sst_children[0], r, best.t);
-                let tr = slab(sst_children[1], r, best.t);
-                code = select(0u, 1u, tl >= 0.0) | select(0u, 2u, tr >= 0.0);
-                if code == 3u {
-                    vote = select(-1, 1, tr < tl);
+            if lid == 0u {
+                // Pop, unless no ray is looking any more.
+                let any_live = atomicLoad(&sst_live) != 0u;
+                atomicStore(&sst_live, 0u);
+                if any_live && sp > 0u {
+                    sp -= 1u;
+                    sst_publish(sst_stack[sp], STEP_POP);
+                } else {
+                    sst_publish(node, STEP_DONE);
                 }
-                atomicStore(&sst_hitcode[code], 1u);
             }
+            continue;
+        }
+        code = 0u;
+        var vote = 0;
+        if taking_part {
+            cost_nodes += 2u;
+            let tl = slab(sst_children[0], r, best.t);
+            let tr = slab(sst_children[1], r, best.t);
+            code = select(0u, 1u, tl >= 0.0) | select(0u, 2u, tr >= 0.0);
+            if code == 3u {
+                vote = select(-1, 1, tr < tl);
+            }
+            if code != 0u {
+                atomicOr(&sst_hits, 1u << code);
+            }
+        }
 //#if VOTE_REDUCTION
-            sst_votes[lid] = vote;
-            workgroupBarrier();
-            // Parallel reduction of the votes (WG_SIZE is a power of two).
-            for (var s = WG_SIZE / 2u; s > 0u; s >>= 1u) {
-                if lid < s {
-                    sst_votes[lid] += sst_votes[lid + s];
-                }
-                workgroupBarrier();
+        // Parallel reduction of the votes (WG_SIZE is a power of two). Invocation 0 adds the last
+        // pair itself, so the last halving needs no barrier.
+        sst_votes[lid] = vote;
+        workgroupBarrier();
+        for (var s = WG_SIZE / 2u; s > 1u; s >>= 1u) {
+            if lid < s {
+                sst_votes[lid] += sst_votes[lid + s];
             }
+            workgroupBarrier();
+        }
+        var votes = sst_votes[0];
+        if WG_SIZE > 1u {
+            // (An index naga can bound when the workgroup has one invocation.)
+            votes += sst_votes[min(1u, WG_SIZE - 1u)];
+        }
 //#endif
 //#if VOTE_SUBGROUP
-            // Each subgroup sums its votes in registers; one barrier, then lid 0 adds the few
-            // partial sums.
-            let partial = subgroupAdd(vote);
-            if sg_lane == 0u {
-                sst_votes[sg_id] = partial;
-            }
-            workgroupBarrier();
-            if lid == 0u {
-                for (var i = 1u; i < sg_count; i++) {
-                    sst_votes[0] += sst_votes[i];
-                }
-            }
-//#endif
-            if lid == 0u {
-                let both = atomicLoad(&sst_hitcode[3]) != 0u;
-                let left = both || atomicLoad(&sst_hitcode[1]) != 0u;
-                let right = both || atomicLoad(&sst_hitcode[2]) != 0u;
-                if left && right {
-                    let right_first = sst_votes[0] > 0;
-                    // One push per level: a full stack means the tree is deeper than the file says.
-                    if sst_sp == STACK_SIZE {
-                        fault(FAULT_STACK);
-                        sst_done = 1u;
-                    } else {
-                        sst_stack[sst_sp] = sst_children[select(1u, 0u, right_first)];
-                        sst_sp += 1u;
-                    }
-                    sst_next = select(0u, 1u, right_first);
-                } else if left {
-                    sst_next = 0u;
-                } else if right {
-                    sst_next = 1u;
-                } else {
-                    sst_next = 2u;
-                }
-            }
-            let next = workgroupUniformLoad(&sst_next);
-            if next == 2u {
-                pop = true;
-            } else {
-                taking_part = taking_part && (code & (1u << next)) != 0u;
-                if lid == 0u {
-                    sst_node = sst_children[next];
-                }
-            }
-        }
-        if pop {
-            workgroupBarrier();
-            if lid == 0u {
-                if sst_sp == 0u {
-                    sst_done = 1u;
-                } else {
-                    sst_sp -= 1u;
-                    sst_node = sst_stack[sst_sp];
-                }
-                atomicStore(&sst_live, 0u);
-            }
-            workgroupBarrier();
-            // The pop re-activates every ray that is still looking.
-            taking_part = live;
-            atomicOr(&sst_live, u32(live));
-            workgroupBarrier();
-            if lid == 0u && atomicLoad(&sst_live) == 0u {
-                sst_done = 1u;
-            }
+        // Each subgroup sums its votes in registers; one barrier, then invocation 0 adds the few
+        // partial sums.
+        let partial = subgroupAdd(vote);
+        if sg_lane == 0u {
+            sst_votes[sg_id] = partial;
         }
         workgroupBarrier();
+        var votes = 0;
+        if lid == 0u {
+            for (var i = 0u; i < sg_count; i++) {
+                votes += sst_votes[i];
+            }
+        }
+//#endif
+        if lid == 0u {
+            let hits = atomicLoad(&sst_hits);
+            atomicStore(&sst_hits, 0u);
+            let both = (hits & 8u) != 0u;
+            let left = both || (hits & 2u) != 0u;
+            let right = both || (hits & 4u) != 0u;
+            var children = array<Node, 2>(sst_children[0], sst_children[1]);
+            if left && right {
+                let right_first = votes > 0;
+                // One push per level: a full stack means the tree is deeper than its file says.
+                if sp == STACK_SIZE {
+                    fault(FAULT_STACK);
+                    sst_publish(node, STEP_DONE);
+                } else {
+                    sst_stack[sp] = children[select(1u, 0u, right_first)];
+                    sp += 1u;
+                    let first = select(0u, 1u, right_first);
+                    sst_publish(children[first], STEP_LEFT << first);
+                }
+            } else if left {
+                sst_publish(children[0], STEP_LEFT);
+            } else if right {
+                sst_publish(children[1], STEP_RIGHT);
+            } else if sp > 0u {
+                // A live ray got here (the last leaf said so), so popping finds work.
+                sp -= 1u;
+                sst_publish(sst_stack[sp], STEP_POP);
+            } else {
+                sst_publish(node, STEP_DONE);
+            }
+        }
     }
     return best;
 }

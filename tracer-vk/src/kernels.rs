@@ -187,11 +187,11 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
     )
 }
 
-/// Workgroup memory an SST kernel needs: the stack of whole nodes, the two children, the leaf
-/// cache, the votes and a few words of control state.
+/// Workgroup memory an SST kernel needs: the stack of whole nodes, the step (a node and a word,
+/// padded to 48 bytes), the two children, the leaf cache, the votes and two flag words.
 pub fn sst_shared_bytes(spec: &Specialisation) -> u64 {
     let wg = spec.workgroup.0 as u64 * spec.workgroup.1 as u64;
-    32 * spec.stack_size.max(1) as u64 + 2 * 32 + 48 * spec.leaf_size.max(1) as u64 + 4 * wg + 4 * 4 + 4 + 32 + 4 * 3
+    32 * spec.stack_size.max(1) as u64 + 48 + 2 * 32 + 48 * spec.leaf_size.max(1) as u64 + 4 * wg + 2 * 4
 }
 
 /// Translates one kernel to SPIR-V.

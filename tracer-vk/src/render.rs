@@ -17,6 +17,22 @@ use bytemuck::{Pod, Zeroable};
 use render_spec::{Aovs, BounceStop, Image, Mode, RayCounts, RenderError, Settings};
 use std::collections::HashMap;
 
+/// The most invocations a workgroup may have on any device (Vulkan guarantees 128; every desktop
+/// GPU and lavapipe allow 1024); a device's own lower limit is checked when a renderer is made.
+pub const MAX_WORKGROUP_INVOCATIONS: u32 = 1024;
+
+/// Whether the kernels take a `width` x `height` workgroup with at most `limit` invocations: both
+/// sides powers of two (SST's vote reduction halves the workgroup), every shape of them tested.
+pub fn workgroup_allowed(width: u32, height: u32, limit: u32) -> bool {
+    width.is_power_of_two() && height.is_power_of_two() && width as u64 * height as u64 <= limit as u64
+}
+
+/// Every workgroup shape [`workgroup_allowed`] takes with `limit` invocations.
+pub fn allowed_workgroups(limit: u32) -> Vec<(u32, u32)> {
+    let sides = || (0..=limit.ilog2()).map(|k| 1u32 << k);
+    sides().flat_map(|w| sides().map(move |h| (w, h))).filter(|&(w, h)| workgroup_allowed(w, h, limit)).collect()
+}
+
 /// Bounces in the first submission of a tile (every shipped scene needs at most 5); each later
 /// submission doubles the bounces done so far. Between submissions the live paths are counted.
 const FIRST_BOUNCES: u32 = 8;
@@ -250,9 +266,9 @@ impl<'g> Renderer<'g> {
         };
         let info = gpu.info();
         let (wx, wy) = workgroup;
-        let limit = (info.max_workgroup_invocations as u64).min(info.max_workgroup_size[0] as u64);
-        if !wx.is_power_of_two() || !wy.is_power_of_two() || wx as u64 * wy as u64 > limit {
-            return Err(VkRenderError::Workgroup { x: wx, y: wy, limit });
+        let limit = info.max_workgroup_invocations.min(info.max_workgroup_size[0]).min(MAX_WORKGROUP_INVOCATIONS);
+        if !workgroup_allowed(wx, wy, limit) {
+            return Err(VkRenderError::Workgroup { x: wx, y: wy, limit: limit as u64 });
         }
         if method == Method::SstSubgroup && !info.supports_subgroup_ops {
             return Err(VkRenderError::NoSubgroups(info.name.clone()));
@@ -370,13 +386,21 @@ impl<'g> Renderer<'g> {
         };
         let info = self.gpu.info();
         let groups = [info.max_workgroup_count[0], info.max_workgroup_count[1]];
-        let plan = tiles::plan(s.width, s.height, self.tile_pixels, self.spec.workgroup, groups)
-            .ok_or_else(|| VkError::Usage(format!("no tile of {} pixels holds a workgroup", self.tile_pixels)))?;
         let mut host = HostFrame::new(s.width, s.height, image, aovs)?;
         for &st in stages {
             self.pipeline(st)?;
         }
-        self.targets(plan.iter().map(Tile::pixels).max().unwrap_or(1))?;
+        // Tiles sized from the device's limits may still not fit the memory other programs left:
+        // halve them until they do, down to one workgroup.
+        let plan = loop {
+            let plan = tiles::plan(s.width, s.height, self.tile_pixels, self.spec.workgroup, groups)
+                .ok_or_else(|| VkError::Usage(format!("no tile of {} pixels holds a workgroup", self.tile_pixels)))?;
+            let wg = self.spec.workgroup.0 as u64 * self.spec.workgroup.1 as u64;
+            match self.targets(plan.iter().map(Tile::pixels).max().unwrap_or(1)) {
+                Err(VkError::OutOfDeviceMemory { .. }) if self.tile_pixels / 2 >= wg => self.tile_pixels /= 2,
+                result => break result.map(|()| plan)?,
+            }
+        };
 
         let stop = BounceStop::new(self.scene, &s.lights);
         let v4 = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
@@ -529,7 +553,7 @@ impl<'g> Renderer<'g> {
             })?;
             tally.add_timings(&timings);
             let words: Vec<u32> = g.download_as(counters)?;
-            self.check_counts(&words, tile, first == 0, dispatches)?;
+            check_counts(&self.spec, &words, tile.pixels(), first == 0, dispatches)?;
             let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
             tally.rays.primary += wide(counters::PRIMARY);
             tally.rays.shadow += wide(counters::SHADOW);
@@ -540,40 +564,39 @@ impl<'g> Renderer<'g> {
             first = end;
         }
     }
+}
 
-    /// Refuses a submission whose counts do not add up: every dispatch must have finished every
-    /// pixel of the tile, the first must have traced one primary ray per pixel, and no traversal
-    /// may have given up on a ray.
-    fn check_counts(&self, words: &[u32], tile: &Tile, first: bool, dispatches: u64) -> Result<(), VkRenderError> {
-        let method = self.spec.method.name();
-        let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
-        let faults = words[counters::FAULTS];
-        if faults & counters::FAULT_STACK != 0 {
-            let what = format!(
-                "found its stack of {} entries full (the tree is deeper than its file says)",
-                self.spec.stack_size
-            );
-            return Err(VkRenderError::Fault { method, what });
-        }
-        if faults & counters::FAULT_WALK != 0 {
-            return Err(VkRenderError::Fault { method, what: "took more steps than the tree has nodes".to_owned() });
-        }
-        let primary = wide(counters::PRIMARY);
-        if first && primary != tile.pixels() {
-            return Err(VkRenderError::LostWork {
-                method,
-                what: "primary rays",
-                done: primary,
-                expected: tile.pixels(),
-            });
-        }
-        let finished = wide(counters::FINISHED);
-        let expected = dispatches * tile.pixels();
-        if finished != expected {
-            return Err(VkRenderError::LostWork { method, what: "pixel passes", done: finished, expected });
-        }
-        Ok(())
+/// Refuses a submission whose counts do not add up: every dispatch must have finished every
+/// pixel of the tile, the first must have traced one primary ray per pixel, and no traversal may
+/// have given up on a ray.
+fn check_counts(
+    spec: &Specialisation,
+    words: &[u32],
+    pixels: u64,
+    first: bool,
+    dispatches: u64,
+) -> Result<(), VkRenderError> {
+    let method = spec.method.name();
+    let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
+    let faults = words[counters::FAULTS];
+    if faults & counters::FAULT_STACK != 0 {
+        let what =
+            format!("found its stack of {} entries full (the tree is deeper than its file says)", spec.stack_size);
+        return Err(VkRenderError::Fault { method, what });
     }
+    if faults & counters::FAULT_WALK != 0 {
+        return Err(VkRenderError::Fault { method, what: "took more steps than the tree has nodes".to_owned() });
+    }
+    let primary = wide(counters::PRIMARY);
+    if first && primary != pixels {
+        return Err(VkRenderError::LostWork { method, what: "primary rays", done: primary, expected: pixels });
+    }
+    let finished = wide(counters::FINISHED);
+    let expected = dispatches * pixels;
+    if finished != expected {
+        return Err(VkRenderError::LostWork { method, what: "pixel passes", done: finished, expected });
+    }
+    Ok(())
 }
 
 /// Checks that a scene array fits one storage buffer binding and one allocation.
@@ -589,6 +612,64 @@ fn fits<T>(info: &crate::device::DeviceInfo, what: &'static str, data: &[T]) -> 
         return Err(VkRenderError::SceneTooLarge { what, bytes, limit_name, limit, fits });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec() -> Specialisation {
+        Specialisation {
+            method: Method::Sst,
+            stack_size: 12,
+            leaf_size: 4,
+            workgroup: (8, 8),
+            reflection: false,
+            refraction: false,
+        }
+    }
+
+    /// Counters as the kernels leave them after `dispatches` passes over `pixels` pixels.
+    fn words(primary: u64, finished: u64, faults: u32) -> Vec<u32> {
+        let mut w = vec![0u32; counters::LIVE + 1];
+        w[counters::PRIMARY] = primary as u32;
+        w[counters::PRIMARY + 1] = (primary >> 32) as u32;
+        w[counters::FINISHED] = finished as u32;
+        w[counters::FINISHED + 1] = (finished >> 32) as u32;
+        w[counters::FAULTS] = faults;
+        w
+    }
+
+    #[test]
+    fn counts_that_add_up_pass() {
+        check_counts(&spec(), &words(100, 400, 0), 100, true, 4).unwrap();
+        // Later submissions trace no primary rays.
+        check_counts(&spec(), &words(0, 300, 0), 100, false, 3).unwrap();
+        // 64-bit counts: more than 2^32 pixel passes in one tile.
+        let n = 1u64 << 31;
+        check_counts(&spec(), &words(n, 3 * n, 0), n, true, 3).unwrap();
+    }
+
+    #[test]
+    fn lost_work_and_faults_refuse_the_frame_in_one_sentence() {
+        let cases = [
+            (words(99, 400, 0), true, "finished 99 of the 100 primary rays"),
+            (words(100, 399, 0), true, "finished 399 of the 400 pixel passes"),
+            (words(0, 400, 0), false, ""),
+            (words(100, 400, counters::FAULT_STACK), true, "stack of 12 entries full"),
+            (words(100, 400, counters::FAULT_WALK), true, "more steps than the tree has nodes"),
+        ];
+        for (w, first, says) in cases {
+            let r = check_counts(&spec(), &w, 100, first, 4);
+            if says.is_empty() {
+                assert!(r.is_ok(), "{r:?}");
+                continue;
+            }
+            let msg = r.expect_err(says).to_string();
+            assert!(msg.contains(says) && msg.contains("sst") && msg.contains("no image"), "{msg}");
+            assert!(!msg.contains('\n'));
+        }
+    }
 }
 
 /// The layout contract between the Rust records and common.wgsl, read from naga's own layout of a

@@ -43,7 +43,7 @@ enum Command {
         /// GPU traversal.
         #[arg(long, value_enum, default_value = "lst")]
         method: MethodArg,
-        /// Workgroup shape (pixels).
+        /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
         #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
         workgroup: (u32, u32),
         #[command(flatten)]
@@ -58,7 +58,7 @@ struct BenchArgs {
     /// Traversals.
     #[arg(long, value_delimiter = ',', value_enum, default_value = "lst,stackless,sst")]
     methods: Vec<MethodArg>,
-    /// Workgroup shape (pixels).
+    /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
     #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
     workgroup: (u32, u32),
     #[command(flatten)]
