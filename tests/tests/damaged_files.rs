@@ -54,6 +54,7 @@ fn scene(triangles: usize, layouts: Layouts) -> SceneFile {
         lights: vec![Light::new([5.0, 5.0, 5.0], [1.0, 1.0, 1.0]), Light::new([-5.0, 8.0, 0.0], [0.3, 0.3, 0.5])],
         settings: SceneSettings { max_indirections: 3, ..SceneSettings::default() },
         positions,
+        warnings: Vec::new(),
     };
     bvh_build::compile(&scene, &BuildParams { max_leaf_size: 4, ..BuildParams::default() }, layouts).unwrap()
 }

@@ -141,6 +141,7 @@ fn scene_of(tris: &[Tri], materials: usize) -> Scene {
         cameras: vec![Camera::new("main", [0.0, 0.0, 5.0], [0.0; 3], [0.0, 1.0, 0.0], 45.0)],
         lights: vec![Light::new([1.0, 2.0, 3.0], [1.0, 1.0, 1.0])],
         settings: SceneSettings::default(),
+        warnings: Vec::new(),
     }
 }
 
