@@ -156,8 +156,8 @@ pub struct Renderer<'g> {
     spec: Specialisation,
     nodes: Buffer,
     tris: Buffer,
+    normal_indices: Buffer,
     normals: Buffer,
-    material_ids: Buffer,
     materials: Buffer,
     input_index: Buffer,
     pipelines: HashMap<Stage, Pipeline>,
@@ -245,6 +245,7 @@ impl<'g> Renderer<'g> {
             workgroup,
             reflection: scene.materials.iter().any(|m| m.kr > 0.0),
             refraction: scene.materials.iter().any(|m| m.kt > 0.0),
+            smooth: !scene.normals.is_empty(),
         };
         let info = gpu.info();
         let (wx, wy) = workgroup;
@@ -264,9 +265,10 @@ impl<'g> Renderer<'g> {
         }
         let node_what = if method == Method::Stackless { "escape-pointer nodes" } else { "child-pair nodes" };
         fits(info, node_what, nodes)?;
-        fits(info, "triangles", &scene.triangles)?;
-        fits(info, "triangle normals", &scene.normals)?;
-        fits(info, "material ids", &scene.material_ids)?;
+        let arrays = SceneArrays::new(scene);
+        fits(info, "triangles", &arrays.tris)?;
+        fits(info, "normal indices", &arrays.normal_indices)?;
+        fits(info, "normals", &arrays.normals)?;
         fits(info, "materials", &scene.materials)?;
         fits(info, "input indices", &scene.input_index)?;
         Ok(Self {
@@ -274,9 +276,9 @@ impl<'g> Renderer<'g> {
             scene,
             spec,
             nodes: gpu.create_buffer_with(nodes, "nodes")?,
-            tris: gpu.create_buffer_with(&scene.triangles, "triangles")?,
-            normals: gpu.create_buffer_with(&scene.normals, "normals")?,
-            material_ids: gpu.create_buffer_with(&scene.material_ids, "material ids")?,
+            tris: gpu.create_buffer_with(&arrays.tris, "triangles")?,
+            normal_indices: gpu.create_buffer_with(&arrays.normal_indices, "normal indices")?,
+            normals: gpu.create_buffer_with(&arrays.normals, "normals")?,
             materials: gpu.create_buffer_with(&scene.materials, "materials")?,
             input_index: gpu.create_buffer_with(&scene.input_index, "input index")?,
             pipelines: HashMap::new(),
@@ -460,8 +462,8 @@ impl<'g> Renderer<'g> {
             frame_buf,
             &self.nodes,
             &self.tris,
+            &self.normal_indices,
             &self.normals,
-            &self.material_ids,
             &self.materials,
             lights_buf,
             &self.input_index,
@@ -550,6 +552,47 @@ impl<'g> Renderer<'g> {
         }
         Ok(())
     }
+}
+
+/// The triangle arrays as the kernels read them: three vertices per triangle in leaf order (one
+/// contiguous 48-byte read per triangle, as the thesis's 16-byte aligned data), and the file's
+/// normal indices and normals, or one-entry placeholders for a scene without smooth triangles
+/// (whose kernels never read them).
+struct SceneArrays {
+    tris: Vec<bvh_format::Triangle>,
+    normal_indices: Vec<[u32; 3]>,
+    normals: Vec<[f32; 3]>,
+}
+
+impl SceneArrays {
+    fn new(scene: &SceneFile) -> Self {
+        let smooth = !scene.normals.is_empty();
+        Self {
+            tris: scene.leaf_triangles(),
+            normal_indices: if smooth { scene.normal_indices.clone() } else { vec![bvh_format::FLAT] },
+            normals: if smooth { scene.normals.clone() } else { vec![[0.0; 3]] },
+        }
+    }
+}
+
+/// Bytes of scene data a renderer with `method` uploads (nodes of the one layout it reads,
+/// triangles, normals, materials, input indices), for `bvhc info`.
+pub fn upload_bytes(scene: &SceneFile, method: Method) -> u64 {
+    let nodes = match method {
+        Method::Stackless => scene.escape.as_ref(),
+        _ => scene.child_pair.as_ref(),
+    };
+    let a = SceneArrays::new(scene);
+    [
+        std::mem::size_of_val(nodes.map_or(&[][..], |n| &n[..])),
+        std::mem::size_of_val(&a.tris[..]),
+        std::mem::size_of_val(&a.normal_indices[..]),
+        std::mem::size_of_val(&a.normals[..]),
+        std::mem::size_of_val(&scene.materials[..]),
+        std::mem::size_of_val(&scene.input_index[..]),
+    ]
+    .iter()
+    .sum::<usize>() as u64
 }
 
 /// Checks that a scene array fits one storage buffer binding and one allocation.
