@@ -5,7 +5,7 @@ use crate::geometry::{Cost, Hit, Ray, offset_origin};
 use crate::shade::{self, Surface};
 use crate::traverse::{self, Stack};
 use crate::{Method, RenderError};
-use bvh_format::{Light, Material, NO_TRIANGLE, Node, SceneFile};
+use bvh_format::{Light, Material, NO_TRIANGLE, Node, SceneFile, Triangle};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -80,13 +80,25 @@ pub struct Image {
 /// The scene prepared for tracing: layouts, and the bounds behind the adaptive bounce stop.
 pub struct Tracer<'a> {
     pub scene: &'a SceneFile,
+    /// The triangles expanded to three vertices each, in leaf order (48 bytes per triangle).
+    pub(crate) tris: Vec<Triangle>,
     child_pair: Option<&'a [Node]>,
     escape: Option<&'a [Node]>,
 }
 
 impl<'a> Tracer<'a> {
     pub fn new(scene: &'a SceneFile) -> Self {
-        Self { scene, child_pair: scene.child_pair.as_deref(), escape: scene.escape.as_deref() }
+        Self {
+            scene,
+            tris: scene.leaf_triangles(),
+            child_pair: scene.child_pair.as_deref(),
+            escape: scene.escape.as_deref(),
+        }
+    }
+
+    /// The triangles as every path intersects them: three vertices each, in leaf order.
+    pub fn triangles(&self) -> &[Triangle] {
+        &self.tris
     }
 
     fn layout_for(&self, method: Method) -> Result<(), RenderError> {
@@ -127,7 +139,7 @@ impl<'a> Tracer<'a> {
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Hit> {
-        let tris = &self.scene.triangles;
+        let tris = &self.tris;
         match (method, self.child_pair, self.escape) {
             (Method::Stackless, _, Some(esc)) | (_, None, Some(esc)) => {
                 traverse::escape::<ANY>(esc, tris, ray, t_min, t_max, cost)
@@ -139,7 +151,7 @@ impl<'a> Tracer<'a> {
 
     fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
         let i = hit.tri as usize;
-        shade::surface(&self.scene.triangles[i], &self.scene.normals[i], ray.origin, ray.dir, hit.t, hit.u, hit.v)
+        shade::surface(&self.tris[i], self.scene.vertex_normals(i), ray.origin, ray.dir, hit.t, hit.u, hit.v)
     }
 }
 
@@ -204,7 +216,7 @@ fn light_query(m: &Material, surf: &Surface, ray: &Ray, light: &Light) -> (Vec3,
 /// [`light_query`] for a primary hit, for the packet path.
 pub(crate) fn shadow_query(tracer: &Tracer<'_>, ray: &Ray, hit: &Hit, light: &Light) -> (Vec3, Option<(Ray, f32)>) {
     let scene = tracer.scene;
-    let m = &scene.materials[scene.material_ids[hit.tri as usize] as usize];
+    let m = &scene.materials[scene.triangles[hit.tri as usize].material as usize];
     light_query(m, &tracer.surface(ray, hit), ray, light)
 }
 
@@ -235,7 +247,7 @@ pub(crate) fn shade_pixel(
         rays,
     };
     if sh.mode == Mode::Cast {
-        let m = &scene.materials[scene.material_ids[hit.tri as usize] as usize];
+        let m = &scene.materials[scene.triangles[hit.tri as usize].material as usize];
         sample.colour = shade::cast(m, &surf, ray.dir);
         return sample;
     }
@@ -247,7 +259,7 @@ pub(crate) fn shade_pixel(
     let mut surf = surf;
     let mut depth = 0u32;
     loop {
-        let m = &scene.materials[scene.material_ids[hit.tri as usize] as usize];
+        let m = &scene.materials[scene.triangles[hit.tri as usize].material as usize];
         let mut local = sh.ambient * Vec3::from(m.kd);
         for (li, light) in sh.lights.iter().enumerate() {
             let (term, shadow) = light_query(m, &surf, &ray, light);

@@ -1,7 +1,7 @@
 //! The shading definition (docs/shading.md), as pure functions. The Vulkan kernels implement the
 //! same formulas; the cross-backend tests hold them to it.
 
-use bvh_format::{Material, Triangle, TriangleNormals};
+use bvh_format::{Material, Triangle};
 use glam::Vec3;
 
 /// Everything shading needs to know about a hit.
@@ -12,24 +12,32 @@ pub struct Surface {
     pub geometric: Vec3,
     /// Unit interpolated shading normal, turned to the same side as `geometric`.
     pub shading: Vec3,
-    /// Whether the ray hit the triangle's front (the side `cross(e1, e2)` points to).
+    /// Whether the ray hit the triangle's front (the side `cross(p1 - p0, p2 - p0)` points to).
     pub front: bool,
 }
 
-fn v3(v: [f32; 4]) -> Vec3 {
-    Vec3::new(v[0], v[1], v[2])
-}
-
-/// The surface at a hit `t` along `origin + t * dir` with barycentrics `(u, v)`.
-pub fn surface(tri: &Triangle, normals: &TriangleNormals, origin: Vec3, dir: Vec3, t: f32, u: f32, v: f32) -> Surface {
+/// The surface at a hit `t` along `origin + t * dir` with barycentrics `(u, v)`; `normals` are the
+/// triangle's vertex normals, `None` for a flat triangle (shaded with its geometric normal).
+pub fn surface(
+    tri: &Triangle,
+    normals: Option<[[f32; 3]; 3]>,
+    origin: Vec3,
+    dir: Vec3,
+    t: f32,
+    u: f32,
+    v: f32,
+) -> Surface {
     let point = origin + t * dir;
-    let raw = v3(tri.e1).cross(v3(tri.e2));
+    let p0 = Vec3::from(tri.p0);
+    let raw = (Vec3::from(tri.p1) - p0).cross(Vec3::from(tri.p2) - p0);
     // A degenerate (zero-area) triangle has no normal of its own: face the ray.
     let ng = raw.try_normalize().unwrap_or(-dir);
     let front = dir.dot(ng) < 0.0;
     let geometric = if front { ng } else { -ng };
-    let n = &normals.n;
-    let interp = (1.0 - u - v) * v3(n[0]) + u * v3(n[1]) + v * v3(n[2]);
+    let Some(n) = normals else {
+        return Surface { point, geometric, shading: geometric, front };
+    };
+    let interp = (1.0 - u - v) * Vec3::from(n[0]) + u * Vec3::from(n[1]) + v * Vec3::from(n[2]);
     let shading = match interp.try_normalize() {
         Some(s) if s.dot(geometric) < 0.0 => -s,
         Some(s) => s,
@@ -191,16 +199,18 @@ mod tests {
     #[test]
     fn surfaces_face_the_ray_and_fall_back_for_degenerate_triangles() {
         let tri = Triangle::from_vertices([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]);
-        let n = TriangleNormals { n: [[0.0, 1.0, 0.0, 0.0]; 3] };
-        let down = surface(&tri, &n, Vec3::new(0.2, 1.0, -0.2), Vec3::NEG_Y, 1.0, 0.2, 0.2);
+        let n = Some([[0.0, 1.0, 0.0]; 3]);
+        let down = surface(&tri, n, Vec3::new(0.2, 1.0, -0.2), Vec3::NEG_Y, 1.0, 0.2, 0.2);
         assert!(down.front && down.geometric == Vec3::Y && down.shading == Vec3::Y);
-        let up = surface(&tri, &n, Vec3::new(0.2, -1.0, -0.2), Vec3::Y, 1.0, 0.2, 0.2);
+        let up = surface(&tri, n, Vec3::new(0.2, -1.0, -0.2), Vec3::Y, 1.0, 0.2, 0.2);
         assert!(!up.front && up.geometric == Vec3::NEG_Y && up.shading == Vec3::NEG_Y);
         let sliver = Triangle::from_vertices([0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]);
-        let zero = TriangleNormals::default();
-        let s = surface(&sliver, &zero, Vec3::ZERO, Vec3::X, 0.5, 0.3, 0.3);
+        let s = surface(&sliver, Some([[0.0; 3]; 3]), Vec3::ZERO, Vec3::X, 0.5, 0.3, 0.3);
         assert_eq!(s.geometric, Vec3::NEG_X);
         assert!(s.shading.is_finite());
+        // A flat triangle is shaded with its geometric normal.
+        let flat = surface(&tri, None, Vec3::new(0.2, -1.0, -0.2), Vec3::Y, 1.0, 0.2, 0.2);
+        assert_eq!(flat.shading, flat.geometric);
     }
 
     #[test]
