@@ -7,13 +7,20 @@
 //! cannot separate a floor quad from the models standing on it (its centre lies among their feet),
 //! and without this candidate the floor's two triangles sink deep into the tree, costing the
 //! million-triangle scene 70% in SAH against the full sweep.
+//!
+//! Large nodes ([`crate::build::PARALLEL_NODE`]) are binned in fixed-size chunks by every thread,
+//! and partitioned by every thread out of place, each chunk writing its primitives to where the
+//! chunks before it leave off: the bins already counted how many of each chunk go left. That
+//! partition is stable, so the children's order does not depend on the number of threads.
 
-use crate::build::{Aabb, Costs, NodeBounds, PrimRef, Split, Splitter};
+use crate::build::{Aabb, AreaScale, Costs, NodeBounds, PrimRef, Split, Splitter};
 use glam::Vec3A;
+use rayon::prelude::*;
 use std::cell::RefCell;
 
-/// Nodes with more primitives than this bin in parallel chunks.
-const PARALLEL_BINNING: usize = 1 << 16;
+/// Primitives per chunk of a large node's binning and partition (256 KiB of references): a size,
+/// not a share of the threads, so that the chunks are the same on every machine.
+const CHUNK: usize = 8192;
 
 #[derive(Clone, Copy)]
 struct Bin {
@@ -22,6 +29,14 @@ struct Bin {
 }
 
 const EMPTY_BIN: Bin = Bin { bounds: Aabb::EMPTY, count: 0 };
+
+impl Bin {
+    #[inline(always)]
+    fn add(&mut self, other: &Bin) {
+        self.bounds.grow(&other.bounds);
+        self.count += other.count;
+    }
+}
 
 thread_local! {
     /// Reused bin storage: a fresh allocation per node would cost more than the binning of the
@@ -34,143 +49,198 @@ pub struct BinnedSah {
     pub costs: Costs,
 }
 
-/// The bin of centroid component `c`; the same arithmetic decides binning and partitioning, so the
-/// children's boxes assembled from bins are exact.
-#[inline(always)]
-fn bin_index(c: Vec3A, lo: Vec3A, scale: Vec3A, last: usize) -> [usize; 3] {
-    let f = ((c - lo) * scale).to_array();
-    // `as` saturates: NaN and negatives land in bin 0.
-    [(f[0] as usize).min(last), (f[1] as usize).min(last), (f[2] as usize).min(last)]
+/// How one node's centroids map to bins, and which triangles count as large.
+#[derive(Clone, Copy)]
+struct Grid {
+    lo: Vec3A,
+    scale: Vec3A,
+    last: usize,
+    /// Box half area from which a triangle joins the large-triangle candidate.
+    big: f32,
 }
 
-impl BinnedSah {
-    fn bin_into(&self, prims: &[PrimRef], lo: Vec3A, scale: Vec3A, big: f32, bins: &mut [Bin]) {
-        let k = self.bins;
-        for p in prims {
-            let b = bin_index(p.centroid(), lo, scale, k - 1);
-            let pb = p.aabb();
-            for axis in 0..3 {
-                let bin = &mut bins[axis * k + b[axis]];
-                bin.bounds.grow(&pb);
-                bin.count += 1;
-            }
-            // The last slot gathers the large triangles (rare, hence a branch).
-            if p.area >= big {
-                let bin = &mut bins[3 * k];
-                bin.bounds.grow(&pb);
-                bin.count += 1;
-            }
-        }
-    }
-
-    fn bin_parallel(&self, prims: &[PrimRef], lo: Vec3A, scale: Vec3A, big: f32, bins: &mut [Bin]) {
-        use rayon::prelude::*;
-        let k = self.bins;
-        let merged = prims
-            .par_chunks(PARALLEL_BINNING / 4)
-            .fold(
-                || vec![EMPTY_BIN; 3 * k + 1],
-                |mut acc, chunk| {
-                    self.bin_into(chunk, lo, scale, big, &mut acc);
-                    acc
-                },
-            )
-            .reduce(
-                || vec![EMPTY_BIN; 3 * k + 1],
-                |mut a, b| {
-                    for (x, y) in a.iter_mut().zip(&b) {
-                        x.bounds.grow(&y.bounds);
-                        x.count += y.count;
-                    }
-                    a
-                },
-            );
-        bins.copy_from_slice(&merged);
-    }
-
-    fn split_with(&self, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool, bins: &mut [Bin]) -> Option<Split> {
-        let n = prims.len();
-        let k = self.bins;
-        let lo = nb.centroids.min;
+impl Grid {
+    /// `None` when all centroids coincide: no plane separates them.
+    fn new(nb: &NodeBounds, bins: usize) -> Option<Grid> {
         let ext = nb.centroids.extent();
         if ext.max_element() <= 0.0 {
             return None;
         }
         // Axes without extent get scale 0: everything in bin 0, so they offer no plane.
-        let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(k as f32) / ext, Vec3A::ZERO);
-        bins.fill(EMPTY_BIN);
-        let parent_area = nb.aabb.half_area();
-        let big = (parent_area * 0.25) as f32;
-        if n > PARALLEL_BINNING {
-            self.bin_parallel(prims, lo, scale, big, bins);
-        } else {
-            self.bin_into(prims, lo, scale, big, bins);
-        }
+        let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(bins as f32) / ext, Vec3A::ZERO);
+        let big = (nb.aabb.half_area() * 0.25) as f32;
+        Some(Grid { lo: nb.centroids.min, scale, last: bins - 1, big })
+    }
 
-        let mut best: Option<(f64, usize, usize)> = None; // (cost, axis, plane)
-        let mut right_area = [0f64; 256];
+    /// The bin of centroid `c` on each axis.
+    #[inline(always)]
+    fn bins_of(&self, c: Vec3A) -> [usize; 3] {
+        let f = ((c - self.lo) * self.scale).to_array();
+        // `as` saturates: NaN and negatives land in bin 0.
+        [(f[0] as usize).min(self.last), (f[1] as usize).min(self.last), (f[2] as usize).min(self.last)]
+    }
+
+    /// The bin of centroid `c` on one axis: the same arithmetic as [`Grid::bins_of`]'s lane, so
+    /// that the partition sends every primitive where its bin was counted.
+    #[inline(always)]
+    fn bin_on(&self, c: Vec3A, axis: usize) -> usize {
+        (((c[axis] - self.lo[axis]) * self.scale[axis]) as usize).min(self.last)
+    }
+}
+
+/// The split chosen from the bins, before any primitive moves.
+#[derive(Clone, Copy)]
+enum Choice {
+    /// Bins `..plane` on `axis` go left.
+    Plane { axis: usize, plane: usize, left: Aabb, right: Aabb },
+    /// The large triangles go left.
+    Large { left: Aabb, right: Aabb },
+}
+
+impl Choice {
+    #[inline(always)]
+    fn goes_left(&self, grid: &Grid, p: &PrimRef, c: Vec3A) -> bool {
+        match *self {
+            Choice::Plane { axis, plane, .. } => grid.bin_on(c, axis) < plane,
+            Choice::Large { .. } => p.area >= grid.big,
+        }
+    }
+
+    /// How many primitives of the chunk binned into `bins` go left.
+    fn left_count(&self, bins: &[Bin], k: usize) -> usize {
+        match *self {
+            Choice::Plane { axis, plane, .. } => {
+                bins[axis * k..axis * k + plane].iter().map(|b| b.count as usize).sum()
+            }
+            Choice::Large { .. } => bins[3 * k].count as usize,
+        }
+    }
+
+    /// The children's bounds, their centroid boxes still empty (the partition grows them).
+    fn children(&self) -> (NodeBounds, NodeBounds) {
+        let (Choice::Plane { left, right, .. } | Choice::Large { left, right }) = *self;
+        (NodeBounds { aabb: left, centroids: Aabb::EMPTY }, NodeBounds { aabb: right, centroids: Aabb::EMPTY })
+    }
+}
+
+impl BinnedSah {
+    /// Adds `prims` to `bins`: `3 K` bins (K per axis), then one gathering the large triangles.
+    fn bin_into(&self, prims: &[PrimRef], grid: &Grid, bins: &mut [Bin]) {
+        let k = self.bins;
+        let (x, rest) = bins.split_at_mut(k);
+        let (y, rest) = rest.split_at_mut(k);
+        let (z, large) = rest.split_at_mut(k);
+        for p in prims {
+            let pb = p.aabb();
+            let b = grid.bins_of((pb.min + pb.max) * 0.5);
+            for (axis_bins, i) in [(&mut *x, b[0]), (&mut *y, b[1]), (&mut *z, b[2])] {
+                let bin = &mut axis_bins[i];
+                bin.bounds.grow(&pb);
+                bin.count += 1;
+            }
+            // Large triangles are rare, hence a branch.
+            if p.area >= grid.big {
+                large[0].bounds.grow(&pb);
+                large[0].count += 1;
+            }
+        }
+    }
+
+    /// The cheapest split by the bins, or `None` when no plane separates the primitives or (if
+    /// `may_leaf`) a leaf is cheaper. `rest` computes the box of the triangles that are not large,
+    /// needed only when some but not all are.
+    fn choose(
+        &self,
+        bins: &[Bin],
+        n: usize,
+        nb: &NodeBounds,
+        may_leaf: bool,
+        rest: impl FnOnce() -> Aabb,
+    ) -> Option<Choice> {
+        let k = self.bins;
+        let scale = AreaScale::of(&nb.aabb);
+        let parent_area = scale.half_area(&nb.aabb) as f64;
+        // (area-weighted count of both children, axis, plane): within one node the SAH cost grows
+        // with the weighted count, so only the chosen candidates' costs are computed in full.
+        let mut best: Option<(f32, usize, usize)> = None;
+        let mut right_area = [0f32; 256];
         let mut right_area_vec;
-        let right_area: &mut [f64] = if k <= 256 {
+        let right_area: &mut [f32] = if k <= 256 {
             &mut right_area[..k]
         } else {
-            right_area_vec = vec![0f64; k];
+            right_area_vec = vec![0f32; k];
             &mut right_area_vec
         };
         for axis in 0..3 {
             let ab = &bins[axis * k..axis * k + k];
             let mut acc = Aabb::EMPTY;
+            let mut right_n = 0u32;
             for i in (1..k).rev() {
                 acc.grow(&ab[i].bounds);
-                right_area[i] = acc.half_area();
+                right_n += ab[i].count;
+                right_area[i] = scale.half_area(&acc) * right_n as f32;
             }
             let mut left = Aabb::EMPTY;
             let mut left_n = 0usize;
             for plane in 1..k {
                 left.grow(&ab[plane - 1].bounds);
                 left_n += ab[plane - 1].count as usize;
-                let right_n = n - left_n;
-                if left_n == 0 || right_n == 0 {
+                if left_n == 0 || left_n == n {
                     continue;
                 }
-                let cost = self.costs.split_cost(parent_area, left.half_area(), left_n, right_area[plane], right_n);
-                if best.is_none_or(|(c, _, _)| cost < c) {
-                    best = Some((cost, axis, plane));
+                let weighted = scale.half_area(&left) * left_n as f32 + right_area[plane];
+                if best.is_none_or(|(c, _, _)| weighted < c) {
+                    best = Some((weighted, axis, plane));
                 }
             }
         }
-        let big_n = bins[3 * k].count as usize;
-        if big_n > 0
-            && big_n < n
-            && let Some(split) = self.big_split(prims, nb, big, bins[3 * k].bounds, best.map(|b| b.0), may_leaf)
-        {
-            return Some(split);
+        let beats_leaf = |cost: f64| !(may_leaf && cost >= self.costs.leaf_cost(n));
+
+        let large = bins[3 * k];
+        let large_n = large.count as usize;
+        if large_n > 0 && large_n < n {
+            let rest = rest();
+            let weighted =
+                scale.half_area(&large.bounds) * large_n as f32 + scale.half_area(&rest) * (n - large_n) as f32;
+            if best.is_none_or(|(b, _, _)| weighted < b)
+                && beats_leaf(self.costs.split_cost(parent_area, weighted as f64))
+            {
+                return Some(Choice::Large { left: large.bounds, right: rest });
+            }
         }
-        let (cost, axis, plane) = best?;
-        if may_leaf && cost >= self.costs.leaf_cost(n) {
+        let (weighted, axis, plane) = best?;
+        if !beats_leaf(self.costs.split_cost(parent_area, weighted as f64)) {
             return None;
         }
         let ab = &bins[axis * k..axis * k + k];
-        let mut left = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
-        let mut right = left;
-        for b in &ab[..plane] {
-            left.aabb.grow(&b.bounds);
-        }
-        for b in &ab[plane..] {
-            right.aabb.grow(&b.bounds);
-        }
+        let side = |bins: &[Bin]| bins.iter().fold(Aabb::EMPTY, |a, b| a.union(&b.bounds));
+        Some(Choice::Plane { axis, plane, left: side(&ab[..plane]), right: side(&ab[plane..]) })
+    }
 
-        // Only the split axis matters here; the scalar arithmetic equals `bin_index`'s lane.
-        let (lo_a, scale_a) = (lo[axis], scale[axis]);
-        let mid = partition(prims, &mut left, &mut right, |_, c| {
-            ((((c[axis] - lo_a) * scale_a) as usize).min(k - 1)) < plane
-        });
-        debug_assert!(mid > 0 && mid < n);
-        Some(Split { mid, left, right })
+    fn split_with(&self, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool, bins: &mut [Bin]) -> Option<Split> {
+        let grid = Grid::new(nb, self.bins)?;
+        bins.fill(EMPTY_BIN);
+        self.bin_into(prims, &grid, bins);
+        let choice = self.choose(bins, prims.len(), nb, may_leaf, || small_bounds(prims, grid.big))?;
+        let (mut left, mut right) = choice.children();
+        let mid = partition(prims, &mut left, &mut right, |p, c| choice.goes_left(&grid, p, c));
+        debug_assert!(mid > 0 && mid < prims.len());
+        Some(Split { mid, left, right, in_spare: false })
     }
 }
 
-/// Moves the primitives for which `goes_left(prim, centroid)` holds to the front, in place, and
-/// grows each side's centroid bounds on the way; returns how many went left.
+/// The box of the triangles smaller than `big`.
+fn small_bounds(prims: &[PrimRef], big: f32) -> Aabb {
+    let mut rest = Aabb::EMPTY;
+    for p in prims.iter().filter(|p| p.area < big) {
+        rest.grow(&p.aabb());
+    }
+    rest
+}
+
+/// Moves the primitives for which `goes_left(prim, centroid)` holds to the front, in place
+/// (Hoare: each misplaced pair is swapped once), and grows each side's centroid bounds on the
+/// way; returns how many went left.
 #[inline(always)]
 fn partition(
     prims: &mut [PrimRef],
@@ -179,52 +249,72 @@ fn partition(
     goes_left: impl Fn(&PrimRef, Vec3A) -> bool,
 ) -> usize {
     let (mut i, mut j) = (0usize, prims.len());
-    while i < j {
-        let c = prims[i].centroid();
-        if goes_left(&prims[i], c) {
+    loop {
+        while i < j {
+            let c = prims[i].centroid();
+            if !goes_left(&prims[i], c) {
+                break;
+            }
             left.centroids.grow_point(c);
             i += 1;
-        } else {
-            j -= 1;
-            right.centroids.grow_point(c);
-            prims.swap(i, j);
         }
+        while i < j {
+            let c = prims[j - 1].centroid();
+            if goes_left(&prims[j - 1], c) {
+                break;
+            }
+            right.centroids.grow_point(c);
+            j -= 1;
+        }
+        if i == j {
+            return i;
+        }
+        // prims[i] goes right and prims[j - 1] left: swap them into place.
+        prims.swap(i, j - 1);
+        left.centroids.grow_point(prims[i].centroid());
+        right.centroids.grow_point(prims[j - 1].centroid());
+        i += 1;
+        j -= 1;
     }
-    i
 }
 
-impl BinnedSah {
-    /// The large triangles (box area at least `big`) against the rest, taken when the SAH prefers
-    /// it to `best_cost` (and to a leaf, if one is allowed).
-    fn big_split(
-        &self,
-        prims: &mut [PrimRef],
-        nb: &NodeBounds,
-        big: f32,
-        big_bounds: Aabb,
-        best_cost: Option<f64>,
-        may_leaf: bool,
-    ) -> Option<Split> {
-        let n = prims.len();
-        let mut rest = Aabb::EMPTY;
-        let mut big_n = 0usize;
-        for p in prims.iter() {
-            if p.area >= big {
-                big_n += 1;
-            } else {
-                rest.grow(&p.aabb());
-            }
-        }
-        let cost =
-            self.costs.split_cost(nb.aabb.half_area(), big_bounds.half_area(), big_n, rest.half_area(), n - big_n);
-        if best_cost.is_some_and(|b| cost >= b) || (may_leaf && cost >= self.costs.leaf_cost(n)) {
-            return None;
-        }
-        let mut left = NodeBounds { aabb: big_bounds, centroids: Aabb::EMPTY };
-        let mut right = NodeBounds { aabb: rest, centroids: Aabb::EMPTY };
-        let mid = partition(prims, &mut left, &mut right, |p, _| p.area >= big);
-        Some(Split { mid, left, right })
+/// Copies `src` into `dst` partitioned, stably: each chunk of [`CHUNK`] primitives sends
+/// `left_counts[chunk]` of them to the left part, after those of the chunks before it, and the
+/// rest to the right part likewise. Returns the centroid bounds of both sides.
+fn scatter(
+    src: &[PrimRef],
+    dst: &mut [PrimRef],
+    left_counts: &[usize],
+    goes_left: impl Fn(&PrimRef, Vec3A) -> bool + Sync,
+) -> (Aabb, Aabb) {
+    let mid: usize = left_counts.iter().sum();
+    let (mut left_dst, mut right_dst) = dst.split_at_mut(mid);
+    let mut jobs = Vec::with_capacity(left_counts.len());
+    for (chunk, &l) in src.chunks(CHUNK).zip(left_counts) {
+        let (l_out, rest) = std::mem::take(&mut left_dst).split_at_mut(l);
+        left_dst = rest;
+        let (r_out, rest) = std::mem::take(&mut right_dst).split_at_mut(chunk.len() - l);
+        right_dst = rest;
+        jobs.push((chunk, l_out, r_out));
     }
+    jobs.into_par_iter()
+        .map(|(chunk, l_out, r_out)| {
+            let (mut lc, mut rc) = (Aabb::EMPTY, Aabb::EMPTY);
+            let (mut l_it, mut r_it) = (l_out.iter_mut(), r_out.iter_mut());
+            for p in chunk {
+                let c = p.centroid();
+                // A primitive without a place would mean the bins miscounted: a bug, never input.
+                if goes_left(p, c) {
+                    *l_it.next().expect("the bins counted this chunk's left side") = *p;
+                    lc.grow_point(c);
+                } else {
+                    *r_it.next().expect("the bins counted this chunk's right side") = *p;
+                    rc.grow_point(c);
+                }
+            }
+            (lc, rc)
+        })
+        .reduce(|| (Aabb::EMPTY, Aabb::EMPTY), |a, b| (a.0.union(&b.0), a.1.union(&b.1)))
 }
 
 impl Splitter for BinnedSah {
@@ -235,7 +325,7 @@ impl Splitter for BinnedSah {
             return crate::sweep::sweep_split(&self.costs, prims, nb, may_leaf);
         }
         SCRATCH.with(|s| {
-            // A nested use (rayon may steal work inside `bin_parallel`) gets its own buffer.
+            // A nested use (rayon may steal work while this thread waits) gets its own buffer.
             let mut own;
             let mut guard = s.try_borrow_mut();
             let bins: &mut Vec<Bin> = match guard.as_deref_mut() {
@@ -248,5 +338,42 @@ impl Splitter for BinnedSah {
             bins.resize(3 * self.bins + 1, EMPTY_BIN);
             self.split_with(prims, nb, may_leaf, &mut bins[..3 * self.bins + 1])
         })
+    }
+
+    fn split_parallel(
+        &self,
+        prims: &mut [PrimRef],
+        spare: &mut [PrimRef],
+        nb: &NodeBounds,
+        may_leaf: bool,
+    ) -> Option<Split> {
+        if prims.len() <= self.bins {
+            return self.split(prims, nb, may_leaf);
+        }
+        let k = self.bins;
+        let grid = Grid::new(nb, k)?;
+        let chunks: Vec<Vec<Bin>> = prims
+            .par_chunks(CHUNK)
+            .map(|chunk| {
+                let mut bins = vec![EMPTY_BIN; 3 * k + 1];
+                self.bin_into(chunk, &grid, &mut bins);
+                bins
+            })
+            .collect();
+        let mut bins = vec![EMPTY_BIN; 3 * k + 1];
+        for chunk in &chunks {
+            for (b, c) in bins.iter_mut().zip(chunk) {
+                b.add(c);
+            }
+        }
+        let rest =
+            || prims.par_chunks(CHUNK).map(|c| small_bounds(c, grid.big)).reduce(|| Aabb::EMPTY, |a, b| a.union(&b));
+        let choice = self.choose(&bins, prims.len(), nb, may_leaf, rest)?;
+        let left_counts: Vec<usize> = chunks.iter().map(|c| choice.left_count(c, k)).collect();
+        let (mut left, mut right) = choice.children();
+        (left.centroids, right.centroids) = scatter(prims, spare, &left_counts, |p, c| choice.goes_left(&grid, p, c));
+        let mid = left_counts.iter().sum();
+        debug_assert!(mid > 0 && mid < prims.len());
+        Some(Split { mid, left, right, in_spare: true })
     }
 }

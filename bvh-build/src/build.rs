@@ -12,7 +12,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 pub const DEPTH_LIMIT: u32 = 64;
 
 /// Nodes with more triangles than this build their two subtrees in parallel.
-const PARALLEL_THRESHOLD: usize = 4096;
+const PARALLEL_SUBTREES: usize = 4096;
 
 /// An axis-aligned box.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -57,6 +57,29 @@ impl Aabb {
     }
 }
 
+/// Half areas of the boxes inside one node, in f32 and in units of the node's largest extent, so
+/// that none exceeds 3 and no coordinate of a huge scene overflows: the SAH compares only ratios
+/// of areas within a node, and f32 lets the splitters evaluate them without conversions.
+#[derive(Clone, Copy)]
+pub struct AreaScale(f32);
+
+impl AreaScale {
+    pub fn of(node: &Aabb) -> AreaScale {
+        // The extent in f64: in f32 it overflows for coordinates beyond half of f32::MAX.
+        let e = (0..3).map(|k| node.max[k] as f64 - node.min[k] as f64).fold(0.0, f64::max);
+        let s = (1.0 / e) as f32;
+        // A point-sized node has no area to compare: any finite scale does.
+        AreaScale(if s.is_finite() && s > 0.0 { s } else { 1.0 })
+    }
+
+    /// Half the surface area of `b` in this node's units; 0 for an empty box.
+    #[inline(always)]
+    pub fn half_area(self, b: &Aabb) -> f32 {
+        let d = (b.max * self.0 - b.min * self.0).max(Vec3A::ZERO);
+        d.x * d.y + d.y * d.z + d.z * d.x
+    }
+}
+
 /// One triangle as the builders see it: its box and its input index, 32 bytes. The builders
 /// reorder these records themselves rather than an index array into them, so that binning and
 /// partitioning stream through memory instead of gathering from it.
@@ -71,6 +94,8 @@ pub struct PrimRef {
 }
 
 impl PrimRef {
+    const ZERO: PrimRef = PrimRef { min: [0.0; 3], id: 0, max: [0.0; 3], area: 0.0 };
+
     #[inline(always)]
     pub fn aabb(&self) -> Aabb {
         Aabb { min: Vec3A::from(self.min), max: Vec3A::from(self.max) }
@@ -125,10 +150,11 @@ pub struct Costs {
 }
 
 impl Costs {
-    /// SAH cost of splitting a node of half area `parent_area` into the given children.
+    /// SAH cost of splitting a node of half area `parent_area` into children whose half areas
+    /// times their primitive counts sum to `weighted`.
     #[inline]
-    pub fn split_cost(&self, parent_area: f64, left_area: f64, left_n: usize, right_area: f64, right_n: usize) -> f64 {
-        self.traversal + self.intersection * (left_area * left_n as f64 + right_area * right_n as f64) / parent_area
+    pub fn split_cost(&self, parent_area: f64, weighted: f64) -> f64 {
+        self.traversal + self.intersection * weighted / parent_area
     }
 
     #[inline]
@@ -142,17 +168,39 @@ pub struct Split {
     pub mid: usize,
     pub left: NodeBounds,
     pub right: NodeBounds,
+    /// The split primitives lie in the spare buffer ([`Splitter::split_parallel`] only).
+    pub in_spare: bool,
 }
 
 /// Decides how one node is split.
 pub trait Splitter: Sync {
-    /// Reorders `refs` and returns the split with the lowest SAH cost, or `None` when no split
-    /// separates the primitives or, if `may_leaf`, when a leaf is cheaper than the best split.
+    /// Reorders `refs` in place and returns the split with the lowest SAH cost, or `None` when no
+    /// split separates the primitives or, if `may_leaf`, when a leaf is cheaper than the best split.
     fn split(&self, refs: &mut [PrimRef], bounds: &NodeBounds, may_leaf: bool) -> Option<Split>;
+
+    /// [`Splitter::split`] for a node of more than [`PARALLEL_NODE`] primitives, using every
+    /// thread. It may leave the split primitives in `spare` (as long as `refs`) instead of
+    /// `refs`, which [`Split::in_spare`] then says. It must choose the same split as `split`, and
+    /// order the children's primitives independently of the number of threads.
+    fn split_parallel(
+        &self,
+        refs: &mut [PrimRef],
+        spare: &mut [PrimRef],
+        bounds: &NodeBounds,
+        may_leaf: bool,
+    ) -> Option<Split> {
+        let _ = spare;
+        self.split(refs, bounds, may_leaf)
+    }
 }
 
+/// Nodes with more primitives than this are split by [`Splitter::split_parallel`]: every thread
+/// bins and partitions them, since near the root there are too few subtrees to keep the threads
+/// busy. It is a size, not a count of threads, so that the tree does not depend on the machine.
+pub const PARALLEL_NODE: usize = 1 << 15;
+
 /// One node of the build, in a gapped depth-first array: a subtree of `c` primitives owns `2c - 1`
-/// slots, its root first, its left subtree next, and its right subtree at `right`.
+/// slots, its root first, its left subtree next, and its right subtree at `index`.
 #[derive(Clone, Copy, Default)]
 struct Slot {
     min: [f32; 3],
@@ -161,11 +209,15 @@ struct Slot {
     count: u32,
     /// First primitive (leaf) or slot of the right child (inner node).
     index: u32,
+    /// Nodes in the subtree rooted here (1 for a leaf): where each layout puts the right child.
+    nodes: u32,
 }
 
-/// A finished tree: child-pair nodes, and for each leaf-order slot the input triangle it holds.
+/// A finished tree: child-pair nodes, the escape-pointer layout when asked for, and for each
+/// leaf-order slot the input triangle it holds.
 pub struct BuiltTree {
     pub nodes: Vec<Node>,
+    pub escape: Option<Vec<Node>>,
     pub order: Vec<u32>,
 }
 
@@ -173,23 +225,37 @@ struct Ctx<'a, S: Splitter> {
     splitter: &'a S,
     costs: Costs,
     progress: Option<&'a AtomicUsize>,
+    /// [`PARALLEL_NODE`] outside tests.
+    parallel_node: usize,
 }
 
-/// Builds a tree over `refs` (reordering them into leaf order) with the given splitter.
-/// `progress`, when given, counts the primitives already placed in leaves, for a progress bar.
+/// Builds a tree over `refs` (used as scratch space: their order afterwards means nothing) with
+/// the given splitter; `escape` asks for the escape-pointer layout too. `progress`, when given,
+/// counts the primitives already placed in leaves, for a progress bar.
 pub fn build<S: Splitter>(
     refs: &mut [PrimRef],
     splitter: &S,
     costs: Costs,
     progress: Option<&AtomicUsize>,
+    escape: bool,
 ) -> BuiltTree {
+    build_with(refs, Ctx { splitter, costs, progress, parallel_node: PARALLEL_NODE }, escape)
+}
+
+fn build_with<S: Splitter>(refs: &mut [PrimRef], ctx: Ctx<'_, S>, escape: bool) -> BuiltTree {
+    use rayon::prelude::*;
     let n = refs.len();
     assert!(n > 0 && n < u32::MAX as usize / 2, "the compiler rejects empty and oversized scenes before building");
     let mut slots = vec![Slot::default(); 2 * n - 1];
+    let mut order = vec![0u32; n];
+    // The second buffer that large nodes are partitioned into; small trees never need it.
+    let mut spare = if n > ctx.parallel_node { vec![PrimRef::ZERO; n] } else { Vec::new() };
     let root = bounds_parallel(refs);
-    let ctx = Ctx { splitter, costs, progress };
-    build_node(&ctx, refs, 0, &mut slots, 0, root, 0);
-    BuiltTree { nodes: flatten(&slots), order: refs.iter().map(|r| r.id).collect() }
+    build_node(&ctx, Prims { refs, spare: &mut spare, order: &mut order }, 0, &mut slots, 0, root, 0);
+    drop(spare);
+    let (nodes, escape) = rayon::join(|| child_pair(&slots), || escape.then(|| depth_first(&slots)));
+    debug_assert!(order.par_iter().all(|&i| (i as usize) < n));
+    BuiltTree { nodes, escape, order }
 }
 
 fn bounds_parallel(refs: &[PrimRef]) -> NodeBounds {
@@ -200,54 +266,82 @@ fn bounds_parallel(refs: &[PrimRef]) -> NodeBounds {
         .reduce(|| empty, |a, b| NodeBounds { aabb: a.aabb.union(&b.aabb), centroids: a.centroids.union(&b.centroids) })
 }
 
+/// A node's primitives, the same range of the spare buffer (empty below [`Ctx::parallel_node`]),
+/// and the same range of the leaf order.
+struct Prims<'a> {
+    refs: &'a mut [PrimRef],
+    spare: &'a mut [PrimRef],
+    order: &'a mut [u32],
+}
+
+impl<'a> Prims<'a> {
+    fn split_at(self, mid: usize) -> (Prims<'a>, Prims<'a>) {
+        let (a, b) = self.refs.split_at_mut(mid);
+        let (c, d) = if self.spare.is_empty() { (&mut [][..], &mut [][..]) } else { self.spare.split_at_mut(mid) };
+        let (e, f) = self.order.split_at_mut(mid);
+        (Prims { refs: a, spare: c, order: e }, Prims { refs: b, spare: d, order: f })
+    }
+}
+
+/// Builds the subtree of `p.refs` into `slots` (its own part of the gapped array, starting at
+/// absolute slot `slot`); `first` is the index of its first primitive. Returns its node count.
 fn build_node<S: Splitter>(
     ctx: &Ctx<'_, S>,
-    prims: &mut [PrimRef],
+    mut p: Prims<'_>,
     first: usize,
     slots: &mut [Slot],
     slot: usize,
     bounds: NodeBounds,
     depth: u32,
-) {
-    let n = prims.len();
+) -> u32 {
+    let n = p.refs.len();
     let may_leaf = n <= ctx.costs.max_leaf_size;
     let split = if n == 1 {
         None
     } else if depth >= ctx.costs.depth_limit {
-        if may_leaf { None } else { Some(median_split(prims, &bounds)) }
+        if may_leaf { None } else { Some(median_split(p.refs, &bounds)) }
     } else {
-        match ctx.splitter.split(prims, &bounds, may_leaf) {
+        let s = if n > ctx.parallel_node {
+            ctx.splitter.split_parallel(p.refs, p.spare, &bounds, may_leaf)
+        } else {
+            ctx.splitter.split(p.refs, &bounds, may_leaf)
+        };
+        match s {
             Some(s) => Some(s),
             None if may_leaf => None,
-            None => Some(median_split(prims, &bounds)),
+            None => Some(median_split(p.refs, &bounds)),
         }
     };
-    let here = &mut slots[0];
+    let (here, below) = slots.split_first_mut().expect("a subtree owns at least one slot");
     here.min = bounds.aabb.min.into();
     here.max = bounds.aabb.max.into();
     let Some(split) = split else {
         here.count = n as u32;
         here.index = first as u32;
-        if let Some(p) = ctx.progress {
-            p.fetch_add(n, Ordering::Relaxed);
+        here.nodes = 1;
+        for (o, r) in p.order.iter_mut().zip(p.refs.iter()) {
+            *o = r.id;
         }
-        return;
+        if let Some(pr) = ctx.progress {
+            pr.fetch_add(n, Ordering::Relaxed);
+        }
+        return 1;
     };
     let mid = split.mid;
     debug_assert!(mid > 0 && mid < n);
+    if split.in_spare {
+        std::mem::swap(&mut p.refs, &mut p.spare);
+    }
     let right_slot = slot + 2 * mid;
     here.count = 0;
     here.index = right_slot as u32;
-    let (left_prims, right_prims) = prims.split_at_mut(mid);
-    let (left_slots, right_slots) = slots[1..].split_at_mut(2 * mid - 1);
-    let mut left = || build_node(ctx, left_prims, first, left_slots, slot + 1, split.left, depth + 1);
-    let mut right = || build_node(ctx, right_prims, first + mid, right_slots, right_slot, split.right, depth + 1);
-    if n > PARALLEL_THRESHOLD {
-        rayon::join(left, right);
-    } else {
-        left();
-        right();
-    }
+    let (left_p, right_p) = p.split_at(mid);
+    let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
+    let left = || build_node(ctx, left_p, first, left_slots, slot + 1, split.left, depth + 1);
+    let right = || build_node(ctx, right_p, first + mid, right_slots, right_slot, split.right, depth + 1);
+    let (l, r) = if n > PARALLEL_SUBTREES { rayon::join(left, right) } else { (left(), right()) };
+    here.nodes = 1 + l + r;
+    here.nodes
 }
 
 /// Splits at the object median along the widest centroid axis; with all centroids equal, simply
@@ -259,33 +353,84 @@ pub fn median_split(refs: &mut [PrimRef], bounds: &NodeBounds) -> Split {
         let axis = ext.max_position();
         refs.select_nth_unstable_by(mid, |a, b| a.centroid()[axis].total_cmp(&b.centroid()[axis]));
     }
-    Split { mid, left: bounds_of(&refs[..mid]), right: bounds_of(&refs[mid..]) }
+    Split { mid, left: bounds_of(&refs[..mid]), right: bounds_of(&refs[mid..]), in_spare: false }
 }
 
-/// Turns the gapped depth-first slots into the child-pair layout: root at 0, the two children of
-/// each inner node allocated together when the walk (depth-first, left first) reaches it.
-fn flatten(slots: &[Slot]) -> Vec<Node> {
-    let mut nodes = Vec::with_capacity(slots.len());
-    nodes.push(Node::default());
-    let mut stack = vec![(0usize, 0usize)]; // (slot, node)
-    while let Some((s, o)) = stack.pop() {
-        let sl = &slots[s];
-        let node = &mut nodes[o];
-        node.min = sl.min;
-        node.max = sl.max;
-        node.count = sl.count;
-        if sl.count > 0 {
-            node.index = sl.index;
-            continue;
-        }
-        let pair = nodes.len();
-        nodes[o].index = pair as u32;
-        nodes.push(Node::default());
-        nodes.push(Node::default());
-        stack.push((sl.index as usize, pair + 1));
-        stack.push((s + 1, pair));
+/// Subtrees of more nodes than this are written out in parallel.
+const PARALLEL_EMIT: u32 = 1 << 14;
+
+/// A slot as a node; `children` is where an inner node's pair (child-pair) or its escape index
+/// (escape-pointer) lies.
+fn node_of(s: &Slot, children: usize) -> Node {
+    Node { min: s.min, count: s.count, max: s.max, index: if s.count > 0 { s.index } else { children as u32 } }
+}
+
+/// The child-pair layout: root at 0, the two children of each inner node side by side, pairs in
+/// the depth-first (left first) order of their parents. The pairs below a node are therefore
+/// contiguous, which lets subtrees be written in parallel into their own parts of the array.
+fn child_pair(slots: &[Slot]) -> Vec<Node> {
+    let mut nodes = vec![Node::default(); slots[0].nodes as usize];
+    let (root, below) = nodes.split_first_mut().expect("a tree has a root");
+    *root = node_of(&slots[0], 1);
+    if slots[0].count == 0 {
+        pairs(slots, 0, below, 1);
     }
     nodes
+}
+
+/// Writes the nodes below the inner node at slot `s` into `out`, which starts at node `base`:
+/// its pair, then everything below its left child, then everything below its right child.
+fn pairs(slots: &[Slot], s: usize, out: &mut [Node], base: usize) {
+    let (l, r) = (s + 1, slots[s].index as usize);
+    let left_below = slots[l].nodes as usize - 1;
+    let (pair, below) = out.split_at_mut(2);
+    let (left_out, right_out) = below.split_at_mut(left_below);
+    let (left_base, right_base) = (base + 2, base + 2 + left_below);
+    pair[0] = node_of(&slots[l], left_base);
+    pair[1] = node_of(&slots[r], right_base);
+    let mut left = || {
+        if slots[l].count == 0 {
+            pairs(slots, l, left_out, left_base)
+        }
+    };
+    let mut right = || {
+        if slots[r].count == 0 {
+            pairs(slots, r, right_out, right_base)
+        }
+    };
+    if slots[s].nodes > PARALLEL_EMIT {
+        rayon::join(left, right);
+    } else {
+        left();
+        right();
+    }
+}
+
+/// The escape-pointer layout: nodes in depth-first order (left first), an inner node pointing
+/// past its subtree.
+fn depth_first(slots: &[Slot]) -> Vec<Node> {
+    let mut nodes = vec![Node::default(); slots[0].nodes as usize];
+    preorder(slots, 0, &mut nodes, 0);
+    nodes
+}
+
+fn preorder(slots: &[Slot], s: usize, out: &mut [Node], base: usize) {
+    let sl = &slots[s];
+    out[0] = node_of(sl, base + sl.nodes as usize);
+    if sl.count > 0 {
+        return;
+    }
+    let (l, r) = (s + 1, sl.index as usize);
+    let left_n = slots[l].nodes as usize;
+    let (left_out, right_out) = out[1..].split_at_mut(left_n);
+    let mut left = || preorder(slots, l, left_out, base + 1);
+    let mut right = || preorder(slots, r, right_out, base + 1 + left_n);
+    if sl.nodes > PARALLEL_EMIT {
+        rayon::join(left, right);
+    } else {
+        left();
+        right();
+    }
 }
 
 #[cfg(test)]
@@ -345,7 +490,7 @@ mod tests {
         assert!(free.max_depth > limit, "the soup is meant to be deeper than the limit");
         let mut refs = super::prim_refs(&tris);
         let costs = super::Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 1, depth_limit: limit };
-        let t = super::build(&mut refs, &crate::binned::BinnedSah { bins: 16, costs }, costs, None);
+        let t = super::build(&mut refs, &crate::binned::BinnedSah { bins: 16, costs }, costs, None, false);
         check_shape(Tree::child_pair(&t.nodes), tris.len() as u32).expect("valid tree");
         let s = stats(Tree::child_pair(&t.nodes), 1.0, 1.0);
         // Median splits halve the count: at most ceil(log2(4000)) = 12 more levels, and a tree of
@@ -405,6 +550,87 @@ mod tests {
                 assert!(s.sah_cost.is_finite(), "scale {scale}: SAH {}", s.sah_cost);
             }
         }
+    }
+
+    /// Builds with large nodes split in parallel from `parallel_node` primitives up, on a rayon
+    /// pool of `threads`.
+    fn build_parallel(tris: &[[Vec3; 3]], parallel_node: usize, threads: usize) -> super::BuiltTree {
+        let costs =
+            super::Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 8, depth_limit: super::DEPTH_LIMIT };
+        let splitter = crate::binned::BinnedSah { bins: 16, costs };
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
+        pool.install(|| {
+            let ctx = super::Ctx { splitter: &splitter, costs, progress: None, parallel_node };
+            super::build_with(&mut super::prim_refs(tris), ctx, true)
+        })
+    }
+
+    /// The leaf order with each leaf's triangles sorted: the serial partition is in place and
+    /// unstable, the parallel one stable, so only the order inside a leaf may differ.
+    fn leaf_sets(t: &super::BuiltTree) -> Vec<u32> {
+        let mut order = t.order.clone();
+        for n in t.nodes.iter().filter(|n| n.count > 0) {
+            order[n.index as usize..(n.index + n.count) as usize].sort_unstable();
+        }
+        order
+    }
+
+    /// A soup with a large floor under it, so that the large-triangle candidate wins some nodes.
+    fn soup_on_floor(n: usize) -> Vec<[Vec3; 3]> {
+        let mut tris = soup(n);
+        let (a, b, c, d) = (
+            Vec3::new(-1.0, -0.5, -1.0),
+            Vec3::new(11.0, -0.5, -1.0),
+            Vec3::new(11.0, -0.5, 11.0),
+            Vec3::new(-1.0, -0.5, 11.0),
+        );
+        tris.push([a, b, c]);
+        tris.push([a, c, d]);
+        tris
+    }
+
+    #[test]
+    fn parallel_splits_of_large_nodes_build_the_serial_tree() {
+        for tris in [soup(40_000), soup_on_floor(40_000)] {
+            // 64: nearly every inner node above the sweep's size takes the parallel path, across
+            // many chunks of its binning and partition.
+            let serial = build_parallel(&tris, usize::MAX, 1);
+            let parallel = build_parallel(&tris, 64, 3);
+            for t in [&serial, &parallel] {
+                check_shape(Tree::child_pair(&t.nodes), tris.len() as u32).expect("valid tree");
+                let mut order = t.order.clone();
+                order.sort_unstable();
+                assert!(order.iter().enumerate().all(|(i, &o)| i as u32 == o), "leaf order is a permutation");
+            }
+            // The same splits, hence the same boxes and SAH cost, bit for bit.
+            assert_eq!(serial.nodes, parallel.nodes);
+            assert_eq!(leaf_sets(&serial), leaf_sets(&parallel));
+            let (a, b) =
+                (stats(Tree::child_pair(&serial.nodes), 1.0, 1.0), stats(Tree::child_pair(&parallel.nodes), 1.0, 1.0));
+            assert_eq!(a.sah_cost, b.sah_cost);
+            assert!(a.node_count > 2 * super::PARALLEL_EMIT, "big enough to write the layouts in parallel");
+        }
+    }
+
+    #[test]
+    fn the_parallel_build_does_not_depend_on_the_number_of_threads() {
+        let tris = soup_on_floor(40_000);
+        let one = build_parallel(&tris, 64, 1);
+        for threads in [2, 5] {
+            let many = build_parallel(&tris, 64, threads);
+            assert_eq!(one.nodes, many.nodes, "{threads} threads");
+            assert_eq!(one.order, many.order, "{threads} threads");
+            assert_eq!(one.escape, many.escape, "{threads} threads");
+        }
+    }
+
+    #[test]
+    fn the_escape_layout_from_the_build_is_the_child_pair_tree_depth_first() {
+        let tris = soup_on_floor(40_000);
+        let t = build_parallel(&tris, 64, 3);
+        let escape = t.escape.expect("asked for");
+        assert_eq!(escape, bvh_format::tree::escape_from_child_pair(&t.nodes));
+        check_shape(Tree::escape(&escape), tris.len() as u32).expect("valid escape tree");
     }
 
     #[test]

@@ -56,6 +56,16 @@ pub fn build_tree_with_progress(
     p: &BuildParams,
     progress: Option<&AtomicUsize>,
 ) -> Result<build::BuiltTree, BuildError> {
+    tree_with(positions, p, progress, false)
+}
+
+fn tree_with(
+    positions: &[[glam::Vec3; 3]],
+    p: &BuildParams,
+    progress: Option<&AtomicUsize>,
+    escape: bool,
+) -> Result<build::BuiltTree, BuildError> {
+    use rayon::prelude::*;
     check_params(p)?;
     if positions.is_empty() {
         return Err(BuildError::Empty);
@@ -63,7 +73,7 @@ pub fn build_tree_with_progress(
     if positions.len() >= (u32::MAX / 2) as usize {
         return Err(BuildError::TooLarge(positions.len()));
     }
-    if let Some(t) = positions.iter().position(|t| t.iter().any(|v| !v.is_finite())) {
+    if let Some(t) = positions.par_iter().position_first(|t| t.iter().any(|v| !v.is_finite())) {
         return Err(BuildError::NonFinite { triangle: t });
     }
     let mut refs = build::prim_refs(positions);
@@ -74,8 +84,10 @@ pub fn build_tree_with_progress(
         depth_limit: build::DEPTH_LIMIT,
     };
     Ok(match p.strategy {
-        Strategy::Binned => build::build(&mut refs, &BinnedSah { bins: p.bins as usize, costs }, costs, progress),
-        Strategy::Sweep => build::build(&mut refs, &SweepSah { costs }, costs, progress),
+        Strategy::Binned => {
+            build::build(&mut refs, &BinnedSah { bins: p.bins as usize, costs }, costs, progress, escape)
+        }
+        Strategy::Sweep => build::build(&mut refs, &SweepSah { costs }, costs, progress, escape),
     })
 }
 
@@ -98,9 +110,8 @@ pub fn compile_with_progress(
     if scene.normals.len() != n || scene.material_ids.len() != n {
         return Err(BuildError::Params("the scene's normals or material ids do not match its triangles".to_owned()));
     }
-    let tree = build_tree_with_progress(&scene.positions, params, progress)?;
+    let tree = tree_with(&scene.positions, params, progress, layouts.escape)?;
     let geometry = index_geometry(scene, &tree.order);
-    let escape = layouts.escape.then(|| bvh_format::tree::escape_from_child_pair(&tree.nodes));
     let file = SceneFile {
         build: *params,
         settings: scene.settings,
@@ -111,9 +122,9 @@ pub fn compile_with_progress(
         normal_indices: geometry.normal_indices,
         materials: scene.materials.clone(),
         material_names: scene.material_names.clone(),
-        input_index: tree.order.clone(),
+        input_index: tree.order,
         child_pair: layouts.child_pair.then_some(tree.nodes),
-        escape,
+        escape: tree.escape,
         cameras: scene.cameras.clone(),
         lights: scene.lights.clone(),
     };

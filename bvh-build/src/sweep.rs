@@ -2,26 +2,33 @@
 //! evaluated. O(n log n) per node; the quality reference the binned builder is measured against,
 //! and the binned builder's choice for nodes no larger than its bin count.
 
-use crate::build::{Aabb, Costs, NodeBounds, PrimRef, Split, Splitter, bounds_of};
+use crate::build::{Aabb, AreaScale, Costs, NodeBounds, PrimRef, Split, Splitter, bounds_of};
 use std::cell::RefCell;
 
 pub struct SweepSah {
     pub costs: Costs,
 }
 
-/// A primitive's sort key on one axis: centroid component, input id (for ties), and its place
-/// in the node's slice. 12 bytes, so three sorts per node move little memory.
+/// A primitive's sort key on one axis: its centroid component's bits made to order as integers
+/// (high half) and its input id (low half, for ties), and its place in the node's slice. One
+/// integer comparison per step of the sort.
 #[derive(Clone, Copy)]
 struct Key {
-    c: f32,
-    id: u32,
+    key: u64,
     at: u32,
+}
+
+/// `f`'s bits as an integer of the same order as `f32::total_cmp`.
+#[inline(always)]
+fn ordered_bits(f: f32) -> u32 {
+    let b = f.to_bits();
+    if b >> 31 == 1 { !b } else { b | 1 << 31 }
 }
 
 #[derive(Default)]
 struct Scratch {
     sorted: [Vec<Key>; 3],
-    right_area: Vec<f64>,
+    right_area: Vec<f32>,
     copy: Vec<PrimRef>,
 }
 
@@ -43,30 +50,38 @@ pub fn sweep_split(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_le
 
 fn sweep_with(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool, s: &mut Scratch) -> Option<Split> {
     let n = prims.len();
-    let parent_area = nb.aabb.half_area();
-    let mut best: Option<(f64, usize, usize)> = None; // (cost, axis, left count)
+    let scale = AreaScale::of(&nb.aabb);
+    // (area-weighted count of both children, axis, left count): within one node the SAH cost
+    // grows with the weighted count, so only the best split's cost is computed in full.
+    let mut best: Option<(f32, usize, usize)> = None;
     s.right_area.resize(n, 0.0);
     for axis in 0..3 {
         let order = &mut s.sorted[axis];
         order.clear();
-        order.extend(prims.iter().enumerate().map(|(i, p)| Key { c: p.centroid()[axis], id: p.id, at: i as u32 }));
         // Ties broken by input index so that the result does not depend on the current order.
-        order.sort_unstable_by(|a, b| a.c.total_cmp(&b.c).then(a.id.cmp(&b.id)));
+        order.extend(
+            prims
+                .iter()
+                .enumerate()
+                .map(|(i, p)| Key { key: (ordered_bits(p.centroid()[axis]) as u64) << 32 | p.id as u64, at: i as u32 }),
+        );
+        order.sort_unstable_by_key(|k| k.key);
         let mut acc = Aabb::EMPTY;
         for i in (1..n).rev() {
             acc.grow(&prims[order[i].at as usize].aabb());
-            s.right_area[i] = acc.half_area();
+            s.right_area[i] = scale.half_area(&acc) * (n - i) as f32;
         }
         let mut left = Aabb::EMPTY;
         for i in 1..n {
             left.grow(&prims[order[i - 1].at as usize].aabb());
-            let cost = costs.split_cost(parent_area, left.half_area(), i, s.right_area[i], n - i);
-            if best.is_none_or(|(b, _, _)| cost < b) {
-                best = Some((cost, axis, i));
+            let weighted = scale.half_area(&left) * i as f32 + s.right_area[i];
+            if best.is_none_or(|(b, _, _)| weighted < b) {
+                best = Some((weighted, axis, i));
             }
         }
     }
-    let (cost, axis, mid) = best?;
+    let (weighted, axis, mid) = best?;
+    let cost = costs.split_cost(scale.half_area(&nb.aabb) as f64, weighted as f64);
     if may_leaf && cost >= costs.leaf_cost(n) {
         return None;
     }
@@ -75,7 +90,7 @@ fn sweep_with(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: b
     for (dst, k) in prims.iter_mut().zip(&s.sorted[axis]) {
         *dst = s.copy[k.at as usize];
     }
-    Some(Split { mid, left: bounds_of(&prims[..mid]), right: bounds_of(&prims[mid..]) })
+    Some(Split { mid, left: bounds_of(&prims[..mid]), right: bounds_of(&prims[mid..]), in_spare: false })
 }
 
 impl Splitter for SweepSah {

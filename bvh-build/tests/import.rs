@@ -628,7 +628,8 @@ at = [0, 2, -8]
 #[test]
 fn an_unknown_key_is_reported_at_its_own_line() {
     let dir = temp_dir("keyline");
-    let text = "[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\n\n[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\ncolour = 3\n";
+    let text =
+        "[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\n\n[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\ncolour = 3\n";
     let msg = description(&dir, text).unwrap_err().to_string();
     assert!(msg.contains("line 8, object 2") && msg.contains("colour"), "{msg}");
     let msg = description(&dir, "[[object]]\ntype = \"box\"\n\n[[object]]\ntype = \"box\"\n").unwrap_err().to_string();

@@ -17,7 +17,9 @@ pub fn parse<T: clap::Parser>() -> T {
             use clap::error::ErrorKind;
             if matches!(
                 e.kind(),
-                ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+                ErrorKind::DisplayHelp
+                    | ErrorKind::DisplayVersion
+                    | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
             ) {
                 e.exit();
             }
@@ -116,6 +118,25 @@ impl Progress {
         self.bar.finish_and_clear();
     }
 
+    /// Runs `work` on this thread (which may hold what cannot move between threads, such as a
+    /// Vulkan renderer) while a helper thread redraws the bar every 100 ms, so that the elapsed
+    /// time moves on during long steps that report nothing.
+    pub fn ticking<T>(&self, work: impl FnOnce() -> T) -> T {
+        let done = AtomicBool::new(false);
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                while !done.load(Ordering::Relaxed) {
+                    self.tick();
+                    std::thread::sleep(Duration::from_millis(100));
+                }
+            });
+            let result = work();
+            done.store(true, Ordering::Relaxed);
+            self.finish();
+            result
+        })
+    }
+
     /// Runs `work` on a worker thread while calling `poll` (which updates this bar) every 50 ms.
     pub fn around<T: Send>(&self, work: impl FnOnce() -> T + Send, poll: impl Fn(&Progress)) -> T {
         std::thread::scope(|s| {
@@ -133,7 +154,7 @@ impl Progress {
 /// A rate in the unit that shows it: rays/s, krays/s, Mrays/s or Grays/s, three significant
 /// digits, so that a small figure never reads "0.0 Mrays/s".
 pub fn rays_per_second(rays: u64, seconds: f64) -> String {
-    if !(seconds > 0.0) {
+    if seconds.is_nan() || seconds <= 0.0 {
         return "rate not measurable".to_owned();
     }
     let r = rays as f64 / seconds;
@@ -143,7 +164,13 @@ pub fn rays_per_second(rays: u64, seconds: f64) -> String {
         r if r >= 1e3 => (r / 1e3, "krays/s"),
         r => (r, "rays/s"),
     };
-    let decimals = if v >= 100.0 { 0 } else if v >= 10.0 { 1 } else { 2 };
+    let decimals = if v >= 100.0 {
+        0
+    } else if v >= 10.0 {
+        1
+    } else {
+        2
+    };
     format!("{v:.decimals$} {unit}")
 }
 

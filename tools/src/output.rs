@@ -149,8 +149,11 @@ pub fn check(outputs: &[(&'static str, &Path, Kind)], inputs: &[&Path]) -> Resul
         if !folder.is_dir() {
             return Err(OutputError::NoFolder { option, path: path.to_owned(), folder: folder.to_owned() });
         }
-        let id = identity(path)
-            .ok_or_else(|| OutputError::NoFolder { option, path: path.to_owned(), folder: folder.to_owned() })?;
+        let id = identity(path).ok_or_else(|| OutputError::NoFolder {
+            option,
+            path: path.to_owned(),
+            folder: folder.to_owned(),
+        })?;
         if let Some((first, _)) = seen.iter().find(|(_, other)| *other == id) {
             return Err(OutputError::Same { first, second: option, path: path.to_owned() });
         }
@@ -255,7 +258,8 @@ fn encode_rgb<W: Write + Seek>(w: &mut W, format: Format, f: &Frame<'_>) -> Resu
 fn encode_exr_rgb<W: Write + Seek>(w: &mut W, f: &Frame<'_>) -> Result<(), String> {
     use exr::prelude::*;
     let channel = |k: usize| FlatSamples::F32(f.rgb.iter().map(|p| f32::from(p[k]) / 255.0).collect());
-    let channels = vec![AnyChannel::new("R", channel(0)), AnyChannel::new("G", channel(1)), AnyChannel::new("B", channel(2))];
+    let channels =
+        vec![AnyChannel::new("R", channel(0)), AnyChannel::new("G", channel(1)), AnyChannel::new("B", channel(2))];
     let layer = Layer::new(
         (f.width as usize, f.height as usize),
         LayerAttributes::default(),
@@ -477,7 +481,7 @@ mod tests {
         assert_eq!(h.max, 127);
         assert!(h.height > 4, "a legend below the image");
         assert_eq!(h.rgb.len(), (128 * h.height) as usize);
-        assert!(h.rgb[(4 * 128)..].iter().any(|&p| p == [255; 3]), "numbers drawn in the legend");
+        assert!(h.rgb[(4 * 128)..].contains(&[255; 3]), "numbers drawn in the legend");
         let fixed = Heatmap::new(128, 4, &nodes, Some(63));
         assert_eq!(fixed.max, 63);
         assert_eq!(fixed.clipped, 4 * 64);

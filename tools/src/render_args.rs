@@ -38,9 +38,9 @@ pub struct RenderArgs {
     /// Look-at point X,Y,Z.
     #[arg(long, value_parser = parse_vec3, requires = "eye", allow_hyphen_values = true)]
     pub at: Option<Vec3>,
-    /// Up vector X,Y,Z.
-    #[arg(long, value_parser = parse_vec3, default_value = "0,1,0", allow_hyphen_values = true)]
-    pub up: Vec3,
+    /// Up vector X,Y,Z [default: with --eye 0,1,0; a stored camera keeps its own unless given].
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub up: Option<Vec3>,
     /// Vertical field of view in degrees, between 0 and 180 (with --eye: default 45; a stored
     /// camera keeps its own unless given).
     #[arg(long, value_parser = parse_fov, allow_hyphen_values = true)]
@@ -48,14 +48,15 @@ pub struct RenderArgs {
     /// Image size, at most 2^28 pixels.
     #[arg(long, value_parser = parse_res, default_value = "640x480", allow_hyphen_values = true)]
     pub res: (u32, u32),
-    /// A point light X,Y,Z or X,Y,Z,R,G,B (repeatable); replaces the scene's lights.
+    /// A point light X,Y,Z or X,Y,Z,R,G,B (repeatable, up to 256); replaces the scene's lights.
     #[arg(long = "light", value_parser = parse_light, allow_hyphen_values = true)]
     pub lights: Vec<Light>,
     /// Use this many lights: the scene's first ones, completed by lights placed around the
-    /// camera so that what it sees is lit (the thesis's 1-, 2- and 4-light modes).
+    /// camera so that what it sees is lit (the thesis's 1-, 2- and 4-light modes); 0 to 256.
     #[arg(long = "lights", conflicts_with = "lights", value_parser = parse_light_count, allow_hyphen_values = true)]
     pub light_count: Option<usize>,
-    /// Longest chain of secondary rays [default: the scene's].
+    /// Longest chain of secondary rays, 0 to 64; rendering stops early once no path is alive
+    /// [default: the scene's].
     #[arg(long, value_parser = parse_indirections, allow_hyphen_values = true)]
     pub indirections: Option<u32>,
     /// Output image: .png, .jpg/.jpeg (quality 95), .bmp (8-bit), or .exr (linear float RGB).
@@ -202,7 +203,7 @@ impl RenderArgs {
     /// checked here, so that both tracers refuse a bad camera with the same sentence.
     pub fn camera(&self, scene: &SceneFile) -> Result<CameraSpec, String> {
         let spec = if let (Some(eye), Some(at)) = (self.eye, self.at) {
-            CameraSpec { eye, at, up: self.up, fov_deg: self.fov.unwrap_or(45.0) }
+            CameraSpec { eye, at, up: self.up.unwrap_or(Vec3::Y), fov_deg: self.fov.unwrap_or(45.0) }
         } else {
             let mut spec = match &self.camera {
                 Some(name) => stored_camera(scene, name)?,
@@ -210,6 +211,9 @@ impl RenderArgs {
             };
             if let Some(f) = self.fov {
                 spec.fov_deg = f;
+            }
+            if let Some(up) = self.up {
+                spec.up = up;
             }
             spec
         };
@@ -279,14 +283,16 @@ pub fn lights_n(scene: &SceneFile, n: usize, camera: &CameraSpec) -> Vec<Light> 
     let (lo, hi) = scene.bounds();
     let added = n.saturating_sub(lights.len());
     let c = 1.0 / n.max(1) as f32;
-    let placed = bvh_build::import::defaults::lights_around(camera.eye, camera.at, camera.up, lo.into(), hi.into(), added);
+    let placed =
+        bvh_build::import::defaults::lights_around(camera.eye, camera.at, camera.up, lo.into(), hi.into(), added);
     lights.extend(placed.into_iter().map(|p| Light::new(p.to_array(), [c, c, c])));
     lights
 }
 
 /// The line both tracers print for a heatmap: its scale, and how many pixels lie above a fixed one.
 pub fn heatmap_line(h: &output::Heatmap, out: &Output) -> String {
-    let clipped = if h.clipped > 0 { format!(", {} pixels above the scale drawn red", h.clipped) } else { String::new() };
+    let clipped =
+        if h.clipped > 0 { format!(", {} pixels above the scale drawn red", h.clipped) } else { String::new() };
     format!(
         "heatmap: nodes visited per pixel, 0 (blue) to {} (red), scale drawn below the image{clipped} -> {}",
         h.max,

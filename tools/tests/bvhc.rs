@@ -171,7 +171,8 @@ fn info_lists_cameras_and_lights_for_every_input_kind() {
     }
     // A text file is named as what it is, not as a truncated scene file.
     std::fs::write(dir.join("notes.txt"), "hello\n").unwrap();
-    let line = assert_one_sentence_error(&bvhc(&["info", dir.join("notes.txt").to_str().unwrap()]), "not a BVH scene file");
+    let line =
+        assert_one_sentence_error(&bvhc(&["info", dir.join("notes.txt").to_str().unwrap()]), "not a BVH scene file");
     assert!(!line.contains("truncated"), "{line}");
 }
 
@@ -182,7 +183,8 @@ fn bvh_gltf(dir: &Path) -> std::path::PathBuf {
     const B64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut b64 = String::new();
     for c in bytes.chunks(3) {
-        let n = (u32::from(c[0]) << 16) | (u32::from(*c.get(1).unwrap_or(&0)) << 8) | u32::from(*c.get(2).unwrap_or(&0));
+        let n =
+            (u32::from(c[0]) << 16) | (u32::from(*c.get(1).unwrap_or(&0)) << 8) | u32::from(*c.get(2).unwrap_or(&0));
         for k in 0..4 {
             b64.push(if k <= c.len() { B64[(n >> (18 - 6 * k) & 63) as usize] as char } else { '=' });
         }
@@ -233,4 +235,21 @@ fn an_interrupted_compile_leaves_no_partial_file() {
         std::fs::write(&out, b"the old file").unwrap();
     }
     assert!(caught_writing, "the write was never seen in progress");
+}
+
+/// Faces with fewer than three corners are not dropped silently: bvhc compiles the rest and
+/// warns with the count, on standard error, once.
+#[test]
+fn short_faces_are_counted_in_a_warning() {
+    let dir = scratch("short-faces");
+    let obj = dir.join("short.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\nf 2 3\n").unwrap();
+    let out = dir.join("short.bvh");
+    let o = bvhc(&["compile", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--quiet"]);
+    let (_, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    let warnings: Vec<&str> = err.lines().filter(|l| l.starts_with("warning: ")).collect();
+    assert_eq!(warnings.len(), 1, "{err}");
+    assert!(warnings[0].contains("2 faces with fewer than three corners skipped"), "{err}");
+    assert!(out.exists());
 }

@@ -25,8 +25,20 @@ fn negative_numbers_are_accepted_as_values_by_both_tracers() {
             &dir,
             tracer,
             &[
-                "render", &room, "--eye", "-1.5,1,-1.5", "--at", "0,-0.5,0", "--up", "0,1,0", "--light", "-1,2.5,-1,0.5,0.5,0.5",
-                "--res", "8x6", "-o", "neg.png",
+                "render",
+                &room,
+                "--eye",
+                "-1.5,1,-1.5",
+                "--at",
+                "0,-0.5,0",
+                "--up",
+                "0,1,0",
+                "--light",
+                "-1,2.5,-1,0.5,0.5,0.5",
+                "--res",
+                "8x6",
+                "-o",
+                "neg.png",
             ],
         );
         assert_ok(&o, tracer);
@@ -47,8 +59,14 @@ fn the_default_camera_is_the_files_first() {
     .unwrap();
     for tracer in ["trace-cpu", "trace-vk"] {
         assert_ok(&run(&dir, tracer, &["render", "two.toml", "--res", "16x12", "-o", "default.png"]), tracer);
-        assert_ok(&run(&dir, tracer, &["render", "two.toml", "--res", "16x12", "-o", "north.png", "--camera", "north"]), tracer);
-        assert_ok(&run(&dir, tracer, &["render", "two.toml", "--res", "16x12", "-o", "south.png", "--camera", "south"]), tracer);
+        assert_ok(
+            &run(&dir, tracer, &["render", "two.toml", "--res", "16x12", "-o", "north.png", "--camera", "north"]),
+            tracer,
+        );
+        assert_ok(
+            &run(&dir, tracer, &["render", "two.toml", "--res", "16x12", "-o", "south.png", "--camera", "south"]),
+            tracer,
+        );
         let read = |n: &str| image::open(dir.join(n)).unwrap().to_rgb8().into_raw();
         assert_eq!(read("default.png"), read("north.png"), "{tracer}");
         assert_ne!(read("default.png"), read("south.png"), "{tracer}: the two cameras see different images");
@@ -101,7 +119,20 @@ fn colour_image_as_exr_and_heatmap_with_its_scale() {
         let o = run(
             &dir,
             tracer,
-            &["render", &room, "--res", "20x10", "-o", "c.exr", "--heatmap", "h.png", "--heatmap-max", "3", "--aov", "a.exr"],
+            &[
+                "render",
+                &room,
+                "--res",
+                "20x10",
+                "-o",
+                "c.exr",
+                "--heatmap",
+                "h.png",
+                "--heatmap-max",
+                "3",
+                "--aov",
+                "a.exr",
+            ],
         );
         let out = assert_ok(&o, tracer);
         assert!(out.contains("0 (blue) to 3 (red)") && out.contains("pixels above the scale"), "{out}");
@@ -181,7 +212,11 @@ fn a_closed_pipe_ends_the_program_quietly() {
 #[test]
 fn auto_method_on_an_escape_only_file_is_stackless() {
     let dir = scratch("escape-only");
-    let o = run(&dir, "bvhc", &["compile", scene("room.toml").to_str().unwrap(), "-o", "e.bvh", "--layout", "escape", "--quiet"]);
+    let o = run(
+        &dir,
+        "bvhc",
+        &["compile", scene("room.toml").to_str().unwrap(), "-o", "e.bvh", "--layout", "escape", "--quiet"],
+    );
     assert_ok(&o, "compile");
     let out = assert_ok(&run(&dir, "trace-cpu", &["render", "e.bvh", "--res", "8x8", "-o", "e.png"]), "auto");
     assert!(out.contains("with Stackless"), "{out}");
@@ -199,4 +234,23 @@ fn added_lights_stay_inside_a_closed_room() {
         let p = glam::Vec3::from(l.position);
         assert!(p.cmpgt(lo.into()).all() && p.cmplt(hi.into()).all(), "{p} lies outside the room");
     }
+}
+
+/// `trace-vk bench --csv` is checked before any scene is read or any frame is timed, and an
+/// existing table survives a refused run.
+#[test]
+fn bench_checks_its_table_before_work() {
+    let dir = scratch("bench-csv");
+    std::fs::write(dir.join("old.csv"), b"kept").unwrap();
+    let before = snapshot(&dir);
+    let bench = ["bench", "no-such-scene.bvh", "--res", "8x8", "--frames", "1", "--methods", "lst", "--modes", "cast"];
+    for (csv, needle) in [("missing/b.csv", "the folder missing does not exist"), ("b.txt", "--csv b.txt")] {
+        let args = [&bench[..], &["--csv", csv]].concat();
+        assert_one_sentence_error(&run(&dir, "trace-vk", &args), needle);
+    }
+    assert_one_sentence_error(
+        &run(&dir, "trace-vk", &[&bench[..], &["--csv", "old.csv"]].concat()),
+        "no-such-scene.bvh",
+    );
+    assert_eq!(snapshot(&dir), before);
 }

@@ -406,7 +406,16 @@ impl<'g> Renderer<'g> {
         for tile in &plan {
             frame.tile = [tile.x, tile.y, tile.width, tile.height];
             g.upload(&frame_buf, bytemuck::bytes_of(&frame))?;
-            self.render_tile(tile, whitted, s.lights.len() as u32, indirections, &frame_buf, &lights_buf, &counters, &mut tally)?;
+            self.render_tile(
+                tile,
+                whitted,
+                s.lights.len() as u32,
+                indirections,
+                &frame_buf,
+                &lights_buf,
+                &counters,
+                &mut tally,
+            )?;
             let t = self.targets.as_ref().expect("the targets were made above");
             let n = tile.pixels() as usize;
             if image {
@@ -535,7 +544,10 @@ impl<'g> Renderer<'g> {
         let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
         let faults = words[counters::FAULTS];
         if faults & counters::FAULT_STACK != 0 {
-            let what = format!("found its stack of {} entries full (the tree is deeper than its file says)", self.spec.stack_size);
+            let what = format!(
+                "found its stack of {} entries full (the tree is deeper than its file says)",
+                self.spec.stack_size
+            );
             return Err(RenderError::Fault { method, what });
         }
         if faults & counters::FAULT_WALK != 0 {

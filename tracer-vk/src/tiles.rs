@@ -40,7 +40,13 @@ pub fn device_tile_pixels(info: &DeviceInfo) -> u64 {
 /// workgroup boundaries, so the blocks of pixels a workgroup traces do not depend on the split,
 /// and no tile needs more than `max_groups` workgroups in x or y. `None` when not even one
 /// workgroup's pixels fit.
-pub fn plan(width: u32, height: u32, max_pixels: u64, workgroup: (u32, u32), max_groups: [u32; 2]) -> Option<Vec<Tile>> {
+pub fn plan(
+    width: u32,
+    height: u32,
+    max_pixels: u64,
+    workgroup: (u32, u32),
+    max_groups: [u32; 2],
+) -> Option<Vec<Tile>> {
     let (wx, wy) = (workgroup.0 as u64, workgroup.1 as u64);
     if width == 0 || height == 0 || wx * wy > max_pixels || max_groups[0] == 0 || max_groups[1] == 0 {
         return None;

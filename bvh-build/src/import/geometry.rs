@@ -6,6 +6,7 @@
 
 use crate::scene::Scene;
 use glam::{DMat3, DMat4, DVec3, Vec3};
+use rayon::prelude::*;
 
 /// The normal of a triangle that has none (zero area): +z, so that every normal stays unit.
 pub(crate) const FALLBACK_NORMAL: Vec3 = Vec3::Z;
@@ -106,23 +107,25 @@ pub(crate) fn emit(
         Normals::Missing if smooth => Some(smooth_normals(positions, triangles)),
         _ => None,
     };
-    scene.positions.reserve(triangles.len());
-    scene.normals.reserve(triangles.len());
-    scene.material_ids.reserve(triangles.len());
-    for (t, tri) in triangles.iter().enumerate() {
+    // Every triangle on its own, so in parallel, into the scene's new tail.
+    let first = scene.positions.len();
+    scene.positions.resize(first + triangles.len(), [Vec3::ZERO; 3]);
+    scene.normals.resize(first + triangles.len(), [Vec3::ZERO; 3]);
+    scene.material_ids.resize(first + triangles.len(), material);
+    let out = scene.positions[first..].par_iter_mut().zip(&mut scene.normals[first..]);
+    out.zip(triangles).enumerate().for_each(|(t, ((p_out, n_out), tri))| {
         let p = tri.map(|i| positions[i as usize]);
-        let flat = face_normal(p[0], p[1], p[2]);
-        let fix = |n: Vec3| unit(n.as_dvec3()).unwrap_or(flat);
-        let n = match (&normals, &smoothed) {
-            (_, Some(s)) => tri.map(|i| s[i as usize].unwrap_or(flat)),
+        // The flat normal only where a vertex has none: it costs a square root in f64.
+        let flat = || face_normal(p[0], p[1], p[2]);
+        let fix = |n: Vec3| unit(n.as_dvec3()).unwrap_or_else(flat);
+        *n_out = match (&normals, &smoothed) {
+            (_, Some(s)) => tri.map(|i| s[i as usize].unwrap_or_else(flat)),
             (Normals::PerVertex(n), None) => tri.map(|i| fix(n[i as usize])),
             (Normals::Indexed(n, idx), None) => idx[t].map(|i| fix(n[i as usize])),
-            (Normals::Missing, None) => [flat; 3],
+            (Normals::Missing, None) => [flat(); 3],
         };
-        scene.positions.push(p);
-        scene.normals.push(n);
-        scene.material_ids.push(material);
-    }
+        *p_out = p;
+    });
     Ok(())
 }
 
@@ -139,7 +142,7 @@ pub(crate) fn smooth_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<
             }
         }
     }
-    sum.into_iter().map(unit).collect()
+    sum.into_par_iter().map(unit).collect()
 }
 
 /// An affine transform of points, with its normal transform.
@@ -188,21 +191,24 @@ pub(crate) fn transform_triangles(
     if aff.is_identity() {
         return Ok(());
     }
-    for (t, (p, n)) in positions.iter_mut().zip(normals.iter_mut()).enumerate() {
+    // In parallel; the first triangle (by index) that fails is reported, and what the others
+    // became does not matter then, since the caller gives up the scene.
+    let failed = positions.par_iter_mut().zip(normals.par_iter_mut()).position_first(|(p, n)| {
         let mut q = p.map(|v| aff.point(v));
         if !q.iter().all(|v| v.is_finite()) {
-            return Err(t);
+            return true;
         }
-        let flat = face_normal(q[0], q[1], q[2]);
-        let mut m = n.map(|v| aff.normal(v).unwrap_or(flat));
+        let flat = || face_normal(q[0], q[1], q[2]);
+        let mut m = n.map(|v| aff.normal(v).unwrap_or_else(flat));
         if aff.flips {
             q.swap(1, 2);
             m.swap(1, 2);
         }
         *p = q;
         *n = m;
-    }
-    Ok(())
+        false
+    });
+    failed.map_or(Ok(()), Err)
 }
 
 #[cfg(test)]

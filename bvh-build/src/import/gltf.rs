@@ -19,6 +19,7 @@ use ::gltf::mesh::{Mode, Semantic};
 use ::gltf::{Accessor, Document, Node, buffer};
 use bvh_format::Camera;
 use glam::{DMat4, DQuat, DVec3, Mat4, Vec3};
+use rayon::prelude::*;
 use std::path::Path;
 
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<(Scene, Vec<Camera>), ImportError> {
@@ -37,7 +38,11 @@ pub fn load(path: &Path, opts: &ImportOptions) -> Result<(Scene, Vec<Camera>), I
         {
             let file = base.join(percent_decode(uri));
             if let Err(e) = std::fs::metadata(&file) {
-                return Err(err(format!("buffer {} refers to {}, which cannot be read ({e})", buffer.index(), file.display())));
+                return Err(err(format!(
+                    "buffer {} refers to {}, which cannot be read ({e})",
+                    buffer.index(),
+                    file.display()
+                )));
             }
         }
     }
@@ -179,7 +184,10 @@ fn percent_decode(uri: &str) -> String {
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;
     while i < bytes.len() {
-        let hex = bytes.get(i + 1..i + 3).and_then(|h| std::str::from_utf8(h).ok()).and_then(|h| u8::from_str_radix(h, 16).ok());
+        let hex = bytes
+            .get(i + 1..i + 3)
+            .and_then(|h| std::str::from_utf8(h).ok())
+            .and_then(|h| u8::from_str_radix(h, 16).ok());
         match (bytes[i], hex) {
             (b'%', Some(v)) => {
                 out.push(v);
@@ -231,7 +239,7 @@ impl Reader<'_> {
                     what: format!("vertex {i} of {label}"),
                 });
             }
-            let positions: Vec<Vec3> = raw.iter().map(|&p| aff.point(p)).collect();
+            let positions: Vec<Vec3> = raw.par_iter().map(|&p| aff.point(p)).collect();
             if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
                 return Err(ImportError::NonFinite {
                     path: self.path.to_owned(),
@@ -246,7 +254,7 @@ impl Reader<'_> {
                     }
                     // A normal the transform collapses becomes zero, which emit replaces by the
                     // triangle's flat normal.
-                    Some(n.iter().map(|&n| aff.normal(n).unwrap_or(Vec3::ZERO)).collect::<Vec<_>>())
+                    Some(n.par_iter().map(|&n| aff.normal(n).unwrap_or(Vec3::ZERO)).collect::<Vec<_>>())
                 }
                 None => None,
             };

@@ -124,7 +124,10 @@ fn triples(v: &[u32]) -> Vec<[u32; 3]> {
 /// line must name a vertex defined before it (1-based, or negative counting back). Returns how
 /// many faces have fewer than three corners: tobj drops them.
 fn check_lines(path: &Path, bytes: &[u8]) -> Result<usize, ImportError> {
-    let err = |line: usize, message: String| ImportError::Obj { path: path.to_owned(), message: format!("line {line}: {message}") };
+    let err = |line: usize, message: String| ImportError::Obj {
+        path: path.to_owned(),
+        message: format!("line {line}: {message}"),
+    };
     let mut vertices = 0i64;
     let mut short_faces = 0;
     for (i, line) in bytes.split(|&b| b == b'\n').enumerate() {
@@ -147,7 +150,9 @@ fn check_lines(path: &Path, bytes: &[u8]) -> Result<usize, ImportError> {
                                 what: format!("vertex {vertices} (line {}, {w:?})", i + 1),
                             });
                         }
-                        Err(_) => return Err(err(i + 1, format!("vertex {vertices} has {w:?}, which is not a number"))),
+                        Err(_) => {
+                            return Err(err(i + 1, format!("vertex {vertices} has {w:?}, which is not a number")));
+                        }
                     }
                 }
             }
@@ -155,9 +160,9 @@ fn check_lines(path: &Path, bytes: &[u8]) -> Result<usize, ImportError> {
                 let corners: Vec<&str> = words.collect();
                 for c in &corners {
                     let first = c.split('/').next().unwrap_or("");
-                    let index = first.parse::<i64>().map_err(|_| {
-                        err(i + 1, format!("face corner {c:?} does not start with a vertex number"))
-                    })?;
+                    let index = first
+                        .parse::<i64>()
+                        .map_err(|_| err(i + 1, format!("face corner {c:?} does not start with a vertex number")))?;
                     let resolved = if index < 0 { vertices + 1 + index } else { index };
                     if index == 0 || resolved < 1 || resolved > vertices {
                         return Err(err(

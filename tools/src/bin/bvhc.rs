@@ -244,10 +244,7 @@ fn info(file: &Path) -> Result<(), String> {
     say!("  triangles       {} ({} with vertex normals)", scene.triangles.len(), smooth);
     say!("  vertices        {} ({} normals)", scene.vertices.len(), scene.normals.len());
     say!("  materials       {}", scene.materials.len());
-    say!(
-        "  bounds          ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4})",
-        lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]
-    );
+    say!("  bounds          ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4})", lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
     say!("  layouts         {}", layout_names(&scene));
     say!(
         "  build           {}{}, traversal cost {}, intersection cost {}, max leaf size {}",
@@ -285,7 +282,9 @@ fn info(file: &Path) -> Result<(), String> {
     );
     say!(
         "  shading         ambient {:?}, background {:?}, up to {} indirections",
-        scene.settings.ambient, scene.settings.background, scene.settings.max_indirections
+        scene.settings.ambient,
+        scene.settings.background,
+        scene.settings.max_indirections
     );
     say!("  cameras (the first is the tracers' default)");
     for c in &scene.cameras {
@@ -306,7 +305,12 @@ fn info(file: &Path) -> Result<(), String> {
         say!(
             "    light {:<10} at ({:.3}, {:.3}, {:.3}) colour ({:.2}, {:.2}, {:.2})",
             i + 1,
-            l.position[0], l.position[1], l.position[2], l.colour[0], l.colour[1], l.colour[2]
+            l.position[0],
+            l.position[1],
+            l.position[2],
+            l.colour[0],
+            l.colour[1],
+            l.colour[2]
         );
     }
     say!("  materials");

@@ -166,7 +166,12 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let method = method_of(method);
     let gpu = open(device)?;
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
-    let out = renderer.render(&settings).map_err(|e| e.to_string())?;
+    let pixels = u64::from(settings.width) * u64::from(settings.height);
+    let bar = Progress::new(pixels, "rendering {bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
+    let per_pixel = outputs.heatmap.is_some() || outputs.aov.is_some();
+    let out = bar
+        .ticking(|| renderer.render_with_progress(&settings, true, per_pixel, &mut |p| bar.set_position(p.pixels_done)))
+        .map_err(|e| e.to_string())?;
     check_validation(&gpu)?;
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
@@ -230,8 +235,9 @@ fn median(v: &mut [f64]) -> f64 {
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
     let md_path = b.csv.with_extension("md");
-    let checked = output::check(&[("--csv", &b.csv, Kind::Table), ("--csv (its Markdown copy)", &md_path, Kind::Markdown)], &[])
-        .map_err(|e| e.to_string())?;
+    let checked =
+        output::check(&[("--csv", &b.csv, Kind::Table), ("--csv (its Markdown copy)", &md_path, Kind::Markdown)], &[])
+            .map_err(|e| e.to_string())?;
     let modes = &b.modes;
     let gpu = open(&b.device)?;
     let scenes: Vec<Option<PathBuf>> =
@@ -262,6 +268,9 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
             .unwrap_or_else(|| "bunny (built-in)".to_owned());
         bar.set_message(format!("loading {name}"));
         let scene = tools::load_scene(path.as_deref())?.file;
+        for cam in &b.cameras {
+            tools::render_args::stored_camera(&scene, cam)?;
+        }
         for &m in &b.methods {
             let method = method_of(m);
             let mut renderer = Renderer::new(&gpu, &scene, method, b.workgroup).map_err(|e| e.to_string())?;
