@@ -620,7 +620,9 @@ fn forged_triangle_outside_its_leaf() {
 #[test]
 fn forged_vertex_and_normal_indices() {
     let vertices = header(&big_file()).vertex_count;
-    let e = forge(|b| section_mut(b, SectionKind::Triangles)[16 * 5 + 4..16 * 5 + 8].copy_from_slice(&vertices.to_le_bytes()));
+    let e = forge(|b| {
+        section_mut(b, SectionKind::Triangles)[16 * 5 + 4..16 * 5 + 8].copy_from_slice(&vertices.to_le_bytes())
+    });
     let expected = FormatError::IndexOutOfRange {
         section: SectionKind::Triangles,
         index: 5,
@@ -628,7 +630,8 @@ fn forged_vertex_and_normal_indices() {
         limit: vertices as u64,
     };
     assert_eq!(e, expected);
-    let e = forge(|b| section_mut(b, SectionKind::NormalIndices)[12 * 4 + 8..12 * 5].copy_from_slice(&1u32.to_le_bytes()));
+    let e =
+        forge(|b| section_mut(b, SectionKind::NormalIndices)[12 * 4 + 8..12 * 5].copy_from_slice(&1u32.to_le_bytes()));
     assert_eq!(e, FormatError::IndexOutOfRange { section: SectionKind::NormalIndices, index: 4, value: 1, limit: 1 });
     // A triangle half flat: the flat marker is all three indices or none.
     let e = forge(|b| section_mut(b, SectionKind::NormalIndices)[0..4].copy_from_slice(&u32::MAX.to_le_bytes()));
