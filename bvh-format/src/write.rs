@@ -27,11 +27,7 @@ pub fn write(scene: &SceneFile) -> Result<Vec<u8>, FormatError> {
         (SectionKind::Vertices, scene.vertices.len() as u64, bytemuck::cast_slice(&scene.vertices)),
         (SectionKind::Triangles, scene.triangles.len() as u64, bytemuck::cast_slice(&scene.triangles)),
         (SectionKind::Normals, scene.normals.len() as u64, bytemuck::cast_slice(&scene.normals)),
-        (
-            SectionKind::NormalIndices,
-            scene.normal_indices.len() as u64,
-            bytemuck::cast_slice(&scene.normal_indices),
-        ),
+        (SectionKind::NormalIndices, scene.normal_indices.len() as u64, bytemuck::cast_slice(&scene.normal_indices)),
         (SectionKind::Materials, scene.materials.len() as u64, bytemuck::cast_slice(&scene.materials)),
         (SectionKind::MaterialNames, names.len() as u64, &names),
         (SectionKind::InputIndex, scene.input_index.len() as u64, bytemuck::cast_slice(&scene.input_index)),

@@ -398,9 +398,7 @@ fn rays_aimed_at_shared_edges_and_vertices_of_closed_meshes_do_not_leak() {
     ];
     let eyes = [Vec3::new(0.48, 0.6, 0.64), Vec3::new(-0.8, 0.36, -0.48)];
     let (mut mt_edges, mut mt_vertices) = (0, 0);
-    println!(
-        "mesh | distance | aim | rays | leaks: traversals (2 methods) | around the target | Moller-Trumbore"
-    );
+    println!("mesh | distance | aim | rays | leaks: traversals (2 methods) | around the target | Moller-Trumbore");
     for (name, tris) in meshes {
         let scene = scene_of(tris, None);
         let t = targets(&scene.leaf_triangles());

@@ -77,7 +77,8 @@ pub fn generate(scene: &SceneFile, width: u32, height: u32) -> Result<[RaySet; 3
             let hit = tracer.closest(Method::Ordered, &ray, 0.0, f32::INFINITY, stack, &mut Cost::default());
             let Some(hit) = hit else { return (Some((ray, f32::INFINITY)), None, None) };
             let k = hit.tri as usize;
-            let surf = shade::surface(&scene.triangle(k), scene.vertex_normals(k), ray.origin, ray.dir, hit.t, hit.u, hit.v);
+            let surf =
+                shade::surface(&scene.triangle(k), scene.vertex_normals(k), ray.origin, ray.dir, hit.t, hit.u, hit.v);
             let to = light - surf.point;
             let shadow = (to != Vec3::ZERO).then(|| {
                 let l = to.normalize();
