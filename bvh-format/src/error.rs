@@ -80,6 +80,8 @@ pub enum FormatError {
     LeafCoverage { layout: LayoutKind, triangle: u32, times: u32 },
     #[error("the header says the tree is {header} deep, but the {layout} layout is {actual} deep")]
     DepthMismatch { layout: LayoutKind, header: u32, actual: u32 },
+    #[error("the header says the tree has an SAH cost of {header}, but the {layout} layout has {actual}")]
+    SahCostMismatch { layout: LayoutKind, header: f32, actual: f32 },
     #[error("the header says the tree has {header} leaves, but the {layout} layout has {actual}")]
     LeafCountMismatch { layout: LayoutKind, header: u32, actual: u32 },
     #[error("the child-pair and escape-pointer layouts describe different trees (first difference at escape node {0})")]
@@ -101,4 +103,6 @@ pub enum FileError {
     Write { path: String, source: std::io::Error },
     #[error("{path} is not a valid scene file: {source}")]
     Invalid { path: String, source: FormatError },
+    #[error("the scene was not written to {path}, because it would not be a valid scene file: {source}")]
+    InvalidScene { path: String, source: FormatError },
 }

@@ -6,7 +6,6 @@
 //! file yields a typed [`FormatError`] and never panics.
 #![doc = include_str!("../FORMAT.md")]
 
-pub mod camera;
 mod error;
 pub mod layout;
 mod read;
@@ -23,9 +22,6 @@ pub use types::{
     Triangle,
 };
 pub use write::{write, write_file};
-
-/// No input triangle: the `prim` AOV value of a pixel whose ray hit nothing.
-pub const NO_TRIANGLE: u32 = u32::MAX;
 
 /// A whole scene as stored in one file: indexed geometry in BVH leaf order, shading data, the tree
 /// in one or both layouts, and default cameras and lights.
@@ -100,19 +96,6 @@ impl SceneFile {
     /// A camera by name.
     pub fn camera(&self, name: &str) -> Option<&Camera> {
         self.cameras.iter().find(|c| c.name() == Some(name))
-    }
-
-    /// The bound behind the adaptive bounce stop (docs/shading.md): the most radiance one Whitted
-    /// hit can add before weighting, `max over materials of Ia kd + (sum of light colours)
-    /// (kd + ks)` and the background, and the largest `kr` or `kt` of the scene.
-    pub fn bounce_bound(&self, light_colours: &[[f32; 3]]) -> (f32, f32) {
-        let lights: [f32; 3] = light_colours.iter().fold([0.0; 3], |a, c| [a[0] + c[0], a[1] + c[1], a[2] + c[2]]);
-        let amb = self.settings.ambient;
-        let per_material =
-            self.materials.iter().flat_map(|m| (0..3).map(move |k| amb[k] * m.kd[k] + lights[k] * (m.kd[k] + m.ks[k])));
-        let bound = per_material.fold(self.settings.background.iter().copied().fold(0.0, f32::max), f32::max);
-        let k_max = self.materials.iter().map(|m| m.kr.max(m.kt)).fold(0.0, f32::max);
-        (bound, k_max)
     }
 
     /// Checks the whole scene as the reader would, without writing it: a writer calls this so that

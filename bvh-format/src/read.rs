@@ -193,14 +193,15 @@ pub fn read_file(path: &std::path::Path) -> Result<SceneFile, FileError> {
     read(&bytes).map_err(|source| FileError::Invalid { path: p(), source })
 }
 
-fn all_finite(values: &[f32]) -> Option<usize> {
+/// The index of the first value that is not finite, if any.
+fn first_non_finite(values: &[f32]) -> Option<usize> {
     values.iter().position(|v| !v.is_finite())
 }
 
 fn check_finite<T: Pod>(section: SectionKind, items: &[T]) -> Result<(), FormatError> {
     let floats: &[f32] = bytemuck::cast_slice(items);
     let per = std::mem::size_of::<T>() / 4;
-    match all_finite(floats) {
+    match first_non_finite(floats) {
         Some(i) => Err(FormatError::NonFinite { section, index: (i / per) as u64 }),
         None => Ok(()),
     }
@@ -252,7 +253,7 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
         // The padding too: FORMAT.md allows no non-finite float anywhere, and a NaN would make the
         // scene unequal to itself after a round trip.
         let f = [c.eye, c.at, c.up, [c.fov_deg, c._pad0, c._pad1]].concat();
-        if all_finite(&f).is_some() {
+        if first_non_finite(&f).is_some() {
             return Err(FormatError::NonFinite { section: SectionKind::Cameras, index: i as u64 });
         }
         if c.name().is_none() {
@@ -260,7 +261,9 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
         }
     }
     let settings = [s.settings.ambient, s.settings.background].concat();
-    if all_finite(&settings).is_some() || !s.build.traversal_cost.is_finite() || !s.build.intersection_cost.is_finite()
+    if first_non_finite(&settings).is_some()
+        || !s.build.traversal_cost.is_finite()
+        || !s.build.intersection_cost.is_finite()
     {
         return Err(FormatError::BadHeader("it holds a non-finite setting"));
     }
@@ -337,6 +340,12 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
             let st = tree::stats(t, s.build.traversal_cost, s.build.intersection_cost);
             if st.max_depth != h.max_depth {
                 return Err(FormatError::DepthMismatch { layout: t.layout, header: h.max_depth, actual: st.max_depth });
+            }
+            // Written from the same tree as an f32; the tolerance only allows for another
+            // summation order, while a cost from a different tree is off by far more.
+            let sah = st.sah_cost as f32;
+            if (sah - h.sah_cost).abs() > 1e-5 * sah.abs().max(1.0) || !h.sah_cost.is_finite() {
+                return Err(FormatError::SahCostMismatch { layout: t.layout, header: h.sah_cost, actual: sah });
             }
             if st.leaf_count != h.leaf_count {
                 return Err(FormatError::LeafCountMismatch {

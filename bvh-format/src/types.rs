@@ -65,7 +65,7 @@ impl Triangle {
     }
 }
 
-/// A material of the Whitted model (DESIGN.md section 7). A material is reflective (`kr > 0`) or
+/// A material of the Whitted model (docs/materials.md, docs/shading.md). A material is reflective (`kr > 0`) or
 /// refractive (`kt > 0`), never both.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
@@ -88,7 +88,7 @@ impl Default for Material {
 /// Longest camera name, in bytes of UTF-8.
 pub const CAMERA_NAME_LEN: usize = 16;
 
-/// A pinhole camera in the convention of DESIGN.md section 7.
+/// A pinhole camera in the convention of docs/shading.md ("Camera").
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct Camera {

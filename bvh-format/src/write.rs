@@ -115,7 +115,7 @@ pub(crate) fn header_crc(header: &Header, table: &[u8]) -> u32 {
 /// Writes a scene to `path` through a temporary file in the same folder, renamed into place only
 /// when complete, so an interrupted write never leaves a damaged file under the final name.
 pub fn write_file(scene: &SceneFile, path: &std::path::Path) -> Result<(), FileError> {
-    let bytes = write(scene).map_err(|source| FileError::Invalid { path: path.display().to_string(), source })?;
+    let bytes = write(scene).map_err(|source| FileError::InvalidScene { path: path.display().to_string(), source })?;
     let werr = |source| FileError::Write { path: path.display().to_string(), source };
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(".partial");

@@ -10,23 +10,8 @@ use bvh_format::{
 };
 use glam::Vec3;
 
-/// xorshift64*: a fixed seed makes every damaged file reproducible.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
+// A fixed seed makes every damaged file reproducible.
+use tests::Rng;
 
 fn scene(triangles: usize, layouts: Layouts) -> SceneFile {
     let mut rng = Rng(0x5eed_1234_abcd_0001);
@@ -302,7 +287,7 @@ fn random_garbage() {
     let mut rng = Rng(0x6a5b_a6e0);
     let good = big_file();
     for len in (0..600).chain((600..40_000).step_by(997)) {
-        let mut garbage: Vec<u8> = (0..len).map(|_| rng.next() as u8).collect();
+        let mut garbage: Vec<u8> = (0..len).map(|_| rng.next_u64() as u8).collect();
         rejected(&garbage);
         // The same garbage behind a plausible start, so that the checks past the magic run too.
         if len >= 16 {
@@ -327,7 +312,7 @@ fn random_section_tables_with_valid_header_checksum() {
                 0 => t[i].count = rng.below(64) as u64,
                 1 => t[i].offset = (rng.below(b.len() / 16 + 2) * 16) as u64,
                 2 => t[i].kind = 1 + rng.below(11) as u32,
-                3 => t[i].count = rng.next() >> rng.below(64),
+                3 => t[i].count = rng.next_u64() >> rng.below(64),
                 _ => {
                     let j = rng.below(t.len());
                     t.swap(i, j);
@@ -514,6 +499,10 @@ fn forged_header_statistics() {
             FormatError::DepthMismatch { layout: LayoutKind::ChildPair, header: depth, actual: truth.max_depth };
         assert_eq!(e, expected);
     }
+    for sah in [truth.sah_cost * 1.01, truth.sah_cost * 0.99, 0.0, f32::NAN, f32::INFINITY] {
+        let e = forge(|b| edit_header(b, |h| Header { sah_cost: sah, ..h }));
+        assert!(matches!(e, FormatError::SahCostMismatch { layout: LayoutKind::ChildPair, .. }), "{sah}: {e:?}");
+    }
     let e = forge(|b| edit_header(b, |h| Header { leaf_count: truth.leaf_count + 1, ..h }));
     assert!(matches!(e, FormatError::LeafCountMismatch { .. }), "{e:?}");
     let e = forge(|b| edit_header(b, |h| Header { triangle_count: 299, ..h }));
@@ -670,4 +659,19 @@ fn names_with_nul_bytes_are_rejected_not_rewritten() {
     s.material_names[0] = "a\0b".to_owned();
     assert_eq!(s.validate(), Err(FormatError::BadNames));
     assert!(bvh_format::write(&s).is_err());
+}
+
+#[test]
+fn an_invalid_scene_is_not_written_and_the_message_blames_the_scene_not_a_file() {
+    let dir = std::env::temp_dir().join(format!("bvh-invalid-write-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("out.bvh");
+    let mut s = scene(40, Layouts::default());
+    s.vertices[0][0] = f32::NAN;
+    let e = bvh_format::write_file(&s, &path).unwrap_err();
+    assert!(matches!(e, bvh_format::FileError::InvalidScene { .. }), "{e:?}");
+    let msg = e.to_string();
+    assert!(msg.starts_with("the scene was not written to") && !msg.contains("is not a valid scene file"), "{msg}");
+    assert!(!path.exists(), "nothing was written");
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -17,16 +17,17 @@
 
 use bvh_build::Scene;
 use bvh_build::import::shapes;
-use bvh_format::{Camera, Material, NO_TRIANGLE, SceneFile, Triangle};
+use bvh_format::{Camera, Material, SceneFile, Triangle};
+use render_spec::{CameraSpec, Mode, NO_TRIANGLE, Settings};
 use glam::{DVec3, Vec3};
 use std::collections::HashMap;
 use tracer_cpu::geometry::{Ray, intersect, intersect_moller_trumbore};
 use tracer_cpu::reference::intersect64;
 use tracer_cpu::traverse::Stack;
-use tracer_cpu::{CameraSpec, Cost, Method, Tracer};
+use tracer_cpu::{Cost, Method, Tracer};
 use tracer_vk::Gpu;
 use tracer_vk::kernels::Method as VkMethod;
-use tracer_vk::render::{Mode as VkMode, Renderer, Settings};
+use tracer_vk::render::Renderer;
 
 const DISTANCES: [f32; 5] = [1.0, 10.0, 100.0, 1000.0, 10_000.0];
 
@@ -112,18 +113,12 @@ fn misses(prim: &[u32]) -> usize {
     prim.iter().filter(|&&p| p == NO_TRIANGLE).count()
 }
 
+fn cast_settings(cam: CameraSpec, n: u32) -> Settings {
+    Settings { width: n, height: n, camera: cam, mode: Mode::Cast, lights: Vec::new(), max_indirections: 0, aovs: true }
+}
+
 fn cpu_prims(scene: &SceneFile, cam: CameraSpec, n: u32, method: Method) -> (Vec<[u8; 3]>, Vec<u32>) {
-    let settings = tracer_cpu::RenderSettings {
-        width: n,
-        height: n,
-        camera: cam,
-        mode: tracer_cpu::Mode::Cast,
-        lights: Vec::new(),
-        max_indirections: 0,
-        method,
-        aovs: true,
-    };
-    let img = tracer_cpu::render(&Tracer::new(scene), &settings).expect("the CPU renders");
+    let img = tracer_cpu::render(&Tracer::new(scene), &cast_settings(cam, n), method).expect("the CPU renders");
     (img.rgb, img.aov.expect("AOVs were asked for").prim)
 }
 
@@ -211,24 +206,17 @@ fn camera_grids_aimed_at_shared_edges_and_vertices_leak_nowhere_on_either_tracer
             let mut gpu_leaks = Vec::new();
             for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup] {
                 let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the grid uploads");
-                let settings = Settings {
-                    width: N,
-                    height: N,
-                    camera: cam,
-                    mode: VkMode::Cast,
-                    lights: Vec::new(),
-                    max_indirections: 0,
-                };
-                let out = r.render(&settings).expect("the GPU renders");
-                let (differ, away) = prim_differences(&scene, &fans, &prim, &out.prim);
+                let out = r.render(&cast_settings(cam, N)).expect("the GPU renders").image;
+                let gpu_prim = out.aov.expect("AOVs were asked for").prim;
+                let (differ, away) = prim_differences(&scene, &fans, &prim, &gpu_prim);
                 let what = format!("{aim:?} at {distance}: GPU {}", method.name());
                 assert_eq!(
                     away, 0,
                     "{what}: of {differ} pixels that name another triangle, {away} are away from the target"
                 );
-                gpu_leaks.push(misses(&out.prim));
+                gpu_leaks.push(misses(&gpu_prim));
                 if aim == Aim::Edges {
-                    assert_eq!(misses(&out.prim), 0, "{what}: rays aimed at shared edges leaked");
+                    assert_eq!(misses(&gpu_prim), 0, "{what}: rays aimed at shared edges leaked");
                 }
             }
             let mt = local_leaks(&scene, cam, N, &fans, intersect_moller_trumbore);

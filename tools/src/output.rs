@@ -4,12 +4,12 @@
 //! temporary name in its own folder and renamed only when complete ([`write_atomically`]), so that
 //! a failure or an interrupt (Ctrl-C, SIGTERM, SIGHUP) leaves what was there before untouched.
 
+use render_spec::Aovs;
 use std::fs::File;
 use std::io::{BufWriter, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard};
 use thiserror::Error;
-use tracer_cpu::Aovs;
 
 /// A file format, known from the file name's extension (any case).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -6,8 +6,8 @@ use crate::output::{self, Kind, Output};
 use bvh_format::{Light, SceneFile};
 use clap::{Args, ValueEnum};
 use glam::Vec3;
+use render_spec::{CameraSpec, Image, Mode, Settings};
 use std::path::PathBuf;
-use tracer_cpu::{CameraSpec, Mode};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum ModeArg {
@@ -80,6 +80,29 @@ pub struct RenderOutputs {
     pub image: Output,
     pub heatmap: Option<Output>,
     pub aov: Option<Output>,
+}
+
+impl RenderOutputs {
+    /// Writes every output of a rendered image (the colour image, then the heatmap and the AOVs
+    /// where asked for) and returns the report lines of the heatmap and the AOVs, so that a caller
+    /// prints only after every file is complete.
+    pub fn write(&self, image: &Image, heatmap_max: Option<u32>) -> Result<Vec<String>, String> {
+        let frame = output::Frame { width: image.width, height: image.height, rgb: &image.rgb };
+        output::write_image(&self.image, &frame).map_err(|e| e.to_string())?;
+        let mut lines = Vec::new();
+        if let Some(aov) = &image.aov {
+            if let Some(out) = &self.heatmap {
+                let h = output::Heatmap::new(image.width, image.height, &aov.nodes, heatmap_max);
+                output::write_heatmap(out, &h).map_err(|e| e.to_string())?;
+                lines.push(heatmap_line(&h, out));
+            }
+            if let Some(out) = &self.aov {
+                output::write_aov(out, image.width, image.height, aov).map_err(|e| e.to_string())?;
+                lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", out.path.display()));
+            }
+        }
+        Ok(lines)
+    }
 }
 
 fn parse_floats(s: &str, counts: &[usize], what: &str) -> Result<Vec<f32>, String> {
@@ -175,6 +198,20 @@ pub fn parse_light(s: &str) -> Result<Light, String> {
 }
 
 impl RenderArgs {
+    /// The settings both tracers take; AOVs are kept when an AOV file or a heatmap is asked for.
+    pub fn settings(&self, scene: &SceneFile) -> Result<Settings, String> {
+        let camera = self.camera(scene)?;
+        Ok(Settings {
+            width: self.res.0,
+            height: self.res.1,
+            camera,
+            mode: self.mode(),
+            lights: self.lights(scene, &camera),
+            max_indirections: self.indirections(scene),
+            aovs: self.aov.is_some() || self.heatmap.is_some(),
+        })
+    }
+
     pub fn mode(&self) -> Mode {
         match self.mode {
             ModeArg::Cast => Mode::Cast,
@@ -246,11 +283,11 @@ pub fn check_camera(spec: &CameraSpec, res: (u32, u32)) -> Result<(), String> {
         ));
     }
     spec.frame(res.0, res.1).map(|_| ()).map_err(|e| match e {
-        bvh_format::camera::CameraError::Degenerate => format!(
+        render_spec::camera::CameraError::Degenerate => format!(
             "the camera is degenerate: the eye {} is on the look-at point {} or the up vector {} is zero or parallel to the view",
             spec.eye, spec.at, spec.up
         ),
-        bvh_format::camera::CameraError::FieldOfView => {
+        render_spec::camera::CameraError::FieldOfView => {
             format!("the field of view must lie strictly between 0 and 180 degrees, not {}", spec.fov_deg)
         }
     })

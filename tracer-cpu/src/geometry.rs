@@ -3,6 +3,7 @@
 
 use bvh_format::{Node, Triangle};
 use glam::Vec3;
+use render_spec::constants::{OFFSET_FLOAT_SCALE, OFFSET_INT_SCALE, OFFSET_ORIGIN, T_SLACK};
 
 /// A ray with its precomputed inverse direction (components may be infinite).
 #[derive(Clone, Copy, Debug)]
@@ -51,13 +52,8 @@ impl std::ops::AddAssign for Cost {
     }
 }
 
-/// Relative slack of every comparison of a box's distance with a hit's distance: both are rounded
-/// (the box's by two operations, the triangle's by more), so a triangle exactly on its box's
-/// boundary can come out a few units in the last place nearer than the box. Without the slack a
-/// ray through a shared vertex could skip the box of the triangle that should win.
-pub const T_SLACK: f32 = 1.0 / (1 << 20) as f32;
-
-/// Whether a box entered at `near` may still hold a hit at `t` or nearer.
+/// Whether a box entered at `near` may still hold a hit at `t` or nearer ([`T_SLACK`] says why
+/// with a slack).
 #[inline(always)]
 pub fn may_hold(near: f32, t: f32) -> bool {
     near <= t + t.abs() * T_SLACK
@@ -181,16 +177,13 @@ pub fn intersect_moller_trumbore(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f
 /// "A Fast and Robust Method for Avoiding Self-Intersection" (Ray Tracing Gems, 2019).
 #[inline]
 pub fn offset_origin(p: Vec3, n: Vec3) -> Vec3 {
-    const ORIGIN: f32 = 1.0 / 32.0;
-    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
-    const INT_SCALE: f32 = 256.0;
-    let of_i = (n * INT_SCALE).as_ivec3();
+    let of_i = (n * OFFSET_INT_SCALE).as_ivec3();
     let step = |p: f32, o: i32| {
         let bits = p.to_bits() as i32;
         f32::from_bits((if p < 0.0 { bits - o } else { bits + o }) as u32)
     };
     let p_i = Vec3::new(step(p.x, of_i.x), step(p.y, of_i.y), step(p.z, of_i.z));
-    let pick = |p: f32, n: f32, pi: f32| if p.abs() < ORIGIN { p + FLOAT_SCALE * n } else { pi };
+    let pick = |p: f32, n: f32, pi: f32| if p.abs() < OFFSET_ORIGIN { p + OFFSET_FLOAT_SCALE * n } else { pi };
     Vec3::new(pick(p.x, n.x, p_i.x), pick(p.y, n.y, p_i.y), pick(p.z, n.z, p_i.z))
 }
 

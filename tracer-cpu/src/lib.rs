@@ -7,7 +7,6 @@
 //! - [`reference`]: the exact f64 brute-force closest hit tests compare against.
 //! - [`shade`] and [`render`]: ray casting and Whitted shading of whole images, with AOVs.
 
-pub use bvh_format::camera;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod geometry;
@@ -17,9 +16,8 @@ pub mod render;
 pub mod shade;
 pub mod traverse;
 
-pub use camera::CameraSpec;
 pub use geometry::{Cost, Hit, Ray};
-pub use render::{Aovs, Image, Mode, RayCounts, RenderSettings, Tracer, render};
+pub use render::{Tracer, render};
 
 /// How rays find their closest hit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -46,6 +44,16 @@ impl Method {
             m => m,
         }
     }
+
+    /// The name `trace-cpu --method` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Ordered => "ordered",
+            Method::Stackless => "stackless",
+            Method::Packet => "packet",
+            Method::Auto => "auto",
+        }
+    }
 }
 
 /// Bytes of scene data trace-cpu holds while rendering `scene` (for `bvhc info`): the file as read
@@ -63,17 +71,4 @@ pub fn held_bytes(scene: &bvh_format::SceneFile) -> u64 {
         + nodes(&s.child_pair)
         + nodes(&s.escape)
         + s.triangles.len() * std::mem::size_of::<bvh_format::Triangle>()) as u64
-}
-
-/// Why an image cannot be rendered. One sentence each.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum RenderError {
-    #[error("the image must be at least 1 x 1 pixels")]
-    EmptyImage,
-    #[error("the camera is degenerate: the eye is on the look-at point or the up vector is parallel to the view")]
-    DegenerateCamera,
-    #[error("the field of view must lie between 0 and 180 degrees, not {0}")]
-    FieldOfView(f32),
-    #[error("this method needs the {0} layout, which the scene file does not contain (compile it with --layout both)")]
-    MissingLayout(&'static str),
 }

@@ -5,11 +5,11 @@
 //! Every lane computes exactly what the scalar path computes, in the same order and without fused
 //! multiply-adds, so a packet finds bit-identical hits (a test holds it to that).
 
-use crate::camera::Frame;
 use crate::geometry::{Cost, Hit, Ray};
 use crate::render::{Sample, Shading, Tracer, shade_pixel, shadow_query};
 use crate::traverse::Stack;
 use bvh_format::{Node, Triangle};
+use render_spec::{Frame, Mode};
 
 /// Lanes of a packet.
 pub const LANES: usize = 8;
@@ -70,8 +70,9 @@ pub struct Entry {
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{Entry, LANES, Rays, Results};
-    use crate::geometry::{Cost, Hit, T_SLACK};
+    use crate::geometry::{Cost, Hit};
     use bvh_format::{Node, Triangle};
+    use render_spec::constants::T_SLACK;
     use std::arch::x86_64::*;
 
     struct Packet {
@@ -363,7 +364,7 @@ pub(crate) fn render_rows(
     let h = rows.len() / w;
     let mut pstack = Vec::with_capacity(128);
     let lights = sh.lights;
-    let shadow_lights = if sh.mode == crate::Mode::Whitted { lights.len() } else { 0 };
+    let shadow_lights = if sh.mode == Mode::Whitted { lights.len() } else { 0 };
     // Lane-major, so each lane hands shade_pixel one slice; allocated once for all packets.
     let mut shadowed = vec![false; LANES * shadow_lights];
     let mut x0 = 0usize;

@@ -1,81 +1,13 @@
 //! Whole images: primary rays per pixel, ray casting or Whitted shading, AOVs, rayon over rows.
 
-use crate::camera::{CameraError, CameraSpec, Frame};
+use crate::Method;
 use crate::geometry::{Cost, Hit, Ray, offset_origin};
 use crate::shade::{self, Surface};
 use crate::traverse::{self, Stack};
-use crate::{Method, RenderError};
-use bvh_format::{Light, Material, NO_TRIANGLE, Node, SceneFile, Triangle};
+use bvh_format::{Light, Material, Node, SceneFile, Triangle};
 use glam::Vec3;
 use rayon::prelude::*;
-
-/// Ray casting or Whitted ray tracing (DESIGN.md section 7).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Mode {
-    Cast,
-    Whitted,
-}
-
-/// What to render.
-#[derive(Clone, Debug)]
-pub struct RenderSettings {
-    pub width: u32,
-    pub height: u32,
-    pub camera: CameraSpec,
-    pub mode: Mode,
-    /// Lights for Whitted mode (ray casting always uses one white light at the eye).
-    pub lights: Vec<Light>,
-    /// Longest chain of secondary rays.
-    pub max_indirections: u32,
-    pub method: Method,
-    /// Fill [`Image::aov`].
-    pub aovs: bool,
-}
-
-/// Per-pixel outputs besides the colour, row-major from the top-left pixel.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Aovs {
-    /// Distance to the primary hit; +inf on a miss.
-    pub t: Vec<f32>,
-    /// Shading normal at the primary hit, facing the camera; zero on a miss.
-    pub normal: Vec<[f32; 3]>,
-    /// Index of the primary hit's triangle in the input scene; [`NO_TRIANGLE`] on a miss.
-    pub prim: Vec<u32>,
-    /// Node boxes tested, over every ray of the pixel.
-    pub nodes: Vec<u32>,
-    /// Triangles tested, over every ray of the pixel.
-    pub tris: Vec<u32>,
-}
-
-/// Rays traced, by kind.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct RayCounts {
-    pub primary: u64,
-    pub shadow: u64,
-    pub secondary: u64,
-}
-
-impl std::ops::Add for RayCounts {
-    type Output = RayCounts;
-    fn add(self, o: RayCounts) -> RayCounts {
-        RayCounts {
-            primary: self.primary + o.primary,
-            shadow: self.shadow + o.shadow,
-            secondary: self.secondary + o.secondary,
-        }
-    }
-}
-
-/// A rendered image.
-#[derive(Clone, Debug)]
-pub struct Image {
-    pub width: u32,
-    pub height: u32,
-    /// 8-bit RGB, row-major from the top-left pixel.
-    pub rgb: Vec<[u8; 3]>,
-    pub aov: Option<Aovs>,
-    pub rays: RayCounts,
-}
+use render_spec::{Aovs, BounceStop, Image, Mode, NO_TRIANGLE, RayCounts, RenderError, Settings};
 
 /// The scene prepared for tracing: layouts, and the bounds behind the adaptive bounce stop.
 pub struct Tracer<'a> {
@@ -103,9 +35,11 @@ impl<'a> Tracer<'a> {
 
     fn layout_for(&self, method: Method) -> Result<(), RenderError> {
         match method {
-            Method::Stackless if self.escape.is_none() => Err(RenderError::MissingLayout("escape-pointer")),
+            Method::Stackless if self.escape.is_none() => {
+                Err(RenderError::MissingLayout { method: method.name(), layout: "escape-pointer" })
+            }
             Method::Ordered | Method::Packet if self.child_pair.is_none() => {
-                Err(RenderError::MissingLayout("child-pair"))
+                Err(RenderError::MissingLayout { method: method.name(), layout: "child-pair" })
             }
             _ => Ok(()),
         }
@@ -173,15 +107,12 @@ pub(crate) struct Shading<'a> {
     pub max_indirections: u32,
     pub ambient: Vec3,
     pub background: Vec3,
-    pub bound: f32,
-    pub k_max: f32,
+    pub stop: BounceStop,
     pub method: Method,
 }
 
 impl<'a> Shading<'a> {
-    pub fn new(scene: &SceneFile, s: &'a RenderSettings) -> Self {
-        let colours: Vec<[f32; 3]> = s.lights.iter().map(|l| l.colour).collect();
-        let (bound, k_max) = scene.bounce_bound(&colours);
+    pub fn new(scene: &SceneFile, s: &'a Settings, method: Method) -> Self {
         let ambient = Vec3::from(scene.settings.ambient);
         let background = Vec3::from(scene.settings.background);
         Self {
@@ -190,10 +121,9 @@ impl<'a> Shading<'a> {
             max_indirections: s.max_indirections,
             ambient,
             background,
-            bound,
-            k_max,
+            stop: BounceStop::new(scene, &s.lights),
             // Secondary and shadow rays are incoherent: the SIMD packet path traces them one by one.
-            method: if s.method == Method::Packet { Method::Ordered } else { s.method },
+            method: if method == Method::Packet { Method::Ordered } else { method },
         }
     }
 }
@@ -279,7 +209,7 @@ pub(crate) fn shade_pixel(
 
         let Some(next) = shade::secondary(m, &surf, ray.dir) else { break };
         let remaining = sh.max_indirections - depth;
-        if remaining == 0 || !shade::worth_tracing(weight * next.factor, remaining, sh.bound, sh.k_max) {
+        if remaining == 0 || !sh.stop.worth_tracing(weight * next.factor, remaining) {
             break;
         }
         weight *= next.factor;
@@ -304,23 +234,14 @@ pub(crate) fn shade_pixel(
     sample
 }
 
-fn check(settings: &RenderSettings) -> Result<Frame, RenderError> {
-    if settings.width == 0 || settings.height == 0 {
-        return Err(RenderError::EmptyImage);
-    }
-    settings.camera.frame(settings.width, settings.height).map_err(|e| match e {
-        CameraError::Degenerate => RenderError::DegenerateCamera,
-        CameraError::FieldOfView => RenderError::FieldOfView(settings.camera.fov_deg),
-    })
-}
-
-/// Renders an image. Pixels are independent, so the result does not depend on the thread count.
-pub fn render(tracer: &Tracer<'_>, settings: &RenderSettings) -> Result<Image, RenderError> {
-    let frame = check(settings)?;
-    let method = settings.method.resolve(tracer.scene);
+/// Renders an image with `method`. Pixels are independent, so the result does not depend on the
+/// thread count.
+pub fn render(tracer: &Tracer<'_>, settings: &Settings, method: Method) -> Result<Image, RenderError> {
+    let frame = settings.frame()?;
+    let method = method.resolve(tracer.scene);
     tracer.layout_for(method)?;
     let (w, h) = (settings.width as usize, settings.height as usize);
-    let sh = Shading::new(tracer.scene, settings);
+    let sh = Shading::new(tracer.scene, settings, method);
     let mut samples = vec![Sample::default(); w * h];
     // Pairs of rows: the packet path traces 4 x 2 blocks.
     samples.par_chunks_mut(2 * w).enumerate().for_each_init(Stack::default, |stack, (pair, rows)| {

@@ -109,23 +109,6 @@ pub fn secondary(m: &Material, s: &Surface, dir: Vec3) -> Option<Secondary> {
     None
 }
 
-/// Whether a secondary ray of weight `w`, with `remaining` indirections left after it (itself
-/// included), can still change an 8-bit pixel: the most the chain can add is
-/// `w * bound * (1 + k + k^2 + ... )` over `remaining` terms, with `k` the largest kr or kt; below
-/// half an 8-bit step it cannot move the rounded value by a full step.
-pub fn worth_tracing(w: f32, remaining: u32, bound: f32, k_max: f32) -> bool {
-    let mut chain = 0.0f32;
-    let mut f = 1.0f32;
-    for _ in 0..remaining {
-        chain += f;
-        f *= k_max;
-        if f < 1e-9 {
-            break;
-        }
-    }
-    w * bound * chain >= 0.5 / 255.0
-}
-
 /// Linear radiance to 8 bits: clamp to [0, 1], scale by 255, round to nearest.
 #[inline]
 pub fn to_u8(c: Vec3) -> [u8; 3] {
@@ -214,11 +197,7 @@ mod tests {
     }
 
     #[test]
-    fn the_bounce_stop_is_exact_at_half_a_step() {
-        assert!(worth_tracing(1.0, 1, 1.0, 0.5));
-        assert!(!worth_tracing(0.5 / 255.0 * 0.99, 1, 1.0, 0.0));
-        assert!(worth_tracing(0.5 / 255.0 * 0.99, 2, 1.0, 0.5), "a longer chain adds more");
-        assert!(!worth_tracing(0.1, 0, 1.0, 1.0), "no indirection left");
+    fn radiance_rounds_to_the_nearest_8_bit_value() {
         assert_eq!(to_u8(Vec3::new(-1.0, 0.5, 2.0)), [0, 128, 255]);
     }
 }

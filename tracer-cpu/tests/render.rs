@@ -5,20 +5,26 @@ mod common;
 
 use bvh_format::{Light, SceneFile};
 use glam::Vec3;
+use render_spec::{CameraSpec, Image, Mode, NO_TRIANGLE, Settings};
 use tracer_cpu::traverse::Stack;
-use tracer_cpu::{CameraSpec, Cost, Image, Method, Mode, Ray, RenderSettings, Tracer, render};
+use tracer_cpu::{Cost, Method, Ray, Tracer};
 
-fn settings(scene: &SceneFile, camera: &str, mode: Mode, method: Method, w: u32, h: u32) -> RenderSettings {
-    RenderSettings {
+/// Renders with `settings.1` as the method.
+fn render(tracer: &Tracer<'_>, settings: &(Settings, Method)) -> Result<Image, render_spec::RenderError> {
+    tracer_cpu::render(tracer, &settings.0, settings.1)
+}
+
+fn settings(scene: &SceneFile, camera: &str, mode: Mode, method: Method, w: u32, h: u32) -> (Settings, Method) {
+    let settings = Settings {
         width: w,
         height: h,
         camera: CameraSpec::from(scene.camera(camera).expect("camera exists")),
         mode,
         lights: scene.lights.clone(),
         max_indirections: scene.settings.max_indirections,
-        method,
         aovs: true,
-    }
+    };
+    (settings, method)
 }
 
 fn same_image(a: &Image, b: &Image, what: &str) {
@@ -42,7 +48,7 @@ fn every_method_renders_the_same_image() {
                 let img = render(&tracer, &settings(scene, camera, mode, method, 97, 61)).unwrap();
                 same_image(&base, &img, &format!("{name} {camera} {mode:?} {method:?}"));
             }
-            let hits = base.aov.as_ref().unwrap().prim.iter().filter(|&&p| p != bvh_format::NO_TRIANGLE).count();
+            let hits = base.aov.as_ref().unwrap().prim.iter().filter(|&&p| p != NO_TRIANGLE).count();
             assert!(hits > 97 * 61 / 4, "{name} {camera}: the camera should see the scene ({hits} hits)");
         }
     }
@@ -107,12 +113,12 @@ fn shadow_rays_end_at_the_light() {
     // In an image: the floor under a light below the roof is lit; above the roof it is dark.
     let lit = {
         let mut s = settings(&scene, "down", Mode::Whitted, Method::Auto, 8, 8);
-        s.lights = vec![Light::new([0.0, 1.5, 0.0], [1.0; 3])];
+        s.0.lights = vec![Light::new([0.0, 1.5, 0.0], [1.0; 3])];
         render(&tracer, &s).unwrap()
     };
     let shadowed = {
         let mut s = settings(&scene, "down", Mode::Whitted, Method::Auto, 8, 8);
-        s.lights = vec![Light::new([0.0, 2.5, 0.0], [1.0; 3])];
+        s.0.lights = vec![Light::new([0.0, 2.5, 0.0], [1.0; 3])];
         render(&tracer, &s).unwrap()
     };
     let brightness = |img: &Image| img.rgb.iter().map(|p| p[0] as u32).sum::<u32>();
@@ -168,7 +174,7 @@ fn the_bounce_stop_skips_only_rays_that_cannot_change_a_pixel() {
     let img = render(&Tracer::new(&strong), &settings(&strong, "view", Mode::Whitted, Method::Auto, 64, 48)).unwrap();
     assert!(img.rays.secondary > 0 && img.rays.secondary <= 3 * img.rays.primary);
     let mut one = settings(&strong, "view", Mode::Whitted, Method::Auto, 64, 48);
-    one.max_indirections = 1;
+    one.0.max_indirections = 1;
     let once = render(&Tracer::new(&strong), &one).unwrap();
     assert!(once.rays.secondary <= once.rays.primary && once.rays.secondary < img.rays.secondary + 1);
 }
@@ -179,8 +185,8 @@ fn bad_settings_are_errors() {
     let tracer = Tracer::new(&scene);
     let mut s = settings(&scene, "down", Mode::Cast, Method::Auto, 0, 8);
     assert!(render(&tracer, &s).is_err());
-    s.width = 8;
-    s.camera.at = s.camera.eye;
+    s.0.width = 8;
+    s.0.camera.at = s.0.camera.eye;
     assert!(render(&tracer, &s).unwrap_err().to_string().contains("degenerate"));
     let mut only_escape = scene.clone();
     only_escape.child_pair = None;

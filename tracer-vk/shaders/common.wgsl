@@ -1,6 +1,8 @@
 // Shared by every kernel: the scene's data, the frame's state, and the intersection and shading
-// arithmetic of docs/shading.md. The host prepends the constants STACK_SIZE, LEAF_SIZE, WG_X and
-// WG_Y and strips the blocks between `//#if FEATURE` and `//#endif` for features the scene lacks.
+// arithmetic of docs/shading.md. The host prepends the shading contract's constants (T_SLACK,
+// OFFSET_*, STOP_*, NO_TRIANGLE, F32_MAX, generated from render_spec::constants, where each is
+// defined and explained) and the per-scene constants STACK_SIZE, LEAF_SIZE, WG_X and WG_Y, and
+// strips the blocks between `//#if FEATURE` and `//#endif` for features the scene lacks.
 
 struct Node {
     min: vec3<f32>,
@@ -96,9 +98,6 @@ struct Pass {
 // host prepends (kernels.rs); see count() and fault().
 @group(0) @binding(13) var<storage, read_write> counters: array<atomic<u32>>;
 var<immediate> pass_info: Pass;
-
-const NO_HIT: u32 = 0xffffffffu;
-const T_SLACK: f32 = 9.5367431640625e-7; // 2^-20
 
 // This invocation's index in its workgroup (set by the entry point; SST needs it).
 var<private> lid: u32;
@@ -218,7 +217,7 @@ fn intersect_leaf(n: Node, r: Ray, t_min: f32, best: ptr<function, HitRec>, any_
 
 // Moves a point off a surface along the unit normal n (Wächter and Binder 2019).
 fn offset_origin(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
-    let of_i = vec3<i32>(n * 256.0);
+    let of_i = vec3<i32>(n * OFFSET_INT_SCALE);
     var p_i: vec3<f32>;
     for (var a = 0u; a < 3u; a++) {
         let bits = bitcast<i32>(p[a]);
@@ -226,7 +225,7 @@ fn offset_origin(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
     }
     var out: vec3<f32>;
     for (var a = 0u; a < 3u; a++) {
-        out[a] = select(p_i[a], p[a] + n[a] / 65536.0, abs(p[a]) < 1.0 / 32.0);
+        out[a] = select(p_i[a], p[a] + OFFSET_FLOAT_SCALE * n[a], abs(p[a]) < OFFSET_ORIGIN);
     }
     return out;
 }
@@ -250,7 +249,7 @@ fn surface_at(r: Ray, h: HitRec) -> Surface {
     let raw = cross(tri.p1 - tri.p0, tri.p2 - tri.p0);
     let len = length(raw);
     var ng = -r.d;
-    if len > 0.0 && len < 3.4e38 {
+    if len > 0.0 && len <= F32_MAX {
         ng = raw / len;
     }
     let front = dot(r.d, ng) < 0.0;
@@ -264,7 +263,7 @@ fn surface_at(r: Ray, h: HitRec) -> Surface {
         let n2 = vertex_normal(normal_indices[ni + 2u]);
         let interp = (1.0 - h.u - h.v) * n0 + h.u * n1 + h.v * n2;
         let il = length(interp);
-        if il > 0.0 && il < 3.4e38 {
+        if il > 0.0 && il <= F32_MAX {
             shading = interp / il;
             if dot(shading, geometric) < 0.0 {
                 shading = -shading;
@@ -304,11 +303,11 @@ fn worth_tracing(w: f32, remaining: u32) -> bool {
     for (var i = 0u; i < remaining; i++) {
         chain += f;
         f *= frame.stop.y;
-        if f < 1e-9 {
+        if f < STOP_CHAIN_TERM {
             break;
         }
     }
-    return w * frame.stop.x * chain >= 0.5 / 255.0;
+    return w * frame.stop.x * chain >= STOP_CONTRIBUTION;
 }
 
 fn to_rgba8(c: vec3<f32>) -> u32 {

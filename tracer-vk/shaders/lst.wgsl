@@ -5,7 +5,7 @@
 // at most one node per level, so the stack cannot overflow (if it would, the frame is refused).
 
 fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec {
-    var best = HitRec(t_max, NO_HIT, 0.0, 0.0);
+    var best = HitRec(t_max, NO_TRIANGLE, 0.0, 0.0);
     if !enabled {
         return best;
     }

@@ -32,7 +32,7 @@ var<workgroup> sst_done: u32;
 var<workgroup> sst_next: u32;
 
 fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec {
-    var best = HitRec(t_max, NO_HIT, 0.0, 0.0);
+    var best = HitRec(t_max, NO_TRIANGLE, 0.0, 0.0);
     // `live`: still looking (an any-hit ray stops at its first hit); `taking_part`: takes part in the
     // current node.
     var live = enabled;

@@ -3,7 +3,7 @@
 // subtree); otherwise the walk goes on with the next node. No stack, fixed child order.
 
 fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec {
-    var best = HitRec(t_max, NO_HIT, 0.0, 0.0);
+    var best = HitRec(t_max, NO_TRIANGLE, 0.0, 0.0);
     if !enabled {
         return best;
     }

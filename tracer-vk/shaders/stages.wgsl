@@ -7,8 +7,6 @@
 // its pixel lies outside the image or has nothing to trace: SST walks the tree with the whole
 // workgroup and needs every invocation at its barriers.
 
-const MAX_T: f32 = 3.40282347e38;
-
 // Index of image pixel (x, y) in the per-pixel buffers, which hold the current tile.
 fn pixel_index(x: u32, y: u32) -> u32 {
     return (y - frame.tile.y) * frame.tile.z + (x - frame.tile.x);
@@ -18,9 +16,9 @@ fn record_primary(p: u32, r: Ray, h: HitRec) -> bool {
     var a: Aov;
     a.nodes = cost_nodes;
     a.tris = cost_tris;
-    if h.tri == NO_HIT {
+    if h.tri == NO_TRIANGLE {
         a.t = bitcast<f32>(0x7f800000u);
-        a.prim = NO_HIT;
+        a.prim = NO_TRIANGLE;
         a.normal = vec4<f32>(0.0);
         aovs[p] = a;
         return false;
@@ -35,7 +33,7 @@ fn record_primary(p: u32, r: Ray, h: HitRec) -> bool {
 fn stage_cast(x: u32, y: u32, valid: bool) {
     let p = pixel_index(x, y);
     let r = make_ray(frame.eye.xyz, primary_dir(x, y));
-    let h = trace(r, 0.0, MAX_T, false, valid);
+    let h = trace(r, 0.0, F32_MAX, false, valid);
     if !valid {
         return;
     }
@@ -52,7 +50,7 @@ fn stage_cast(x: u32, y: u32, valid: bool) {
 fn stage_primary(x: u32, y: u32, valid: bool) {
     let p = pixel_index(x, y);
     let r = make_ray(frame.eye.xyz, primary_dir(x, y));
-    let h = trace(r, 0.0, MAX_T, false, valid);
+    let h = trace(r, 0.0, F32_MAX, false, valid);
     if !valid {
         return;
     }
@@ -104,7 +102,7 @@ fn stage_shade(x: u32, y: u32, valid: bool) {
             }
         }
     }
-    let blocked = trace(shadow, 0.0, shadow_t, true, wants_shadow).tri != NO_HIT;
+    let blocked = trace(shadow, 0.0, shadow_t, true, wants_shadow).tri != NO_TRIANGLE;
     if valid {
         count(SLOT_FINISHED);
     }
@@ -166,7 +164,7 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
         o = offset_origin(s.point, select(-s.geometric, s.geometric, same_side));
     }
     let nr = make_ray(o, dir);
-    let nh = trace(nr, 0.0, MAX_T, false, go);
+    let nh = trace(nr, 0.0, F32_MAX, false, go);
     if valid {
         count(SLOT_FINISHED);
     }
@@ -180,7 +178,7 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
     count(SLOT_SECONDARY);
     aovs[p].nodes += cost_nodes;
     aovs[p].tris += cost_tris;
-    if nh.tri == NO_HIT {
+    if nh.tri == NO_TRIANGLE {
         accum[p] += vec4<f32>(w * frame.background.xyz, 0.0);
         paths[p].dir.w = 0.0;
         return;

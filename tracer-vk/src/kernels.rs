@@ -1,5 +1,6 @@
 //! Assembling and specialising the WGSL kernels: the common file, one traversal file and the
-//! pipeline stages, with per-scene constants prepended and unneeded shading features stripped.
+//! pipeline stages, with the shading contract's constants (generated from `render_spec::constants`)
+//! and per-scene constants prepended and unneeded shading features stripped.
 //!
 //! Specialisation is by generated constants, not naga's pipeline overrides: the per-invocation
 //! stack of LST is a function-scope array, which WGSL only lets a `const` size (naga rejects an
@@ -177,8 +178,9 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
     );
     let counters: String = counters::WGSL.iter().map(|(name, v)| format!("const {name}: u32 = {v}u;\n")).collect();
     format!(
-        "{counters}const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n\
+        "{}{counters}const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n\
          {}\n{}\n{}\n{}",
+        render_spec::constants::wgsl_header(),
         spec.stack_size.max(1),
         spec.leaf_size.max(1),
         spec.workgroup.0,
@@ -241,6 +243,33 @@ mod tests {
         let s = source(Stage::Bounce, &spec(Method::Lst, false, false));
         assert!(!s.contains("1.0 / m.kt_ior.y") && !s.contains("factor = m.ks_kr.w"));
         assert!(source(Stage::Primary, &spec(Method::Stackless, false, false)).contains("arrayLength(&nodes)"));
+    }
+
+    /// Every shared constant reaches the kernels with exactly the Rust value, as naga reads it.
+    #[test]
+    fn the_contract_constants_reach_the_kernels_bit_for_bit() {
+        use render_spec::constants::{SHARED, Value};
+        let src = source(Stage::Bounce, &spec(Method::Lst, true, true));
+        let module = naga::front::wgsl::parse_str(&src).expect("the kernel parses");
+        for (name, value) in SHARED {
+            let c = module.constants.iter().find(|(_, c)| c.name.as_deref() == Some(*name));
+            let (_, c) = c.unwrap_or_else(|| panic!("the kernel lacks {name}"));
+            match (&module.global_expressions[c.init], value) {
+                (naga::Expression::Literal(naga::Literal::F32(k)), Value::F32(v)) => {
+                    assert_eq!(k.to_bits(), v.to_bits(), "{name}: {k} in the kernel, {v} in Rust")
+                }
+                (naga::Expression::Literal(naga::Literal::U32(k)), Value::U32(v)) => assert_eq!(k, v, "{name}"),
+                (e, _) => panic!("{name} is {e:?} in the kernel"),
+            }
+        }
+        // No kernel file spells a shared value itself.
+        for (file, text) in
+            [("common", COMMON), ("lst", LST), ("stackless", STACKLESS), ("sst", SST), ("stages", STAGES)]
+        {
+            for (name, _) in SHARED {
+                assert!(!text.contains(&format!("const {name}")), "{file}.wgsl declares {name} again");
+            }
+        }
     }
 
     #[test]

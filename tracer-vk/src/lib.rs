@@ -1,4 +1,4 @@
-//! The Vulkan compute tracer (DESIGN.md section 6).
+//! The Vulkan compute tracer: LST, SST and stackless traversal (docs/vulkan-tracer.md).
 //!
 //! - [`device`]: the Vulkan device layer (ash): devices, buffers, compute pipelines, recording
 //!   dispatches and reading back GPU timestamps.

@@ -12,33 +12,10 @@ use crate::device::{Buffer, Gpu, Pipeline};
 use crate::error::VkError;
 use crate::kernels::{self, Method, Specialisation, Stage, counters};
 use crate::tiles::{self, Tile};
-use bvh_format::camera::CameraSpec;
 use bvh_format::{Light, SceneFile};
 use bytemuck::{Pod, Zeroable};
+use render_spec::{Aovs, BounceStop, Image, Mode, RayCounts, RenderError, Settings};
 use std::collections::HashMap;
-
-/// Ray casting or Whitted ray tracing.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Mode {
-    Cast,
-    Whitted,
-}
-
-/// What to render.
-#[derive(Clone, Debug)]
-pub struct Settings {
-    pub width: u32,
-    pub height: u32,
-    pub camera: CameraSpec,
-    pub mode: Mode,
-    pub lights: Vec<Light>,
-    pub max_indirections: u32,
-}
-
-/// The most indirections a frame may ask for. Paths end earlier in every scene whose reflective
-/// and refractive materials lose light (the passes stop when none is alive); only perfect mirrors
-/// facing each other go on to the limit, at a cost that grows with it.
-pub const MAX_INDIRECTIONS: u32 = 1024;
 
 /// Bounces in the first submission of a tile (every shipped scene needs at most 5); each later
 /// submission doubles the bounces done so far. Between submissions the live paths are counted.
@@ -54,38 +31,22 @@ pub struct Progress {
 /// A rendered frame.
 #[derive(Clone, Debug)]
 pub struct Output {
-    pub width: u32,
-    pub height: u32,
-    pub rgb: Vec<[u8; 3]>,
-    /// Per pixel: primary hit distance (+inf on a miss), shading normal, input triangle
-    /// (`NO_TRIANGLE` on a miss), nodes and triangles tested over all of the pixel's rays.
-    pub t: Vec<f32>,
-    pub normal: Vec<[f32; 3]>,
-    pub prim: Vec<u32>,
-    pub nodes: Vec<u32>,
-    pub tris: Vec<u32>,
-    /// Primary, shadow and secondary rays traced.
-    pub rays: [u64; 3],
+    pub image: Image,
     /// GPU time of the whole frame and of each pass, from timestamp queries.
     pub gpu_ms: f64,
     pub passes: Vec<(String, f64)>,
 }
 
-/// Why a frame cannot be rendered.
+/// Why a frame cannot be rendered: the mistakes every tracer reports alike, or what only the
+/// Vulkan tracer can run into.
 #[derive(Debug, thiserror::Error)]
-pub enum RenderError {
+pub enum VkRenderError {
+    #[error(transparent)]
+    Settings(#[from] RenderError),
     #[error(transparent)]
     Vulkan(#[from] VkError),
-    #[error("the image must be at least 1 x 1 pixels")]
-    EmptyImage,
-    #[error("the camera is degenerate or its field of view is outside 0 to 180 degrees")]
-    Camera,
-    #[error("the {method} traversal needs the {layout} layout, which the scene file does not contain")]
-    MissingLayout { method: &'static str, layout: &'static str },
     #[error("{0} lights are more than the kernels address")]
     TooManyLights(usize),
-    #[error("{0} indirections are more than the {MAX_INDIRECTIONS} a frame may trace")]
-    TooManyIndirections(u32),
     #[error(
         "a {x} x {y} workgroup is not allowed: width and height must be powers of two with at most {limit} invocations in all on this device, such as 8x8 (the default), 16x16 or 32x4"
     )]
@@ -166,12 +127,48 @@ pub struct Renderer<'g> {
     tile_pixels: u64,
 }
 
-const BINDINGS: u32 = 14;
+/// The kernels' storage buffers by binding number, as common.wgsl names them; `render_tile` binds
+/// its buffers in this order (a test holds common.wgsl to it).
+const BINDING_NAMES: [&str; 14] = [
+    "frame",
+    "nodes",
+    "tris",
+    "normal_indices",
+    "normals",
+    "materials",
+    "lights",
+    "input_index",
+    "paths",
+    "hits",
+    "accum",
+    "aovs",
+    "image",
+    "counters",
+];
+
+const BINDINGS: u32 = BINDING_NAMES.len() as u32;
+
+/// Bytes per pixel of the per-pixel buffers: `PathRay`, `HitRec`, the accumulated colour, `Aov`
+/// and the packed RGBA8 image of common.wgsl (a test holds them to naga's layout).
+const PATH_BYTES: u64 = 32;
+const HIT_BYTES: u64 = 16;
+const ACCUM_BYTES: u64 = 16;
+const AOV_BYTES: u64 = 32;
+const IMAGE_BYTES: u64 = 4;
+
+/// Where `Aov`'s fields lie in its eight 32-bit words (a test holds them to naga's layout).
+mod aov_word {
+    pub const NORMAL: usize = 0;
+    pub const T: usize = 4;
+    pub const PRIM: usize = 5;
+    pub const NODES: usize = 6;
+    pub const TRIS: usize = 7;
+}
 
 /// What one frame's passes gave, summed over tiles and submissions.
 #[derive(Default)]
 struct Tally {
-    rays: [u64; 3],
+    rays: RayCounts,
     gpu_ms: f64,
     passes: Vec<(String, f64)>,
 }
@@ -196,10 +193,10 @@ struct HostFrame {
 }
 
 impl HostFrame {
-    fn new(width: u32, height: u32, image: bool, aovs: bool) -> Result<Self, RenderError> {
+    fn new(width: u32, height: u32, image: bool, aovs: bool) -> Result<Self, VkRenderError> {
         let n = width as usize * height as usize;
-        let bytes = n as u64 * (4 * image as u64 + 32 * aovs as u64);
-        let fail = |_| RenderError::HostMemory { width, height, bytes };
+        let bytes = n as u64 * (IMAGE_BYTES * image as u64 + AOV_BYTES * aovs as u64);
+        let fail = |_| VkRenderError::HostMemory { width, height, bytes };
         let mut f = HostFrame { width, image: Vec::new(), aovs: Vec::new() };
         if image {
             f.image.try_reserve_exact(n).map_err(fail)?;
@@ -226,7 +223,12 @@ impl<'g> Renderer<'g> {
     /// Uploads the scene (only the node layout `method` reads) and specialises the kernels:
     /// LST's and SST's stacks hold exactly the file's max depth, SST's leaf cache its largest
     /// leaf; reflection and refraction code is present only when some material needs it.
-    pub fn new(gpu: &'g Gpu, scene: &'g SceneFile, method: Method, workgroup: (u32, u32)) -> Result<Self, RenderError> {
+    pub fn new(
+        gpu: &'g Gpu,
+        scene: &'g SceneFile,
+        method: Method,
+        workgroup: (u32, u32),
+    ) -> Result<Self, VkRenderError> {
         let nodes = match method {
             Method::Lst | Method::Sst | Method::SstSubgroup => scene
                 .child_pair
@@ -235,7 +237,7 @@ impl<'g> Renderer<'g> {
             Method::Stackless => scene
                 .escape
                 .as_deref()
-                .ok_or(RenderError::MissingLayout { method: "stackless", layout: "escape-pointer" })?,
+                .ok_or(RenderError::MissingLayout { method: method.name(), layout: "escape-pointer" })?,
         };
         let stats = scene.stats();
         let spec = Specialisation {
@@ -251,16 +253,21 @@ impl<'g> Renderer<'g> {
         let (wx, wy) = workgroup;
         let limit = (info.max_workgroup_invocations as u64).min(info.max_workgroup_size[0] as u64);
         if !wx.is_power_of_two() || !wy.is_power_of_two() || wx as u64 * wy as u64 > limit {
-            return Err(RenderError::Workgroup { x: wx, y: wy, limit });
+            return Err(VkRenderError::Workgroup { x: wx, y: wy, limit });
         }
         if method == Method::SstSubgroup && !info.supports_subgroup_ops {
-            return Err(RenderError::NoSubgroups(info.name.clone()));
+            return Err(VkRenderError::NoSubgroups(info.name.clone()));
         }
         if matches!(method, Method::Sst | Method::SstSubgroup) {
             let needed = kernels::sst_shared_bytes(&spec);
             let limit = info.max_shared_memory as u64;
             if needed > limit {
-                return Err(RenderError::SharedMemory { depth: spec.stack_size, leaf: spec.leaf_size, needed, limit });
+                return Err(VkRenderError::SharedMemory {
+                    depth: spec.stack_size,
+                    leaf: spec.leaf_size,
+                    needed,
+                    limit,
+                });
             }
         }
         let node_what = if method == Method::Stackless { "escape-pointer nodes" } else { "child-pair nodes" };
@@ -317,44 +324,39 @@ impl<'g> Renderer<'g> {
         let g = self.gpu;
         self.targets = Some(Targets {
             pixels,
-            paths: g.create_buffer(pixels * 32, "paths")?,
-            hits: g.create_buffer(pixels * 16, "hits")?,
-            accum: g.create_buffer(pixels * 16, "accumulated colour")?,
-            aovs: g.create_buffer(pixels * 32, "AOVs")?,
-            image: g.create_buffer(pixels * 4, "image")?,
+            paths: g.create_buffer(pixels * PATH_BYTES, "paths")?,
+            hits: g.create_buffer(pixels * HIT_BYTES, "hits")?,
+            accum: g.create_buffer(pixels * ACCUM_BYTES, "accumulated colour")?,
+            aovs: g.create_buffer(pixels * AOV_BYTES, "AOVs")?,
+            image: g.create_buffer(pixels * IMAGE_BYTES, "image")?,
         });
         Ok(())
     }
 
-    /// Renders one frame and reads back the image and the AOVs.
-    pub fn render(&mut self, s: &Settings) -> Result<Output, RenderError> {
+    /// Renders one frame and reads back the image, and the AOVs when the settings ask for them.
+    pub fn render(&mut self, s: &Settings) -> Result<Output, VkRenderError> {
         self.render_frame(s, true)
     }
 
     /// Renders one frame; without `readback` only the ray counts and GPU times come back (the
-    /// per-pixel vectors of the output are empty), as benchmarks want.
-    pub fn render_frame(&mut self, s: &Settings, readback: bool) -> Result<Output, RenderError> {
-        self.render_with_progress(s, readback, readback, &mut |_| {})
+    /// image's pixels are empty and it has no AOVs), as benchmarks want.
+    pub fn render_frame(&mut self, s: &Settings, readback: bool) -> Result<Output, VkRenderError> {
+        self.render_with_progress(s, readback, &mut |_| {})
     }
 
-    /// Renders one frame, calling `progress` after every tile. `image` reads back the colours,
-    /// `aovs` the per-pixel outputs; without either only the ray counts and GPU times come back.
+    /// Renders one frame, calling `progress` after every tile. `readback` reads back the colours,
+    /// and the per-pixel outputs when the settings ask for them; without it only the ray counts
+    /// and GPU times come back.
     pub fn render_with_progress(
         &mut self,
         s: &Settings,
-        image: bool,
-        aovs: bool,
+        readback: bool,
         progress: &mut dyn FnMut(Progress),
-    ) -> Result<Output, RenderError> {
-        if s.width == 0 || s.height == 0 {
-            return Err(RenderError::EmptyImage);
-        }
-        let f = s.camera.frame(s.width, s.height).map_err(|_| RenderError::Camera)?;
+    ) -> Result<Output, VkRenderError> {
+        let (image, aovs) = (readback, readback && s.aovs);
+        let f = s.frame()?;
         if s.lights.len() > u32::MAX as usize / 2 {
-            return Err(RenderError::TooManyLights(s.lights.len()));
-        }
-        if s.max_indirections > MAX_INDIRECTIONS {
-            return Err(RenderError::TooManyIndirections(s.max_indirections));
+            return Err(VkRenderError::TooManyLights(s.lights.len()));
         }
         let whitted = s.mode == Mode::Whitted;
         // Bounces only where a material can spawn one: no scene pays for what it lacks.
@@ -378,8 +380,7 @@ impl<'g> Renderer<'g> {
         }
         self.targets(plan.iter().map(Tile::pixels).max().unwrap_or(1))?;
 
-        let colours: Vec<[f32; 3]> = s.lights.iter().map(|l| l.colour).collect();
-        let (bound, k_max) = self.scene.bounce_bound(&colours);
+        let stop = BounceStop::new(self.scene, &s.lights);
         let v4 = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
         let a3 = |v: [f32; 3]| [v[0], v[1], v[2], 0.0];
         let mut frame = FrameData {
@@ -390,7 +391,7 @@ impl<'g> Renderer<'g> {
             ambient: a3(self.scene.settings.ambient),
             background: a3(self.scene.settings.background),
             size: [s.width, s.height, s.lights.len() as u32, indirections],
-            stop: [bound, k_max, 0.0, 0.0],
+            stop: [stop.bound, stop.k_max, 0.0, 0.0],
             tile: [0; 4],
         };
         let g = self.gpu;
@@ -432,16 +433,21 @@ impl<'g> Renderer<'g> {
         debug_assert_eq!(host.width, s.width);
         let f32_of = |u: u32| f32::from_bits(u);
         let a = &host.aovs;
+        let aov = aovs.then(|| Aovs {
+            normal: a.iter().map(|a| std::array::from_fn(|k| f32_of(a[aov_word::NORMAL + k]))).collect(),
+            t: a.iter().map(|a| f32_of(a[aov_word::T])).collect(),
+            prim: a.iter().map(|a| a[aov_word::PRIM]).collect(),
+            nodes: a.iter().map(|a| a[aov_word::NODES]).collect(),
+            tris: a.iter().map(|a| a[aov_word::TRIS]).collect(),
+        });
         Ok(Output {
-            width: s.width,
-            height: s.height,
-            rgb: host.image.iter().map(|&p| [p as u8, (p >> 8) as u8, (p >> 16) as u8]).collect(),
-            normal: a.iter().map(|a| [f32_of(a[0]), f32_of(a[1]), f32_of(a[2])]).collect(),
-            t: a.iter().map(|a| f32_of(a[4])).collect(),
-            prim: a.iter().map(|a| a[5]).collect(),
-            nodes: a.iter().map(|a| a[6]).collect(),
-            tris: a.iter().map(|a| a[7]).collect(),
-            rays: tally.rays,
+            image: Image {
+                width: s.width,
+                height: s.height,
+                rgb: host.image.iter().map(|&p| [p as u8, (p >> 8) as u8, (p >> 16) as u8]).collect(),
+                aov,
+                rays: tally.rays,
+            },
             gpu_ms: tally.gpu_ms,
             passes: tally.passes,
         })
@@ -462,11 +468,12 @@ impl<'g> Renderer<'g> {
         lights_buf: &Buffer,
         counters: &Buffer,
         tally: &mut Tally,
-    ) -> Result<(), RenderError> {
+    ) -> Result<(), VkRenderError> {
         let g = self.gpu;
         let t = self.targets.as_ref().expect("the targets were made before the tiles");
         let (wx, wy) = self.spec.workgroup;
         let groups = [tile.width.div_ceil(wx), tile.height.div_ceil(wy), 1];
+        // In the order of BINDING_NAMES.
         let buffers: [&Buffer; BINDINGS as usize] = [
             frame_buf,
             &self.nodes,
@@ -526,9 +533,9 @@ impl<'g> Renderer<'g> {
             let words: Vec<u32> = g.download_as(counters)?;
             self.check_counts(&words, tile, first == 0, dispatches)?;
             let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
-            tally.rays[0] += wide(counters::PRIMARY);
-            tally.rays[1] += wide(counters::SHADOW);
-            tally.rays[2] += wide(counters::SECONDARY);
+            tally.rays.primary += wide(counters::PRIMARY);
+            tally.rays.shadow += wide(counters::SHADOW);
+            tally.rays.secondary += wide(counters::SECONDARY);
             if !whitted || end >= indirections || words[counters::LIVE + end as usize - 1] == 0 {
                 return Ok(());
             }
@@ -539,7 +546,7 @@ impl<'g> Renderer<'g> {
     /// Refuses a submission whose counts do not add up: every dispatch must have finished every
     /// pixel of the tile, the first must have traced one primary ray per pixel, and no traversal
     /// may have given up on a ray.
-    fn check_counts(&self, words: &[u32], tile: &Tile, first: bool, dispatches: u64) -> Result<(), RenderError> {
+    fn check_counts(&self, words: &[u32], tile: &Tile, first: bool, dispatches: u64) -> Result<(), VkRenderError> {
         let method = self.spec.method.name();
         let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
         let faults = words[counters::FAULTS];
@@ -548,19 +555,24 @@ impl<'g> Renderer<'g> {
                 "found its stack of {} entries full (the tree is deeper than its file says)",
                 self.spec.stack_size
             );
-            return Err(RenderError::Fault { method, what });
+            return Err(VkRenderError::Fault { method, what });
         }
         if faults & counters::FAULT_WALK != 0 {
-            return Err(RenderError::Fault { method, what: "took more steps than the tree has nodes".to_owned() });
+            return Err(VkRenderError::Fault { method, what: "took more steps than the tree has nodes".to_owned() });
         }
         let primary = wide(counters::PRIMARY);
         if first && primary != tile.pixels() {
-            return Err(RenderError::LostWork { method, what: "primary rays", done: primary, expected: tile.pixels() });
+            return Err(VkRenderError::LostWork {
+                method,
+                what: "primary rays",
+                done: primary,
+                expected: tile.pixels(),
+            });
         }
         let finished = wide(counters::FINISHED);
         let expected = dispatches * tile.pixels();
         if finished != expected {
-            return Err(RenderError::LostWork { method, what: "pixel passes", done: finished, expected });
+            return Err(VkRenderError::LostWork { method, what: "pixel passes", done: finished, expected });
         }
         Ok(())
     }
@@ -608,7 +620,7 @@ pub fn upload_bytes(scene: &SceneFile, method: Method) -> u64 {
 }
 
 /// Checks that a scene array fits one storage buffer binding and one allocation.
-fn fits<T>(info: &crate::device::DeviceInfo, what: &'static str, data: &[T]) -> Result<(), RenderError> {
+fn fits<T>(info: &crate::device::DeviceInfo, what: &'static str, data: &[T]) -> Result<(), VkRenderError> {
     let bytes = std::mem::size_of_val(data) as u64;
     let (limit_name, limit) = if info.max_storage_buffer_range <= info.max_memory_allocation {
         ("maxStorageBufferRange", info.max_storage_buffer_range)
@@ -617,7 +629,198 @@ fn fits<T>(info: &crate::device::DeviceInfo, what: &'static str, data: &[T]) -> 
     };
     if bytes > limit {
         let fits = limit / size_of::<T>().max(1) as u64;
-        return Err(RenderError::SceneTooLarge { what, bytes, limit_name, limit, fits });
+        return Err(VkRenderError::SceneTooLarge { what, bytes, limit_name, limit, fits });
     }
     Ok(())
+}
+
+/// The layout contract between the Rust records and common.wgsl, read from naga's own layout of a
+/// kernel module: every shared struct's size, array stride and field offsets, and the binding table.
+#[cfg(test)]
+mod layout_contract {
+    use super::*;
+    use bvh_format::{Material, Node, Triangle};
+    use naga::proc::Layouter;
+    use std::mem::{offset_of, size_of};
+
+    /// A kernel with every feature present, so that every struct and binding is declared.
+    fn module() -> naga::Module {
+        let spec = Specialisation {
+            method: Method::Lst,
+            stack_size: 23,
+            leaf_size: 8,
+            workgroup: (8, 8),
+            reflection: true,
+            refraction: true,
+            smooth: true,
+        };
+        naga::front::wgsl::parse_str(&kernels::source(Stage::Bounce, &spec)).expect("the kernel parses")
+    }
+
+    /// (size, array stride, alignment, [(field, offset)]) of the WGSL struct `name`.
+    fn wgsl_struct(m: &naga::Module, l: &Layouter, name: &str) -> (u32, u32, u32, Vec<(String, u32)>) {
+        let (h, ty) =
+            m.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).unwrap_or_else(|| panic!("no {name}"));
+        let naga::TypeInner::Struct { members, span } = &ty.inner else { panic!("{name} is not a struct") };
+        let fields = members.iter().map(|f| (f.name.clone().unwrap_or_default(), f.offset)).collect();
+        (*span, l[h].to_stride(), l[h].alignment.round_up(1), fields)
+    }
+
+    /// Asserts that the WGSL struct `name` is `size` bytes, strides by `size` in an array (so a
+    /// Rust slice uploads as is) and has exactly `fields` at those byte offsets.
+    fn check(m: &naga::Module, l: &Layouter, name: &str, size: usize, fields: &[(&str, usize)]) {
+        let (span, stride, align, wgsl) = wgsl_struct(m, l, name);
+        assert_eq!(span as usize, size, "{name}: {span} bytes in WGSL, {size} in Rust");
+        assert_eq!(stride as usize, size, "{name}: array stride {stride} in WGSL (alignment {align}), {size} in Rust");
+        let wgsl: Vec<(&str, usize)> = wgsl.iter().map(|(n, o)| (n.as_str(), *o as usize)).collect();
+        assert_eq!(wgsl, fields, "{name}: fields and offsets (WGSL left, Rust right)");
+    }
+
+    #[test]
+    fn every_record_shared_with_wgsl_has_the_rust_size_and_offsets() {
+        let m = module();
+        let mut l = Layouter::default();
+        l.update(m.to_ctx()).expect("naga lays the module out");
+        check(
+            &m,
+            &l,
+            "Node",
+            size_of::<Node>(),
+            &[
+                ("min", offset_of!(Node, min)),
+                ("count", offset_of!(Node, count)),
+                ("max", offset_of!(Node, max)),
+                ("index", offset_of!(Node, index)),
+            ],
+        );
+        check(
+            &m,
+            &l,
+            "Tri",
+            size_of::<Triangle>(),
+            &[
+                ("p0", offset_of!(Triangle, p0)),
+                ("material", offset_of!(Triangle, material)),
+                ("p1", offset_of!(Triangle, p1)),
+                ("pad1", offset_of!(Triangle, _pad1)),
+                ("p2", offset_of!(Triangle, p2)),
+                ("pad2", offset_of!(Triangle, _pad2)),
+            ],
+        );
+        check(
+            &m,
+            &l,
+            "Material",
+            size_of::<Material>(),
+            &[
+                ("kd_n", offset_of!(Material, kd)),
+                ("ks_kr", offset_of!(Material, ks)),
+                ("kt_ior", offset_of!(Material, kt)),
+            ],
+        );
+        assert_eq!(offset_of!(Material, shininess), offset_of!(Material, kd) + 12, "shininess is kd_n.w");
+        assert_eq!(offset_of!(Material, kr), offset_of!(Material, ks) + 12, "kr is ks_kr.w");
+        assert_eq!(offset_of!(Material, ior), offset_of!(Material, kt) + 4, "ior is kt_ior.y");
+        check(
+            &m,
+            &l,
+            "Light",
+            size_of::<Light>(),
+            &[("position", offset_of!(Light, position)), ("colour", offset_of!(Light, colour))],
+        );
+        check(
+            &m,
+            &l,
+            "Frame",
+            size_of::<FrameData>(),
+            &[
+                ("eye", offset_of!(FrameData, eye)),
+                ("top_left", offset_of!(FrameData, top_left)),
+                ("h_step", offset_of!(FrameData, h_step)),
+                ("v_step", offset_of!(FrameData, v_step)),
+                ("ambient", offset_of!(FrameData, ambient)),
+                ("background", offset_of!(FrameData, background)),
+                ("size", offset_of!(FrameData, size)),
+                ("stop", offset_of!(FrameData, stop)),
+                ("tile", offset_of!(FrameData, tile)),
+            ],
+        );
+        let pad = offset_of!(PassData, pad);
+        check(
+            &m,
+            &l,
+            "Pass",
+            size_of::<PassData>(),
+            &[
+                ("light", offset_of!(PassData, light)),
+                ("depth", offset_of!(PassData, depth)),
+                ("pad0", pad),
+                ("pad1", pad + 4),
+            ],
+        );
+        assert_eq!(size_of::<PassData>(), kernels::PASS_BYTES as usize, "the push-constant range");
+        // Per-pixel records the host only sizes and reads back as words.
+        let size = |name: &str| wgsl_struct(&m, &l, name).1 as u64;
+        assert_eq!(size("PathRay"), PATH_BYTES);
+        assert_eq!(size("HitRec"), HIT_BYTES);
+        assert_eq!(size("Aov"), AOV_BYTES);
+        let w = |k: usize| 4 * k;
+        check(
+            &m,
+            &l,
+            "Aov",
+            AOV_BYTES as usize,
+            &[
+                ("normal", w(aov_word::NORMAL)),
+                ("t", w(aov_word::T)),
+                ("prim", w(aov_word::PRIM)),
+                ("nodes", w(aov_word::NODES)),
+                ("tris", w(aov_word::TRIS)),
+            ],
+        );
+    }
+
+    #[test]
+    fn the_binding_table_matches_the_rust_side() {
+        let m = module();
+        let mut l = Layouter::default();
+        l.update(m.to_ctx()).expect("naga lays the module out");
+        let mut bound: Vec<(u32, String, u32)> = m
+            .global_variables
+            .iter()
+            .filter_map(|(_, g)| {
+                let b = g.binding.as_ref()?;
+                assert_eq!(b.group, 0, "{:?} is outside group 0", g.name);
+                assert!(matches!(g.space, naga::AddressSpace::Storage { .. }), "{:?} is not a storage buffer", g.name);
+                // The element stride of an array buffer, the size of a single record.
+                let stride = match &m.types[g.ty].inner {
+                    naga::TypeInner::Array { stride, .. } => *stride,
+                    _ => l[g.ty].size,
+                };
+                Some((b.binding, g.name.clone().unwrap_or_default(), stride))
+            })
+            .collect();
+        bound.sort();
+        let names: Vec<&str> = bound.iter().map(|(_, n, _)| n.as_str()).collect();
+        assert_eq!(names, BINDING_NAMES, "binding names in order (WGSL left)");
+        let numbers: Vec<u32> = bound.iter().map(|(b, _, _)| *b).collect();
+        assert_eq!(numbers, (0..BINDINGS).collect::<Vec<_>>(), "bindings are 0..{BINDINGS} without gaps");
+        let stride = |name: &str| bound.iter().find(|(_, n, _)| n == name).expect("bound").2 as u64;
+        assert_eq!(stride("frame"), size_of::<FrameData>() as u64);
+        assert_eq!(stride("nodes"), size_of::<Node>() as u64);
+        assert_eq!(stride("tris"), size_of::<Triangle>() as u64);
+        // Three words per triangle and three floats per normal (SceneArrays uploads [u32; 3] and
+        // [f32; 3]).
+        assert_eq!(stride("normal_indices") * 3, size_of::<[u32; 3]>() as u64);
+        assert_eq!(stride("normals") * 3, size_of::<[f32; 3]>() as u64);
+        assert_eq!(stride("materials"), size_of::<Material>() as u64);
+        assert_eq!(stride("lights"), size_of::<Light>() as u64);
+        assert_eq!(stride("input_index"), 4);
+        assert_eq!(stride("paths"), PATH_BYTES);
+        assert_eq!(stride("hits"), HIT_BYTES);
+        assert_eq!(stride("accum"), ACCUM_BYTES);
+        assert_eq!(stride("aovs"), AOV_BYTES);
+        assert_eq!(stride("image"), IMAGE_BYTES);
+        assert_eq!(stride("counters"), 4);
+    }
 }

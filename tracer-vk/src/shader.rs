@@ -1,4 +1,4 @@
-//! WGSL to SPIR-V inside the program (DESIGN.md section 6; device.md "naga 30").
+//! WGSL to SPIR-V inside the program (docs/vulkan-tracer.md, "Kernels").
 //!
 //! naga's SPIR-V writer has no specialization constants, so `override`s are resolved here, before
 //! writing: every distinct set of override values is its own SPIR-V module (about a millisecond).

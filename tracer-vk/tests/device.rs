@@ -24,16 +24,9 @@ fn finish(gpu: Gpu) {
     assert_clean(&log, "at teardown");
 }
 
-/// xorshift64*: a few MB of bytes that are not all alike, without a dependency.
-fn random_bytes(n: usize, mut seed: u64) -> Vec<u8> {
-    (0..n)
-        .map(|_| {
-            seed ^= seed >> 12;
-            seed ^= seed << 25;
-            seed ^= seed >> 27;
-            (seed.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 56) as u8
-        })
-        .collect()
+/// A few MB of bytes that are not all alike.
+fn random_bytes(n: usize, seed: u64) -> Vec<u8> {
+    tests::Rng(seed).bytes(n)
 }
 
 const DOUBLE: &str = r#"

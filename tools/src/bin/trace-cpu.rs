@@ -4,10 +4,9 @@ use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
 use std::time::Instant;
 use tools::cli::{duration, rays_per_second};
-use tools::output::{self, Frame, Heatmap};
 use tools::render_args::{RenderArgs, parse_count};
 use tools::say;
-use tracer_cpu::{Method, RenderSettings, Tracer};
+use tracer_cpu::{Method, Tracer};
 
 #[derive(Parser)]
 #[command(name = "trace-cpu", version, about = "Ray cast or Whitted ray trace a BVH scene file on the CPU.")]
@@ -54,21 +53,12 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     let outputs = args.check()?;
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
-    let camera = args.camera(scene)?;
-    let settings = RenderSettings {
-        width: args.res.0,
-        height: args.res.1,
-        camera,
-        mode: args.mode(),
-        lights: args.lights(scene, &camera),
-        max_indirections: args.indirections(scene),
-        method: match method {
-            MethodArg::Auto => Method::Auto,
-            MethodArg::Packet => Method::Packet,
-            MethodArg::Ordered => Method::Ordered,
-            MethodArg::Stackless => Method::Stackless,
-        },
-        aovs: args.aov.is_some() || args.heatmap.is_some(),
+    let settings = args.settings(scene)?;
+    let method = match method {
+        MethodArg::Auto => Method::Auto,
+        MethodArg::Packet => Method::Packet,
+        MethodArg::Ordered => Method::Ordered,
+        MethodArg::Stackless => Method::Stackless,
     };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.unwrap_or(0))
@@ -76,12 +66,11 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
         .map_err(|e| format!("cannot start the worker threads: {e}"))?;
     let tracer = Tracer::new(scene);
     let t0 = Instant::now();
-    let image = pool.install(|| tracer_cpu::render(&tracer, &settings)).map_err(|e| e.to_string())?;
+    let image = pool.install(|| tracer_cpu::render(&tracer, &settings, method)).map_err(|e| e.to_string())?;
     let seconds = t0.elapsed().as_secs_f64();
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
-    let frame = Frame { width: image.width, height: image.height, rgb: &image.rgb };
-    output::write_image(&outputs.image, &frame).map_err(|e| e.to_string())?;
+    let written = outputs.write(&image, args.heatmap_max)?;
     let mut lines = Vec::new();
     let r = image.rays;
     lines.push(format!(
@@ -89,28 +78,17 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
         image.width,
         image.height,
         settings.mode,
-        settings.method.resolve(scene),
+        method.resolve(scene),
         pool.current_num_threads(),
         duration(seconds),
         loaded.timing_note(),
         r.primary,
         r.shadow,
         r.secondary,
-        rays_per_second(r.primary + r.shadow + r.secondary, seconds),
+        rays_per_second(r.total(), seconds),
         outputs.image.path.display()
     ));
-    if let Some(aov) = &image.aov {
-        if let Some(out) = &outputs.heatmap {
-            let h = Heatmap::new(image.width, image.height, &aov.nodes, args.heatmap_max);
-            output::write_heatmap(out, &h).map_err(|e| e.to_string())?;
-            lines.push(tools::render_args::heatmap_line(&h, out));
-        }
-        if let Some(out) = &outputs.aov {
-            output::write_aov(out, image.width, image.height, aov).map_err(|e| e.to_string())?;
-            lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", out.path.display()));
-        }
-    }
-    for line in lines {
+    for line in lines.into_iter().chain(written) {
         say!("{line}");
     }
     Ok(())

@@ -1,14 +1,15 @@
 //! `trace-vk`: renders a scene file with the Vulkan compute tracer on any Vulkan device.
 
 use clap::{Parser, Subcommand, ValueEnum};
+use render_spec::{Mode, RayCounts, Settings};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use tools::cli::{Progress, duration, rays_per_second};
-use tools::output::{self, Frame, Heatmap, Kind};
+use tools::output::{self, Kind};
 use tools::render_args::{RenderArgs, lights_n, parse_count, parse_res, parse_workgroup};
 use tools::say;
 use tracer_vk::kernels::Method;
-use tracer_vk::render::{Mode, Renderer, Settings};
+use tracer_vk::render::Renderer;
 use tracer_vk::{Gpu, list_devices};
 
 #[derive(Parser)]
@@ -151,56 +152,37 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let outputs = args.check()?;
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
-    let camera = args.camera(scene)?;
-    let settings = Settings {
-        width: args.res.0,
-        height: args.res.1,
-        camera,
-        mode: match args.mode() {
-            tracer_cpu::Mode::Cast => Mode::Cast,
-            tracer_cpu::Mode::Whitted => Mode::Whitted,
-        },
-        lights: args.lights(scene, &camera),
-        max_indirections: args.indirections(scene),
-    };
+    let settings = args.settings(scene)?;
     let method = method_of(method);
     let gpu = open(device)?;
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
     let pixels = u64::from(settings.width) * u64::from(settings.height);
     let bar = Progress::new(pixels, "rendering {bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
-    let per_pixel = outputs.heatmap.is_some() || outputs.aov.is_some();
     let out = bar
-        .ticking(|| renderer.render_with_progress(&settings, true, per_pixel, &mut |p| bar.set_position(p.pixels_done)))
+        .ticking(|| renderer.render_with_progress(&settings, true, &mut |p| bar.set_position(p.pixels_done)))
         .map_err(|e| e.to_string())?;
     check_validation(&gpu)?;
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
-    output::write_image(&outputs.image, &Frame { width: out.width, height: out.height, rgb: &out.rgb })
-        .map_err(|e| e.to_string())?;
-    let [p, s, sec] = out.rays;
-    let mut lines = vec![format!(
-        "{}x{} {:?} with {} on {}: {} GPU{}, rays: {p} primary, {s} shadow, {sec} secondary ({}) -> {}",
-        out.width,
-        out.height,
+    let image = &out.image;
+    let written = outputs.write(image, args.heatmap_max)?;
+    let r = image.rays;
+    let lines = vec![format!(
+        "{}x{} {:?} with {} on {}: {} GPU{}, rays: {} primary, {} shadow, {} secondary ({}) -> {}",
+        image.width,
+        image.height,
         settings.mode,
         method.name(),
         gpu.info().name,
         duration(out.gpu_ms / 1e3),
         loaded.timing_note(),
-        rays_per_second(p + s + sec, out.gpu_ms / 1e3),
+        r.primary,
+        r.shadow,
+        r.secondary,
+        rays_per_second(r.total(), out.gpu_ms / 1e3),
         outputs.image.path.display()
     )];
-    if let Some(o) = &outputs.heatmap {
-        let h = Heatmap::new(out.width, out.height, &out.nodes, args.heatmap_max);
-        output::write_heatmap(o, &h).map_err(|e| e.to_string())?;
-        lines.push(tools::render_args::heatmap_line(&h, o));
-    }
-    if let Some(o) = &outputs.aov {
-        let aov = tracer_cpu::Aovs { t: out.t, normal: out.normal, prim: out.prim, nodes: out.nodes, tris: out.tris };
-        output::write_aov(o, out.width, out.height, &aov).map_err(|e| e.to_string())?;
-        lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", o.path.display()));
-    }
-    for line in lines {
+    for line in lines.into_iter().chain(written) {
         say!("{line}");
     }
     Ok(())
@@ -290,19 +272,20 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                             mode,
                             lights: lights_n(&scene, nl, &camera),
                             max_indirections: scene.settings.max_indirections,
+                            aovs: false,
                         };
                         let mut times = Vec::with_capacity(b.frames);
-                        let mut rays = [0u64; 3];
+                        let mut rays = RayCounts::default();
                         for i in 0..b.warmup + b.frames {
                             let out = renderer.render_frame(&settings, false).map_err(|e| e.to_string())?;
                             if i >= b.warmup {
                                 times.push(out.gpu_ms);
-                                rays = out.rays;
+                                rays = out.image.rays;
                             }
                         }
                         let min = times.iter().copied().fold(f64::INFINITY, f64::min);
                         let med = median(&mut times);
-                        let all_rays = rays[0] + rays[1] + rays[2];
+                        let all_rays = rays.total();
                         let mrays = all_rays as f64 / med / 1e3;
                         let mode_name = match mode {
                             Mode::Cast => "cast".to_owned(),
@@ -312,17 +295,17 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                             "{name},{},{cam},{w},{h},{mode_name},{nl},{},{med:.4},{min:.4},{},{},{},{mrays:.4}",
                             scene.triangles.len(),
                             method.name(),
-                            rays[0],
-                            rays[1],
-                            rays[2]
+                            rays.primary,
+                            rays.shadow,
+                            rays.secondary
                         ));
                         md.push(format!(
                             "| {name} | {cam} | {w}x{h} | {mode_name} | {} | {med:.3} | {} | {} | {} | {} |",
                             method.name(),
                             rays_per_second(all_rays, med / 1e3),
-                            rays[0],
-                            rays[1],
-                            rays[2]
+                            rays.primary,
+                            rays.shadow,
+                            rays.secondary
                         ));
                         bar.inc(1);
                     }

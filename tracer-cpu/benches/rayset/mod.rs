@@ -9,12 +9,13 @@
 use bvh_format::SceneFile;
 use glam::Vec3;
 use rayon::prelude::*;
+use render_spec::CameraSpec;
 use std::path::Path;
 use std::time::Instant;
 use tracer_cpu::geometry::{Cost, Ray, offset_origin};
 use tracer_cpu::packet::{self, LANES, Rays};
 use tracer_cpu::traverse::Stack;
-use tracer_cpu::{CameraSpec, Method, Tracer, shade};
+use tracer_cpu::{Method, Tracer, shade};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {

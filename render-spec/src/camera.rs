@@ -1,5 +1,5 @@
-//! The camera convention of DESIGN.md section 7 (docs/shading.md), shared by every tracer and
-//! tool so that all of them shoot exactly the same primary rays.
+//! Primary rays from a camera: the convention of docs/shading.md ("Camera"), shared by every tracer
+//! and tool so that all of them shoot exactly the same primary rays.
 
 use glam::Vec3;
 
@@ -12,8 +12,8 @@ pub struct CameraSpec {
     pub fov_deg: f32,
 }
 
-impl From<&crate::Camera> for CameraSpec {
-    fn from(c: &crate::Camera) -> Self {
+impl From<&bvh_format::Camera> for CameraSpec {
+    fn from(c: &bvh_format::Camera) -> Self {
         Self { eye: c.eye.into(), at: c.at.into(), up: c.up.into(), fov_deg: c.fov_deg }
     }
 }

@@ -1,0 +1,37 @@
+//! The render errors both tracers report: the same mistake gets the same sentence from each.
+
+/// Why an image cannot be rendered, whichever tracer renders it. One sentence each.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RenderError {
+    #[error("the image must be at least 1 x 1 pixels")]
+    EmptyImage,
+    #[error("the camera is degenerate: the eye is on the look-at point or the up vector is parallel to the view")]
+    DegenerateCamera,
+    #[error("the field of view must lie between 0 and 180 degrees, not {0}")]
+    FieldOfView(f32),
+    #[error("{0} indirections are more than the {max} a frame may trace", max = crate::settings::MAX_INDIRECTIONS)]
+    TooManyIndirections(u32),
+    #[error(
+        "the {method} traversal needs the {layout} layout, which the scene file does not contain (compile it with --layout both)"
+    )]
+    MissingLayout { method: &'static str, layout: &'static str },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_message_is_one_sentence() {
+        for e in [
+            RenderError::EmptyImage,
+            RenderError::DegenerateCamera,
+            RenderError::FieldOfView(180.0),
+            RenderError::TooManyIndirections(2000),
+            RenderError::MissingLayout { method: "stackless", layout: "escape-pointer" },
+        ] {
+            let s = e.to_string();
+            assert!(!s.contains('\n') && !s.ends_with('.') && !s.starts_with(char::is_uppercase), "{s}");
+        }
+    }
+}

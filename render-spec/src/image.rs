@@ -1,0 +1,54 @@
+//! What a tracer hands back: the 8-bit image, the per-pixel outputs (AOVs) and the rays traced.
+
+/// Per-pixel outputs besides the colour, row-major from the top-left pixel (docs/shading.md,
+/// "Output").
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Aovs {
+    /// Distance to the primary hit; +inf on a miss.
+    pub t: Vec<f32>,
+    /// Shading normal at the primary hit, facing the camera; zero on a miss.
+    pub normal: Vec<[f32; 3]>,
+    /// Index of the primary hit's triangle in the input scene; [`crate::NO_TRIANGLE`] on a miss.
+    pub prim: Vec<u32>,
+    /// Node boxes tested, over every ray of the pixel.
+    pub nodes: Vec<u32>,
+    /// Triangles tested, over every ray of the pixel.
+    pub tris: Vec<u32>,
+}
+
+/// Rays traced, by kind.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayCounts {
+    pub primary: u64,
+    pub shadow: u64,
+    pub secondary: u64,
+}
+
+impl RayCounts {
+    pub fn total(&self) -> u64 {
+        self.primary + self.shadow + self.secondary
+    }
+}
+
+impl std::ops::Add for RayCounts {
+    type Output = RayCounts;
+    fn add(self, o: RayCounts) -> RayCounts {
+        RayCounts {
+            primary: self.primary + o.primary,
+            shadow: self.shadow + o.shadow,
+            secondary: self.secondary + o.secondary,
+        }
+    }
+}
+
+/// A rendered image.
+#[derive(Clone, Debug)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    /// 8-bit RGB, row-major from the top-left pixel.
+    pub rgb: Vec<[u8; 3]>,
+    /// Present when [`crate::Settings::aovs`] asked for it.
+    pub aov: Option<Aovs>,
+    pub rays: RayCounts,
+}

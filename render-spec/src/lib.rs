@@ -1,0 +1,23 @@
+//! What both tracers mean identically, defined once: the render [`Settings`] and their [`Mode`],
+//! the [`RenderError`]s both report, the [`Image`] with its [`Aovs`] and [`RayCounts`], the
+//! camera's primary rays ([`camera`]), the adaptive bounce stop ([`bounce`]), sample sequences
+//! ([`sequence`]) and the numeric constants of the shading contract ([`constants`], with the WGSL
+//! header the Vulkan kernels are prepended with).
+//!
+//! The shading definition itself is `docs/shading.md`. Dependency direction: the tracers depend on
+//! this crate, this crate on `bvh-format` (for lights, materials and stored cameras).
+
+pub mod bounce;
+pub mod camera;
+pub mod constants;
+mod error;
+mod image;
+pub mod sequence;
+mod settings;
+
+pub use bounce::BounceStop;
+pub use camera::{CameraSpec, Frame};
+pub use constants::NO_TRIANGLE;
+pub use error::RenderError;
+pub use image::{Aovs, Image, RayCounts};
+pub use settings::{MAX_INDIRECTIONS, Mode, Settings};
