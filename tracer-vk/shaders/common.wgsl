@@ -1,7 +1,7 @@
 // Shared by every kernel: the scene's data, the frame's state, and the intersection and shading
 // arithmetic of docs/shading.md. The host prepends the shading contract's constants (T_SLACK,
-// OFFSET_*, STOP_*, NO_TRIANGLE, F32_MAX, generated from render_spec::constants, where each is
-// defined and explained) and the per-scene constants STACK_SIZE, LEAF_SIZE, WG_X and WG_Y, and
+// OFFSET_*, STOP_*, NO_TRIANGLE, FLAT_NORMAL, F32_MAX, generated from render_spec::constants,
+// where each is defined and explained) and the per-scene constants STACK_SIZE, LEAF_SIZE, WG_X and WG_Y, and
 // strips the blocks between `//#if FEATURE` and `//#endif` for features the scene lacks.
 
 struct Node {
@@ -82,7 +82,7 @@ struct Pass {
 @group(0) @binding(0) var<storage, read> frame: Frame;
 @group(0) @binding(1) var<storage, read> nodes: array<Node>;
 @group(0) @binding(2) var<storage, read> tris: array<Tri>;
-// Three normal indices per triangle (all NO_HIT for a flat one) and three floats per normal; read
+// Three normal indices per triangle (all FLAT_NORMAL for a flat one) and three floats per normal; read
 // only when the scene has smooth triangles (feature SMOOTH), else one-entry placeholders.
 @group(0) @binding(3) var<storage, read> normal_indices: array<u32>;
 @group(0) @binding(4) var<storage, read> normals: array<f32>;
@@ -257,7 +257,7 @@ fn surface_at(r: Ray, h: HitRec) -> Surface {
     var shading = geometric;
 //#if SMOOTH
     let ni = 3u * h.tri;
-    if normal_indices[ni] != NO_HIT {
+    if normal_indices[ni] != FLAT_NORMAL {
         let n0 = vertex_normal(normal_indices[ni]);
         let n1 = vertex_normal(normal_indices[ni + 1u]);
         let n2 = vertex_normal(normal_indices[ni + 2u]);
