@@ -18,8 +18,8 @@
 use bvh_build::Scene;
 use bvh_build::import::shapes;
 use bvh_format::{Camera, Material, SceneFile, Triangle};
-use render_spec::{CameraSpec, Mode, NO_TRIANGLE, Settings};
 use glam::{DVec3, Vec3};
+use render_spec::{CameraSpec, Mode, NO_TRIANGLE, Settings};
 use std::collections::HashMap;
 use tracer_cpu::geometry::{Ray, intersect, intersect_moller_trumbore};
 use tracer_cpu::reference::intersect64;
