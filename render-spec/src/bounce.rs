@@ -30,6 +30,12 @@ impl BounceStop {
     /// included), can still change an 8-bit pixel: the most the chain can add is
     /// `w * bound * (1 + k + k^2 + ... )` over `remaining` terms, with `k` the largest kr or kt.
     pub fn worth_tracing(&self, w: f32, remaining: u32) -> bool {
+        w * self.bound * self.chain(remaining) >= STOP_CONTRIBUTION
+    }
+
+    /// The sum `1 + k + k^2 + ...` of [`Self::worth_tracing`] over `remaining` terms, stopping once
+    /// the terms are negligible. Public for tracers that test many weights at one depth at once.
+    pub fn chain(&self, remaining: u32) -> f32 {
         let mut chain = 0.0f32;
         let mut f = 1.0f32;
         for _ in 0..remaining {
@@ -39,7 +45,7 @@ impl BounceStop {
                 break;
             }
         }
-        w * self.bound * chain >= STOP_CONTRIBUTION
+        chain
     }
 }
 

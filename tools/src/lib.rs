@@ -2,6 +2,7 @@
 //! built-in bunny included), the render options every tracer takes ([`render_args`]), and
 //! writing every output safely ([`output`]).
 
+pub mod bench;
 pub mod cli;
 pub mod output;
 pub mod render_args;
@@ -75,4 +76,15 @@ pub fn load_scene(path: Option<&Path>) -> Result<LoadedScene, String> {
         Some(p) => (compile_default(p)?, true),
     };
     Ok(LoadedScene { file, compile_seconds: compiled.then(|| t0.elapsed().as_secs_f64()) })
+}
+
+/// The CPU's model name, for benchmark tables ("?" where the system does not say).
+pub fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            let line = s.lines().find(|l| l.starts_with("model name"))?;
+            Some(line.split_once(':')?.1.trim().to_owned())
+        })
+        .unwrap_or_else(|| "?".to_owned())
 }

@@ -236,21 +236,21 @@ fn added_lights_stay_inside_a_closed_room() {
     }
 }
 
-/// `trace-vk bench --csv` is checked before any scene is read or any frame is timed, and an
-/// existing table survives a refused run.
+/// `bench --csv` of both tracers is checked before any scene is read or any frame is timed, and
+/// an existing table survives a refused run.
 #[test]
 fn bench_checks_its_table_before_work() {
     let dir = scratch("bench-csv");
     std::fs::write(dir.join("old.csv"), b"kept").unwrap();
     let before = snapshot(&dir);
-    let bench = ["bench", "no-such-scene.bvh", "--res", "8x8", "--frames", "1", "--methods", "lst", "--modes", "cast"];
-    for (csv, needle) in [("missing/b.csv", "the folder missing does not exist"), ("b.txt", "--csv b.txt")] {
-        let args = [&bench[..], &["--csv", csv]].concat();
-        assert_one_sentence_error(&run(&dir, "trace-vk", &args), needle);
+    for (tool, method) in [("trace-vk", "lst"), ("trace-cpu", "ordered")] {
+        let bench =
+            ["bench", "no-such-scene.bvh", "--res", "8x8", "--frames", "1", "--methods", method, "--modes", "cast"];
+        for (csv, needle) in [("missing/b.csv", "the folder missing does not exist"), ("b.txt", "--csv b.txt")] {
+            let args = [&bench[..], &["--csv", csv]].concat();
+            assert_one_sentence_error(&run(&dir, tool, &args), needle);
+        }
+        assert_one_sentence_error(&run(&dir, tool, &[&bench[..], &["--csv", "old.csv"]].concat()), "no-such-scene.bvh");
     }
-    assert_one_sentence_error(
-        &run(&dir, "trace-vk", &[&bench[..], &["--csv", "old.csv"]].concat()),
-        "no-such-scene.bvh",
-    );
     assert_eq!(snapshot(&dir), before);
 }

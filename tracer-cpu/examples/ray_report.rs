@@ -134,27 +134,13 @@ fn sh(cmd: &str, args: &[&str]) -> String {
         .unwrap_or_default()
 }
 
-fn loadavg() -> String {
-    std::fs::read_to_string("/proc/loadavg")
-        .map_or("?".into(), |s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
-}
-
-fn cpu_model() -> String {
-    std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|s| {
-            s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_owned())
-        })
-        .unwrap_or_else(|| "?".into())
-}
-
 fn main() {
     let opts = parse_args().unwrap_or_else(|e| {
         eprintln!("ray_report: {e}");
         std::process::exit(2)
     });
     let started = Instant::now();
-    let load_before = loadavg();
+    let load_before = rayset::loadavg();
     let pools: Vec<_> = opts
         .threads
         .iter()
@@ -310,9 +296,9 @@ fn markdown(
     let nproc = std::thread::available_parallelism().map_or(0, |n| n.get());
     let command: Vec<String> = std::env::args().collect();
     s.push_str(PREFACE);
-    let _ = writeln!(s, "## {} ({nproc} threads), {date}\n", cpu_model());
-    let _ = writeln!(s, "- Machine: `{host}`, CPU `{}`, `nproc` = {nproc}, {}", cpu_model(), simd_flags());
-    let _ = writeln!(s, "- Load average (1, 5, 15 min): {load_before} before, {} after", loadavg());
+    let _ = writeln!(s, "## {} ({nproc} threads), {date}\n", rayset::cpu_model());
+    let _ = writeln!(s, "- Machine: `{host}`, CPU `{}`, `nproc` = {nproc}, {}", rayset::cpu_model(), simd_flags());
+    let _ = writeln!(s, "- Load average (1, 5, 15 min): {load_before} before, {} after", rayset::loadavg());
     let _ = writeln!(s, "- Command: `{}` ({seconds:.0} s in all)", command.join(" "));
     let _ = writeln!(
         s,

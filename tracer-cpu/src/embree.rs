@@ -138,16 +138,15 @@ impl Scene {
     }
 
     fn packet(rays: &Rays) -> (Valid, RTCRay8) {
-        let r = &rays.rays;
         let valid = Valid(std::array::from_fn(|i| if rays.valid[i] { -1 } else { 0 }));
         let ray = RTCRay8 {
-            org_x: std::array::from_fn(|i| r[i].origin.x),
-            org_y: std::array::from_fn(|i| r[i].origin.y),
-            org_z: std::array::from_fn(|i| r[i].origin.z),
+            org_x: rays.origin[0],
+            org_y: rays.origin[1],
+            org_z: rays.origin[2],
             tnear: [0.0; LANES],
-            dir_x: std::array::from_fn(|i| r[i].dir.x),
-            dir_y: std::array::from_fn(|i| r[i].dir.y),
-            dir_z: std::array::from_fn(|i| r[i].dir.z),
+            dir_x: rays.dir[0],
+            dir_y: rays.dir[1],
+            dir_z: rays.dir[2],
             time: [0.0; LANES],
             tfar: rays.t_max,
             mask: [u32::MAX; LANES],
@@ -222,7 +221,10 @@ mod tests {
             assert_eq!(s.intersect1(&Ray::new(Vec3::new(2.0, 2.0, 1.0), Vec3::NEG_Z), 0.0, f32::INFINITY), None);
             assert!(s.occluded1(&down, 1.5));
             assert!(!s.occluded1(&down, 0.5));
-            let mut p = Rays { rays: [down; LANES], valid: [true; LANES], t_max: [f32::INFINITY; LANES] };
+            let mut p = Rays::default();
+            for i in 0..LANES {
+                p.set(i, &down, f32::INFINITY);
+            }
             p.valid[3] = false;
             p.t_max[5] = 0.5;
             let hits = s.intersect8(&p);

@@ -180,7 +180,9 @@ pub fn offset_origin(p: Vec3, n: Vec3) -> Vec3 {
     let of_i = (n * OFFSET_INT_SCALE).as_ivec3();
     let step = |p: f32, o: i32| {
         let bits = p.to_bits() as i32;
-        f32::from_bits((if p < 0.0 { bits - o } else { bits + o }) as u32)
+        // Wrapping: the integer step is computed for every component, also for those near zero
+        // (where `pick` then takes the float step instead), whose bits can sit at `i32::MIN`.
+        f32::from_bits((if p < 0.0 { bits.wrapping_sub(o) } else { bits.wrapping_add(o) }) as u32)
     };
     let p_i = Vec3::new(step(p.x, of_i.x), step(p.y, of_i.y), step(p.z, of_i.z));
     let pick = |p: f32, n: f32, pi: f32| if p.abs() < OFFSET_ORIGIN { p + OFFSET_FLOAT_SCALE * n } else { pi };

@@ -5,19 +5,25 @@
 //! - [`traverse`]: scalar ordered child-pair traversal and stackless escape-pointer traversal.
 //! - [`packet`]: 8-wide AVX2 packets for coherent primary and shadow rays.
 //! - [`reference`]: the exact f64 brute-force closest hit tests compare against.
-//! - [`shade`] and [`render`]: ray casting and Whitted shading of whole images, with AOVs.
+//! - [`lanes`]: the rays of one stage of a 4 x 2 pixel block, traced as a packet or one by one.
+//! - [`shade`]: the shading formulas; [`whitted`]: the stages of ray casting and Whitted ray
+//!   tracing for a block of pixels.
+//! - [`render`]: whole images in parallel bands, written straight into the 8-bit image and AOVs.
 
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod geometry;
+pub mod lanes;
 pub mod packet;
 pub mod reference;
 pub mod render;
 pub mod shade;
 pub mod traverse;
+pub mod whitted;
+pub mod wide;
 
 pub use geometry::{Cost, Hit, Ray};
-pub use render::{Tracer, render};
+pub use render::{Tracer, render, render_with_progress};
 
 /// How rays find their closest hit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -1,18 +1,17 @@
 //! Coherent packets of 8 rays (a 4 x 2 pixel block) traced together with AVX2: one walk through
-//! the child-pair tree for all 8, each node's box and each leaf's triangles tested 8-wide. Used for
-//! primary rays and for the shadow rays of their hits; secondary rays go one by one.
+//! the child-pair tree for all 8, each node's box and each leaf's triangles tested 8-wide. The
+//! renderer traces every stage of a block this way (`lanes::Packets`); this module is the kernel
+//! alone.
 //!
 //! Every lane computes exactly what the scalar path computes, in the same order and without fused
 //! multiply-adds, so a packet finds bit-identical hits (a test holds it to that).
 
 use crate::geometry::{Cost, Hit, Ray};
-use crate::render::{Sample, Shading, Tracer, shade_pixel, shadow_query};
-use crate::traverse::Stack;
 use bvh_format::{Node, Triangle};
-use render_spec::{Frame, Mode};
+use glam::Vec3;
 
 /// Lanes of a packet.
-pub const LANES: usize = 8;
+pub use crate::wide::LANES;
 
 /// Whether this CPU runs the packet path.
 pub fn available() -> bool {
@@ -26,19 +25,77 @@ pub fn available() -> bool {
     }
 }
 
-/// Up to 8 rays; lanes with `valid[i] == false` take no part.
-#[derive(Clone, Copy)]
+/// Up to 8 rays, component by component across the lanes (as the kernel and the block shading
+/// read them); lanes with `valid[i] == false` take no part. The inverse directions are computed
+/// where they are needed (8-wide in the kernel, by [`Ray::new`] for one ray at a time).
+#[derive(Clone, Copy, Debug, Default)]
 pub struct Rays {
-    pub rays: [Ray; LANES],
-    pub valid: [bool; LANES],
+    pub origin: [[f32; LANES]; 3],
+    pub dir: [[f32; LANES]; 3],
     pub t_max: [f32; LANES],
+    pub valid: [bool; LANES],
 }
 
-/// The result for each lane: its closest (or, for any-hit, some) hit and its work.
-#[derive(Clone, Copy, Debug, Default)]
+impl Rays {
+    /// Puts `ray` with `t_max` into lane `i` and marks it valid.
+    pub fn set(&mut self, i: usize, ray: &Ray, t_max: f32) {
+        for a in 0..3 {
+            self.origin[a][i] = ray.origin[a];
+            self.dir[a][i] = ray.dir[a];
+        }
+        self.t_max[i] = t_max;
+        self.valid[i] = true;
+    }
+
+    /// The ray of lane `i`.
+    pub fn ray(&self, i: usize) -> Ray {
+        let v = |a: &[[f32; LANES]; 3]| Vec3::new(a[0][i], a[1][i], a[2][i]);
+        Ray::new(v(&self.origin), v(&self.dir))
+    }
+
+    /// Valid lanes.
+    pub fn count(&self) -> usize {
+        self.valid.iter().filter(|&&v| v).count()
+    }
+}
+
+/// The result for each lane, component by component: whether it hit (for any-hit: is blocked),
+/// the closest (or, for any-hit, some) hit's distance, triangle and barycentrics, and its work.
+#[derive(Clone, Copy, Debug)]
 pub struct Results {
-    pub hits: [Option<Hit>; LANES],
+    pub hit: [bool; LANES],
+    pub t: [f32; LANES],
+    pub tri: [u32; LANES],
+    pub u: [f32; LANES],
+    pub v: [f32; LANES],
     pub cost: [Cost; LANES],
+}
+
+impl Default for Results {
+    fn default() -> Self {
+        Self {
+            hit: [false; LANES],
+            t: [f32::INFINITY; LANES],
+            tri: [u32::MAX; LANES],
+            u: [0.0; LANES],
+            v: [0.0; LANES],
+            cost: [Cost::default(); LANES],
+        }
+    }
+}
+
+impl Results {
+    /// Lane `i`'s hit.
+    pub fn get(&self, i: usize) -> Option<Hit> {
+        self.hit[i].then(|| Hit { t: self.t[i], tri: self.tri[i], u: self.u[i], v: self.v[i] })
+    }
+
+    /// Sets lane `i`'s hit.
+    pub fn set(&mut self, i: usize, hit: Option<Hit>) {
+        if let Some(h) = hit {
+            (self.hit[i], self.t[i], self.tri[i], self.u[i], self.v[i]) = (true, h.t, h.tri, h.u, h.v);
+        }
+    }
 }
 
 /// Closest hits (`ANY == false`, `t_min` 0) or occlusion (`ANY == true`) for a packet. Only call
@@ -70,7 +127,7 @@ pub struct Entry {
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{Entry, LANES, Rays, Results};
-    use crate::geometry::{Cost, Hit};
+    use crate::geometry::Cost;
     use bvh_format::{Node, Triangle};
     use render_spec::constants::T_SLACK;
     use std::arch::x86_64::*;
@@ -227,15 +284,19 @@ mod avx2 {
 
     #[target_feature(enable = "avx2")]
     pub fn trace<const ANY: bool>(nodes: &[Node], tris: &[Triangle], rays: &Rays, stack: &mut Vec<Entry>) -> Results {
-        let r = &rays.rays;
-        let pk = Packet {
-            o: [lanes(|i| r[i].origin.x), lanes(|i| r[i].origin.y), lanes(|i| r[i].origin.z)],
-            d: [lanes(|i| r[i].dir.x), lanes(|i| r[i].dir.y), lanes(|i| r[i].dir.z)],
-            inv: [lanes(|i| r[i].inv_dir.x), lanes(|i| r[i].inv_dir.y), lanes(|i| r[i].inv_dir.z)],
+        let load = |a: &[f32; LANES]| {
+            // SAFETY: `a` holds 8 floats.
+            unsafe { _mm256_loadu_ps(a.as_ptr()) }
         };
+        let o = [load(&rays.origin[0]), load(&rays.origin[1]), load(&rays.origin[2])];
+        let d = [load(&rays.dir[0]), load(&rays.dir[1]), load(&rays.dir[2])];
+        // `Ray::new`'s reciprocal, 8-wide: the same correctly rounded division.
+        let one = splat(1.0);
+        let inv = [_mm256_div_ps(one, d[0]), _mm256_div_ps(one, d[1]), _mm256_div_ps(one, d[2])];
+        let pk = Packet { o, d, inv };
         // Lanes still looking: valid ones, minus (for any-hit) those already blocked.
         let mut alive = lanes(|i| if rays.valid[i] { f32::from_bits(u32::MAX) } else { 0.0 });
-        let mut best_t = lanes(|i| rays.t_max[i]);
+        let mut best_t = load(&rays.t_max);
         let mut best_tri = _mm256_set1_epi32(-1);
         let mut best_u = _mm256_setzero_ps();
         let mut best_v = _mm256_setzero_ps();
@@ -335,89 +396,15 @@ mod avx2 {
             }
         }
 
-        let (t, u, v) = (to_array(best_t), to_array(best_u), to_array(best_v));
-        let (tri, hit) = (to_array_i(best_tri), to_array(hit_any));
+        let (hit, tri) = (to_array(hit_any), to_array_i(best_tri));
         let (nn, nt) = (to_array_i(n_nodes), to_array_i(n_tris));
-        let mut out = Results::default();
+        let mut out = Results { t: to_array(best_t), u: to_array(best_u), v: to_array(best_v), ..Results::default() };
+        // A loop, not `array::from_fn`: its closure would not be compiled for AVX2 nor inlined.
         for i in 0..LANES {
-            if hit[i].to_bits() != 0 {
-                out.hits[i] = Some(Hit { t: t[i], tri: tri[i] as u32, u: u[i], v: v[i] });
-            }
+            out.hit[i] = hit[i].to_bits() != 0;
+            out.tri[i] = tri[i] as u32;
             out.cost[i] = Cost { nodes: nn[i] as u32, tris: nt[i] as u32 };
         }
         out
-    }
-}
-
-/// Renders one or two rows (`rows` holds them, `w` pixels each) in 4 x 2 packets.
-pub(crate) fn render_rows(
-    tracer: &Tracer<'_>,
-    sh: &Shading<'_>,
-    frame: &Frame,
-    y0: u32,
-    rows: &mut [Sample],
-    w: usize,
-    stack: &mut Stack,
-) {
-    let nodes = tracer.scene.child_pair.as_deref().expect("render checked the layout");
-    let tris = &tracer.tris;
-    let h = rows.len() / w;
-    let mut pstack = Vec::with_capacity(128);
-    let lights = sh.lights;
-    let shadow_lights = if sh.mode == Mode::Whitted { lights.len() } else { 0 };
-    // Lane-major, so each lane hands shade_pixel one slice; allocated once for all packets.
-    let mut shadowed = vec![false; LANES * shadow_lights];
-    let mut x0 = 0usize;
-    while x0 < w {
-        let lane_xy = |i: usize| (x0 + i % 4, i / 4);
-        let mut valid = [false; LANES];
-        let mut rays = [Ray::new(frame.eye, glam::Vec3::Z); LANES];
-        for (i, (v, r)) in valid.iter_mut().zip(rays.iter_mut()).enumerate() {
-            let (x, dy) = lane_xy(i);
-            *v = x < w && dy < h;
-            if *v {
-                *r = Ray::new(frame.eye, frame.direction(x as u32, y0 + dy as u32));
-            }
-        }
-        let primary = trace::<false>(nodes, tris, &Rays { rays, valid, t_max: [f32::INFINITY; LANES] }, &mut pstack);
-
-        // Shadow rays of the primary hits, one packet per light.
-        shadowed.fill(false);
-        let mut extra = [Cost::default(); LANES];
-        let mut shadow_rays = [0u64; LANES];
-        for (li, light) in lights.iter().enumerate().take(shadow_lights) {
-            let mut srays = Rays { rays, valid: [false; LANES], t_max: [0.0; LANES] };
-            for i in 0..LANES {
-                let Some(hit) = primary.hits[i].filter(|_| valid[i]) else { continue };
-                if let (_, Some((ray, t_max))) = shadow_query(tracer, &rays[i], &hit, light) {
-                    srays.rays[i] = ray;
-                    srays.t_max[i] = t_max;
-                    srays.valid[i] = true;
-                    shadow_rays[i] += 1;
-                }
-            }
-            if !srays.valid.iter().any(|&v| v) {
-                continue;
-            }
-            let res = trace::<true>(nodes, tris, &srays, &mut pstack);
-            for i in 0..LANES {
-                shadowed[i * shadow_lights + li] = res.hits[i].is_some();
-                extra[i] += res.cost[i];
-            }
-        }
-
-        for i in 0..LANES {
-            if !valid[i] {
-                continue;
-            }
-            let (x, dy) = lane_xy(i);
-            let mut cost = primary.cost[i];
-            cost += extra[i];
-            let per_light = &shadowed[i * shadow_lights..(i + 1) * shadow_lights];
-            let mut s = shade_pixel(tracer, sh, rays[i], primary.hits[i], cost, Some(per_light), stack);
-            s.rays.shadow += shadow_rays[i];
-            rows[dy * w + x] = s;
-        }
-        x0 += 4;
     }
 }

@@ -1,13 +1,17 @@
-//! Whole images: primary rays per pixel, ray casting or Whitted shading, AOVs, rayon over rows.
+//! Whole images: bands of rows in parallel (rayon), 4 x 2 pixel blocks shaded by the Whitted
+//! driver and written straight into the 8-bit image and, when asked for, the AOVs.
 
 use crate::Method;
-use crate::geometry::{Cost, Hit, Ray, offset_origin};
-use crate::shade::{self, Surface};
+use crate::geometry::{Cost, Hit, Ray};
+use crate::lanes::{OneByOne, Packets, TraceLanes};
+use crate::packet::{LANES, Rays};
+use crate::shade;
 use crate::traverse::{self, Stack};
-use bvh_format::{Light, Material, Node, SceneFile, Triangle};
-use glam::Vec3;
+use crate::whitted::Shading;
+use crate::wide::{F8, Lanes, V3};
+use bvh_format::{Node, SceneFile, Triangle};
 use rayon::prelude::*;
-use render_spec::{Aovs, BounceStop, Image, Mode, NO_TRIANGLE, RayCounts, RenderError, Settings};
+use render_spec::{Aovs, Frame, Image, RayCounts, RenderError, Settings};
 
 /// The scene prepared for tracing: layouts, and the bounds behind the adaptive bounce stop.
 pub struct Tracer<'a> {
@@ -64,7 +68,7 @@ impl<'a> Tracer<'a> {
     }
 
     /// The scalar traversal `method` names, on the layout it reads (or whichever is present).
-    fn trace<const ANY: bool>(
+    pub(crate) fn trace<const ANY: bool>(
         &self,
         method: Method,
         ray: &Ray,
@@ -82,191 +86,322 @@ impl<'a> Tracer<'a> {
             (_, None, None) => None,
         }
     }
+}
 
-    fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
-        let i = hit.tri as usize;
-        shade::surface(&self.tris[i], self.scene.vertex_normals(i), ray.origin, ray.dir, hit.t, hit.u, hit.v)
+/// How the image is cut up for the workers: bands of `rows` rows are the unit of parallel work,
+/// of progress and of the output slices a worker writes into; a band is traced in tiles of
+/// `rows` x `columns` pixels, 4 x 2 blocks in each, so that neighbouring blocks find the same
+/// nodes in the cache. Images do not depend on it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Tiles {
+    pub rows: usize,
+    pub columns: usize,
+}
+
+impl Default for Tiles {
+    /// 8 x 8: as fast as any shape measured on the dragon and the bunny (tiles of 2 x the width,
+    /// 4 x 8 to 16 x 16 and 8 x 32 lie within 5% of each other; `examples/tiles.rs`), and enough
+    /// bands (180 at 1920 x 1440) to keep 16 workers busy to the end.
+    fn default() -> Self {
+        Self { rows: 8, columns: 8 }
     }
 }
 
-/// One pixel's result.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct Sample {
-    pub colour: Vec3,
-    pub t: f32,
-    pub normal: Vec3,
-    pub prim: u32,
-    pub cost: Cost,
-    pub rays: RayCounts,
-}
-
-/// Per-frame constants of the Whitted pipeline.
-pub(crate) struct Shading<'a> {
-    pub mode: Mode,
-    pub lights: &'a [Light],
-    pub max_indirections: u32,
-    pub ambient: Vec3,
-    pub background: Vec3,
-    pub stop: BounceStop,
-    pub method: Method,
-}
-
-impl<'a> Shading<'a> {
-    pub fn new(scene: &SceneFile, s: &'a Settings, method: Method) -> Self {
-        let ambient = Vec3::from(scene.settings.ambient);
-        let background = Vec3::from(scene.settings.background);
-        Self {
-            mode: s.mode,
-            lights: &s.lights,
-            max_indirections: s.max_indirections,
-            ambient,
-            background,
-            stop: BounceStop::new(scene, &s.lights),
-            // Secondary and shadow rays are incoherent: the SIMD packet path traces them one by one.
-            method: if method == Method::Packet { Method::Ordered } else { method },
-        }
+impl Tiles {
+    /// Whole blocks: an even number of rows and a multiple of 4 columns, at least one block.
+    fn blocks(self) -> Self {
+        Self { rows: self.rows.max(2).next_multiple_of(2), columns: self.columns.max(4).next_multiple_of(4) }
     }
-}
-
-/// One light's unshadowed Phong term at a hit, and the shadow ray that decides whether it counts
-/// (none when the term is zero: a light behind the surface needs no shadow ray). The shadow ray
-/// leaves from the side of the surface the light is on and ends at the light.
-fn light_query(m: &Material, surf: &Surface, ray: &Ray, light: &Light) -> (Vec3, Option<(Ray, f32)>) {
-    let to = Vec3::from(light.position) - surf.point;
-    let l = to.normalize_or_zero();
-    let term = shade::phong(m, surf, ray.dir, l);
-    if term == Vec3::ZERO {
-        return (term, None);
-    }
-    let side = if surf.geometric.dot(l) >= 0.0 { surf.geometric } else { -surf.geometric };
-    let o = offset_origin(surf.point, side);
-    (term, Some((Ray::new(o, l), (Vec3::from(light.position) - o).length())))
-}
-
-/// [`light_query`] for a primary hit, for the packet path.
-pub(crate) fn shadow_query(tracer: &Tracer<'_>, ray: &Ray, hit: &Hit, light: &Light) -> (Vec3, Option<(Ray, f32)>) {
-    let scene = tracer.scene;
-    let m = &scene.materials[scene.triangles[hit.tri as usize].material as usize];
-    light_query(m, &tracer.surface(ray, hit), ray, light)
-}
-
-/// Shades one primary ray whose closest hit is already known (`primary`, found with `cost`), and
-/// follows its shadow and secondary rays. `shadowed`, when given, holds the primary hit's shadow
-/// test per light (a packet path traced those together).
-pub(crate) fn shade_pixel(
-    tracer: &Tracer<'_>,
-    sh: &Shading<'_>,
-    ray: Ray,
-    primary: Option<Hit>,
-    mut cost: Cost,
-    shadowed: Option<&[bool]>,
-    stack: &mut Stack,
-) -> Sample {
-    let scene = tracer.scene;
-    let mut rays = RayCounts { primary: 1, ..RayCounts::default() };
-    let Some(hit) = primary else {
-        return Sample { colour: sh.background, t: f32::INFINITY, normal: Vec3::ZERO, prim: NO_TRIANGLE, cost, rays };
-    };
-    let surf = tracer.surface(&ray, &hit);
-    let mut sample = Sample {
-        colour: Vec3::ZERO,
-        t: hit.t,
-        normal: surf.shading,
-        prim: scene.input_index[hit.tri as usize],
-        cost,
-        rays,
-    };
-    if sh.mode == Mode::Cast {
-        let m = &scene.materials[scene.triangles[hit.tri as usize].material as usize];
-        sample.colour = shade::cast(m, &surf, ray.dir);
-        return sample;
-    }
-
-    let mut colour = Vec3::ZERO;
-    let mut weight = 1.0f32;
-    let mut ray = ray;
-    let mut hit = hit;
-    let mut surf = surf;
-    let mut depth = 0u32;
-    loop {
-        let m = &scene.materials[scene.triangles[hit.tri as usize].material as usize];
-        let mut local = sh.ambient * Vec3::from(m.kd);
-        for (li, light) in sh.lights.iter().enumerate() {
-            let (term, shadow) = light_query(m, &surf, &ray, light);
-            let Some((sray, t_max)) = shadow else { continue };
-            let blocked = match shadowed.filter(|_| depth == 0) {
-                Some(s) => s[li],
-                None => {
-                    rays.shadow += 1;
-                    tracer.occluded(sh.method, &sray, t_max, stack, &mut cost)
-                }
-            };
-            if !blocked {
-                local += Vec3::from(light.colour) * term;
-            }
-        }
-        colour += weight * local;
-
-        let Some(next) = shade::secondary(m, &surf, ray.dir) else { break };
-        let remaining = sh.max_indirections - depth;
-        if remaining == 0 || !sh.stop.worth_tracing(weight * next.factor, remaining) {
-            break;
-        }
-        weight *= next.factor;
-        depth += 1;
-        let side = if next.same_side { surf.geometric } else { -surf.geometric };
-        ray = Ray::new(offset_origin(surf.point, side), next.dir);
-        rays.secondary += 1;
-        match tracer.closest(sh.method, &ray, 0.0, f32::INFINITY, stack, &mut cost) {
-            Some(h) => {
-                surf = tracer.surface(&ray, &h);
-                hit = h;
-            }
-            None => {
-                colour += weight * sh.background;
-                break;
-            }
-        }
-    }
-    sample.colour = colour;
-    sample.cost = cost;
-    sample.rays = rays;
-    sample
 }
 
 /// Renders an image with `method`. Pixels are independent, so the result does not depend on the
 /// thread count.
 pub fn render(tracer: &Tracer<'_>, settings: &Settings, method: Method) -> Result<Image, RenderError> {
-    let frame = settings.frame()?;
-    let method = method.resolve(tracer.scene);
-    tracer.layout_for(method)?;
-    let (w, h) = (settings.width as usize, settings.height as usize);
-    let sh = Shading::new(tracer.scene, settings, method);
-    let mut samples = vec![Sample::default(); w * h];
-    // Pairs of rows: the packet path traces 4 x 2 blocks.
-    samples.par_chunks_mut(2 * w).enumerate().for_each_init(Stack::default, |stack, (pair, rows)| {
-        let y0 = (pair * 2) as u32;
-        if method == Method::Packet {
-            crate::packet::render_rows(tracer, &sh, &frame, y0, rows, w, stack);
-            return;
-        }
-        for (i, s) in rows.iter_mut().enumerate() {
-            let (x, y) = ((i % w) as u32, y0 + (i / w) as u32);
-            let ray = Ray::new(frame.eye, frame.direction(x, y));
-            let mut cost = Cost::default();
-            let hit = tracer.closest(method, &ray, 0.0, f32::INFINITY, stack, &mut cost);
-            *s = shade_pixel(tracer, &sh, ray, hit, cost, None, stack);
-        }
-    });
+    render_with_progress(tracer, settings, method, &|_| {})
+}
 
-    let rays = samples.par_iter().map(|s| s.rays).reduce(RayCounts::default, |a, b| a + b);
-    let rgb = samples.iter().map(|s| shade::to_u8(s.colour)).collect();
-    let aov = settings.aovs.then(|| Aovs {
-        t: samples.iter().map(|s| s.t).collect(),
-        normal: samples.iter().map(|s| s.normal.to_array()).collect(),
-        prim: samples.iter().map(|s| s.prim).collect(),
-        nodes: samples.iter().map(|s| s.cost.nodes).collect(),
-        tris: samples.iter().map(|s| s.cost.tris).collect(),
+/// [`render`], calling `progress` with the number of rows finished each time a band of rows is
+/// done (from any worker thread).
+pub fn render_with_progress(
+    tracer: &Tracer<'_>,
+    settings: &Settings,
+    method: Method,
+    progress: &(dyn Fn(u32) + Sync),
+) -> Result<Image, RenderError> {
+    let tiles = Tiles::default();
+    match method.resolve(tracer.scene) {
+        Method::Packet => render_with(tracer, settings, Method::Packet, || Packets::new(tracer), tiles, progress),
+        m => render_with(tracer, settings, m, || OneByOne::new(tracer, m), tiles, progress),
+    }
+}
+
+/// One band of rows and the part of every output it covers.
+struct Band<'a> {
+    y0: usize,
+    rgb: &'a mut [[u8; 3]],
+    aov: Option<AovRows<'a>>,
+}
+
+struct AovRows<'a> {
+    t: &'a mut [f32],
+    normal: &'a mut [[f32; 3]],
+    prim: &'a mut [u32],
+    nodes: &'a mut [u32],
+    tris: &'a mut [u32],
+}
+
+/// Splits the outputs into bands of `rows` rows of `w` pixels.
+fn bands<'a>(w: usize, rows: usize, rgb: &'a mut [[u8; 3]], aov: Option<&'a mut Aovs>) -> Vec<Band<'a>> {
+    let n = rows * w;
+    let mut aovs: Vec<Option<AovRows<'a>>> = match aov {
+        Some(a) => {
+            a.t.chunks_mut(n)
+                .zip(a.normal.chunks_mut(n))
+                .zip(a.prim.chunks_mut(n))
+                .zip(a.nodes.chunks_mut(n))
+                .zip(a.tris.chunks_mut(n))
+                .map(|((((t, normal), prim), nodes), tris)| Some(AovRows { t, normal, prim, nodes, tris }))
+                .collect()
+        }
+        None => Vec::new(),
+    };
+    aovs.resize_with(rgb.len().div_ceil(n), || None);
+    rgb.chunks_mut(n).zip(aovs).enumerate().map(|(i, (rgb, aov))| Band { y0: i * rows, rgb, aov }).collect()
+}
+
+/// [`render_with_progress`] with the rays of every stage traced by a [`TraceLanes`] made once per
+/// worker by `lanes` (benchmarks wrap the renderer's own to see what it traces), in `tiles`.
+/// `method` is the one `lanes` traces with: the layout it reads must be in the file.
+pub fn render_with<T: TraceLanes>(
+    tracer: &Tracer<'_>,
+    settings: &Settings,
+    method: Method,
+    lanes: impl Fn() -> T + Sync,
+    tiles: Tiles,
+    progress: &(dyn Fn(u32) + Sync),
+) -> Result<Image, RenderError> {
+    render_in(tracer, settings, method, lanes, tiles, progress, crate::packet::available())
+}
+
+/// [`render_with`], with AVX lanes for the shading or (`avx` false, or no AVX2) plain arrays.
+fn render_in<T: TraceLanes>(
+    tracer: &Tracer<'_>,
+    settings: &Settings,
+    method: Method,
+    lanes: impl Fn() -> T + Sync,
+    tiles: Tiles,
+    progress: &(dyn Fn(u32) + Sync),
+    avx: bool,
+) -> Result<Image, RenderError> {
+    let tiles = tiles.blocks();
+    let frame = settings.frame()?;
+    tracer.layout_for(method.resolve(tracer.scene))?;
+    let (w, h) = (settings.width as usize, settings.height as usize);
+    let sh = Shading::new(tracer.scene, settings);
+    let mut rgb = vec![[0u8; 3]; w * h];
+    let mut aov = settings.aovs.then(|| Aovs {
+        t: vec![0.0; w * h],
+        normal: vec![[0.0; 3]; w * h],
+        prim: vec![0; w * h],
+        nodes: vec![0; w * h],
+        tris: vec![0; w * h],
     });
+    let rays = bands(w, tiles.rows, &mut rgb, aov.as_mut())
+        .into_par_iter()
+        .map_init(&lanes, |lanes, mut band| {
+            let rays = render_band(&sh, &frame, lanes, &mut band, w, tiles.columns, avx);
+            progress((band.rgb.len() / w) as u32);
+            rays
+        })
+        .reduce(RayCounts::default, |a, b| a + b);
     Ok(Image { width: settings.width, height: settings.height, rgb, aov, rays })
+}
+
+/// Renders a band: with AVX lanes when asked and the CPU has AVX2, else with plain arrays.
+fn render_band<T: TraceLanes>(
+    sh: &Shading<'_>,
+    frame: &Frame,
+    lanes: &mut T,
+    band: &mut Band<'_>,
+    w: usize,
+    columns: usize,
+    avx: bool,
+) -> RayCounts {
+    #[cfg(target_arch = "x86_64")]
+    if avx && crate::packet::available() {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { render_band_avx2(sh, frame, lanes, band, w, columns) };
+    }
+    render_band_in::<F8, T>(sh, frame, lanes, band, w, columns)
+}
+
+/// [`render_band`] compiled for AVX2, so that every lane operation of the shading is one
+/// instruction.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn render_band_avx2<T: TraceLanes>(
+    sh: &Shading<'_>,
+    frame: &Frame,
+    lanes: &mut T,
+    band: &mut Band<'_>,
+    w: usize,
+    columns: usize,
+) -> RayCounts {
+    render_band_in::<crate::wide::Avx8, T>(sh, frame, lanes, band, w, columns)
+}
+
+/// The band tile by tile, and each tile in 4 x 2 blocks.
+#[inline(always)]
+fn render_band_in<L: Lanes, T: TraceLanes>(
+    sh: &Shading<'_>,
+    frame: &Frame,
+    lanes: &mut T,
+    band: &mut Band<'_>,
+    w: usize,
+    columns: usize,
+) -> RayCounts {
+    let rows = band.rgb.len() / w;
+    let mut rays = RayCounts::default();
+    for x0 in (0..w).step_by(columns) {
+        for dy in (0..rows).step_by(2) {
+            for bx in (x0..(x0 + columns).min(w)).step_by(4) {
+                rays = rays + block::<L, T>(sh, frame, lanes, band, w, rows, bx, dy);
+            }
+        }
+    }
+    rays
+}
+
+/// `Frame::direction` for the pixels (`x`, `y`) of the lanes, operation by operation.
+#[inline(always)]
+fn directions<L: Lanes>(frame: &Frame, x: L, y: L) -> V3<L> {
+    let half = L::splat(0.5);
+    (V3::splat(frame.top_left) + V3::splat(frame.h_step) * (x + half) + V3::splat(frame.v_step) * (y + half))
+        .normalize()
+}
+/// Traces and shades the 4 x 2 block whose top-left pixel is (`bx`, `dy`) in the band, writing
+/// its pixels; returns its rays.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn block<L: Lanes, T: TraceLanes>(
+    sh: &Shading<'_>,
+    frame: &Frame,
+    lanes: &mut T,
+    band: &mut Band<'_>,
+    w: usize,
+    rows: usize,
+    bx: usize,
+    dy: usize,
+) -> RayCounts {
+    let lane_xy = |i: usize| (bx + i % 4, dy + i / 4);
+    let mut primary = Rays::default();
+    for i in 0..LANES {
+        let (x, y) = lane_xy(i);
+        primary.valid[i] = x < w && y < rows;
+    }
+    primary.origin = V3::<L>::splat(frame.eye).to_arrays();
+    let (x, y) = (L::from_fn(|i| lane_xy(i).0 as f32), L::from_fn(|i| (band.y0 + lane_xy(i).1) as f32));
+    primary.dir = directions(frame, x, y).to_arrays();
+    primary.t_max = [f32::INFINITY; LANES];
+    let out = sh.block::<L, T>(&primary, lanes);
+    let rgb = shade::to_u8_lanes(V3::<L>::from_arrays(&out.colour));
+    for i in 0..LANES {
+        if !primary.valid[i] {
+            continue;
+        }
+        let (x, y) = lane_xy(i);
+        let p = y * w + x;
+        band.rgb[p] = rgb[i];
+        if let Some(a) = &mut band.aov {
+            let n = out.normal;
+            a.t[p] = out.t[i];
+            a.normal[p] = [n[0][i], n[1][i], n[2][i]];
+            a.prim[p] = out.prim[i];
+            a.nodes[p] = out.cost[i].nodes;
+            a.tris[p] = out.cost[i].tris;
+        }
+    }
+    out.rays
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use render_spec::{CameraSpec, Mode};
+
+    fn same_directions<L: Lanes>() {
+        let cams = [
+            CameraSpec { eye: Vec3::new(0.0, 0.1, 0.3), at: Vec3::new(0.01, 0.1, 0.0), up: Vec3::Y, fov_deg: 45.0 },
+            CameraSpec { eye: Vec3::new(-3e4, 2e3, 7.0), at: Vec3::ZERO, up: Vec3::new(0.1, 1.0, 0.3), fov_deg: 170.0 },
+            CameraSpec { eye: Vec3::new(1.0, 2.0, 3.0), at: Vec3::new(1.0, 2.0, 2.0), up: Vec3::X, fov_deg: 0.01 },
+        ];
+        for cam in cams {
+            for (w, h) in [(1, 1), (97, 61), (16384, 3), (3, 70000)] {
+                let frame = cam.frame(w, h).unwrap();
+                for (bx, by) in [(0, 0), (w.saturating_sub(4), h.saturating_sub(2)), (w / 2, h / 3)] {
+                    let x = L::from_fn(|i| (bx + i as u32 % 4) as f32);
+                    let y = L::from_fn(|i| (by + i as u32 / 4) as f32);
+                    let d = directions(&frame, x, y).to_arrays();
+                    let got: [[f32; 3]; LANES] = std::array::from_fn(|i| [d[0][i], d[1][i], d[2][i]]);
+                    for (i, got) in got.iter().enumerate() {
+                        let want = frame.direction(bx + i as u32 % 4, by + i as u32 / 4);
+                        assert_eq!(got.map(f32::to_bits), want.to_array().map(f32::to_bits));
+                    }
+                }
+            }
+        }
+    }
+
+    /// The image with AVX lanes is the image with plain arrays (the path of CPUs without AVX2),
+    /// for every way of tracing the rays, and does not depend on the tiles.
+    #[test]
+    fn both_lane_types_render_the_same_image() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/room.toml");
+        let scene = bvh_build::import::load(&path, &Default::default()).unwrap();
+        let scene = bvh_build::compile(&scene, &Default::default(), Default::default()).unwrap();
+        let tracer = Tracer::new(&scene);
+        for mode in [Mode::Cast, Mode::Whitted] {
+            for method in [Method::Packet, Method::Ordered, Method::Stackless] {
+                let settings = Settings {
+                    width: 61,
+                    height: 37,
+                    camera: CameraSpec::from(scene.camera("medium").unwrap()),
+                    mode,
+                    lights: scene.lights.clone(),
+                    max_indirections: scene.settings.max_indirections,
+                    aovs: true,
+                };
+                let tiles = Tiles { rows: 6, columns: 12 };
+                let image = |avx| match method.resolve(&scene) {
+                    Method::Packet => {
+                        render_in(&tracer, &settings, Method::Packet, || Packets::new(&tracer), tiles, &|_| {}, avx)
+                    }
+                    m => render_in(&tracer, &settings, m, || OneByOne::new(&tracer, m), tiles, &|_| {}, avx),
+                };
+                let (a, b) = (image(true).unwrap(), image(false).unwrap());
+                assert_eq!(a.rgb, b.rgb, "{mode:?} {method:?}");
+                assert_eq!(a.rgb, render(&tracer, &settings, method).unwrap().rgb, "{mode:?} {method:?}: other tiles");
+                assert_eq!(a.rays, b.rays, "{mode:?} {method:?}");
+                let (x, y) = (a.aov.unwrap(), b.aov.unwrap());
+                assert_eq!(
+                    x.t.iter().map(|t| t.to_bits()).collect::<Vec<_>>(),
+                    y.t.iter().map(|t| t.to_bits()).collect::<Vec<_>>()
+                );
+                assert_eq!(
+                    (x.normal, x.prim, x.nodes, x.tris),
+                    (y.normal, y.prim, y.nodes, y.tris),
+                    "{mode:?} {method:?}"
+                );
+                assert!(a.rays.secondary > 0 || mode == Mode::Cast, "the room has a mirror and glass");
+            }
+        }
+    }
+
+    #[test]
+    fn block_directions_are_the_cameras_bit_for_bit() {
+        same_directions::<F8>();
+        #[cfg(target_arch = "x86_64")]
+        same_directions::<crate::wide::Avx8>();
+    }
 }

@@ -1,8 +1,11 @@
 //! The shading definition (docs/shading.md), as pure functions. The Vulkan kernels implement the
 //! same formulas; the cross-backend tests hold them to it.
 
+use crate::wide::{LANES, Lanes, Real, V3};
 use bvh_format::{Material, Triangle};
 use glam::Vec3;
+use render_spec::BounceStop;
+use render_spec::constants::STOP_CONTRIBUTION;
 
 /// Everything shading needs to know about a hit.
 #[derive(Clone, Copy, Debug)]
@@ -16,6 +19,28 @@ pub struct Surface {
     pub front: bool,
 }
 
+/// [`Surface`] for any lanes ([`crate::wide`]).
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceOf<R: Real> {
+    pub point: V3<R>,
+    pub geometric: V3<R>,
+    pub shading: V3<R>,
+    pub front: R::Mask,
+}
+
+/// The edges `p1 - p0` and `p2 - p0` of a triangle, whose cross product is its geometric normal
+/// (the kernels compute them the same way).
+pub fn edges(tri: &Triangle) -> (Vec3, Vec3) {
+    let p0 = Vec3::from(tri.p0);
+    (Vec3::from(tri.p1) - p0, Vec3::from(tri.p2) - p0)
+}
+
+/// The vertex normals shading interpolates: a flat triangle's are zero, which the interpolation
+/// turns into its geometric normal (the kernels take that normal directly).
+pub fn shading_normals(normals: Option<[[f32; 3]; 3]>) -> [[f32; 3]; 3] {
+    normals.unwrap_or([[0.0; 3]; 3])
+}
+
 /// The surface at a hit `t` along `origin + t * dir` with barycentrics `(u, v)`; `normals` are the
 /// triangle's vertex normals, `None` for a flat triangle (shaded with its geometric normal).
 pub fn surface(
@@ -27,35 +52,61 @@ pub fn surface(
     u: f32,
     v: f32,
 ) -> Surface {
-    let point = origin + t * dir;
-    let p0 = Vec3::from(tri.p0);
-    let raw = (Vec3::from(tri.p1) - p0).cross(Vec3::from(tri.p2) - p0);
+    let n = shading_normals(normals).map(|n| Vec3::from(n).into());
+    let (e1, e2) = edges(tri);
+    let s = surface_of(e1.into(), e2.into(), n, origin.into(), dir.into(), t, u, v);
+    Surface { point: s.point.into(), geometric: s.geometric.into(), shading: s.shading.into(), front: s.front }
+}
+
+/// [`surface`] of a triangle given by its edges `e1`, `e2` and vertex normals `n` (zero for a
+/// flat triangle).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn surface_of<R: Real>(
+    e1: V3<R>,
+    e2: V3<R>,
+    n: [V3<R>; 3],
+    origin: V3<R>,
+    dir: V3<R>,
+    t: R,
+    u: R,
+    v: R,
+) -> SurfaceOf<R> {
+    let zero = R::splat(0.0);
+    let point = origin + dir * t;
     // A degenerate (zero-area) triangle has no normal of its own: face the ray.
-    let ng = raw.try_normalize().unwrap_or(-dir);
-    let front = dir.dot(ng) < 0.0;
-    let geometric = if front { ng } else { -ng };
-    let Some(n) = normals else {
-        return Surface { point, geometric, shading: geometric, front };
-    };
-    let interp = (1.0 - u - v) * Vec3::from(n[0]) + u * Vec3::from(n[1]) + v * Vec3::from(n[2]);
-    let shading = match interp.try_normalize() {
-        Some(s) if s.dot(geometric) < 0.0 => -s,
-        Some(s) => s,
-        None => geometric,
-    };
-    Surface { point, geometric, shading, front }
+    let (ng, ok) = e1.cross(e2).try_normalize();
+    let ng = V3::select(ok, ng, -dir);
+    let front = dir.dot(ng).lt(zero);
+    let geometric = V3::select(front, ng, -ng);
+    let interp = n[0] * (R::splat(1.0) - u - v) + n[1] * u + n[2] * v;
+    let (s, ok) = interp.try_normalize();
+    let s = V3::select(s.dot(geometric).lt(zero), -s, s);
+    SurfaceOf { point, geometric, shading: V3::select(ok, s, geometric), front }
 }
 
 /// Ray casting: a white point light at the eye, Lambert only.
 #[inline]
 pub fn cast(m: &Material, s: &Surface, dir: Vec3) -> Vec3 {
-    Vec3::from(m.kd) * s.shading.dot(-dir).max(0.0)
+    cast_of(Vec3::from(m.kd).into(), s.shading.into(), dir.into()).into()
+}
+
+/// [`cast`] with the material's `kd`.
+#[inline(always)]
+pub fn cast_of<R: Real>(kd: V3<R>, shading: V3<R>, dir: V3<R>) -> V3<R> {
+    kd * shading.dot(-dir).max(R::splat(0.0))
 }
 
 /// Mirror direction of `dir` about the unit normal `n`.
 #[inline]
 pub fn reflect(dir: Vec3, n: Vec3) -> Vec3 {
-    dir - 2.0 * dir.dot(n) * n
+    reflect_of(dir.into(), n.into()).into()
+}
+
+/// [`reflect`] for any lanes.
+#[inline(always)]
+pub fn reflect_of<R: Real>(dir: V3<R>, n: V3<R>) -> V3<R> {
+    dir - n * (R::splat(2.0) * dir.dot(n))
 }
 
 /// Refraction of the unit `dir` through a surface with unit normal `n` facing the incoming ray,
@@ -63,9 +114,18 @@ pub fn reflect(dir: Vec3, n: Vec3) -> Vec3 {
 /// internal reflection.
 #[inline]
 pub fn refract(dir: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
+    let (t, ok) = refract_of(dir.into(), n.into(), eta);
+    ok.then(|| t.into())
+}
+
+/// [`refract`] for any lanes: the direction, and where it exists (elsewhere total internal
+/// reflection).
+#[inline(always)]
+pub fn refract_of<R: Real>(dir: V3<R>, n: V3<R>, eta: R) -> (V3<R>, R::Mask) {
+    let one = R::splat(1.0);
     let cos_i = -dir.dot(n);
-    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
-    (k >= 0.0).then(|| (eta * dir + (eta * cos_i - k.sqrt()) * n).normalize())
+    let k = one - eta * eta * (one - cos_i * cos_i);
+    ((dir * eta + n * (eta * cos_i - k.sqrt())).normalize(), k.ge(R::splat(0.0)))
 }
 
 /// The diffuse and specular terms of one unshadowed light, before its colour:
@@ -73,14 +133,30 @@ pub fn refract(dir: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
 /// Zero when the light is behind the shading normal.
 #[inline]
 pub fn phong(m: &Material, s: &Surface, dir: Vec3, to_light: Vec3) -> Vec3 {
-    let cos_t = s.shading.dot(to_light);
-    if cos_t <= 0.0 {
-        return Vec3::ZERO;
-    }
-    let r = reflect(-to_light, s.shading);
-    let cos_p = r.dot(-dir).max(0.0);
-    let spec = if m.shininess > 0.0 { cos_p.powf(m.shininess) } else { 1.0 };
-    Vec3::from(m.kd) * cos_t + Vec3::from(m.ks) * spec
+    let (kd, ks) = (Vec3::from(m.kd).into(), Vec3::from(m.ks).into());
+    phong_of(kd, ks, m.shininess, s.shading.into(), dir.into(), to_light.into(), true).into()
+}
+
+/// [`phong`] with the material's `kd`, `ks` and shininess; `live` marks the lanes whose result
+/// is used (the others skip the power).
+#[inline(always)]
+pub fn phong_of<R: Real>(
+    kd: V3<R>,
+    ks: V3<R>,
+    shininess: R,
+    shading: V3<R>,
+    dir: V3<R>,
+    to_light: V3<R>,
+    live: R::Mask,
+) -> V3<R> {
+    let zero = R::splat(0.0);
+    let cos_t = shading.dot(to_light);
+    let lit = !cos_t.le(zero);
+    let r = reflect_of(-to_light, shading);
+    let cos_p = r.dot(-dir).max(zero);
+    let glossy = shininess.gt(zero);
+    let spec = R::select(glossy, cos_p.powf_in(shininess, glossy & lit & live), R::splat(1.0));
+    V3::select(lit, kd * cos_t + ks * spec, V3::zero())
 }
 
 /// The secondary ray a hit spawns: direction, which side of the surface it leaves into
@@ -92,21 +168,46 @@ pub struct Secondary {
     pub factor: f32,
 }
 
+/// [`Secondary`] for any lanes, with where one exists.
+#[derive(Clone, Copy, Debug)]
+pub struct SecondaryOf<R: Real> {
+    pub dir: V3<R>,
+    pub same_side: R::Mask,
+    pub factor: R,
+    pub exists: R::Mask,
+}
+
 /// A material's secondary ray: reflection for `kr > 0`; refraction for `kt > 0`, entering when
 /// the front was hit (eta = 1 / ior) and leaving otherwise (eta = ior), with total internal
 /// reflection sending the ray back as a mirror would, still weighted by `kt`.
 pub fn secondary(m: &Material, s: &Surface, dir: Vec3) -> Option<Secondary> {
-    if m.kr > 0.0 {
-        return Some(Secondary { dir: reflect(dir, s.shading), same_side: true, factor: m.kr });
+    let sec = secondary_of(m.kr, m.kt, m.ior, s.shading.into(), s.front, dir.into());
+    sec.exists.then(|| Secondary { dir: sec.dir.into(), same_side: sec.same_side, factor: sec.factor })
+}
+
+/// [`secondary`] with the material's `kr`, `kt` and `ior`, and the surface's shading normal and
+/// side.
+#[inline(always)]
+pub fn secondary_of<R: Real>(kr: R, kt: R, ior: R, shading: V3<R>, front: R::Mask, dir: V3<R>) -> SecondaryOf<R> {
+    let zero = R::splat(0.0);
+    let mirror = kr.gt(zero);
+    let glass = !mirror & kt.gt(zero);
+    let reflected = reflect_of(dir, shading);
+    let eta = R::select(front, R::splat(1.0) / ior, ior);
+    let (refracted, ok) = refract_of(dir, shading, eta);
+    SecondaryOf {
+        dir: V3::select(mirror, reflected, V3::select(ok, refracted, reflected)),
+        same_side: mirror | !ok,
+        factor: R::select(mirror, kr, kt),
+        exists: mirror | glass,
     }
-    if m.kt > 0.0 {
-        let eta = if s.front { 1.0 / m.ior } else { m.ior };
-        return Some(match refract(dir, s.shading, eta) {
-            Some(t) => Secondary { dir: t, same_side: false, factor: m.kt },
-            None => Secondary { dir: reflect(dir, s.shading), same_side: true, factor: m.kt },
-        });
-    }
-    None
+}
+
+/// [`BounceStop::worth_tracing`] for any lanes, given the stop's [`BounceStop::chain`] at their
+/// (common) depth: computed once per depth, not once per lane.
+#[inline(always)]
+pub fn worth_of<R: Real>(w: R, stop: &BounceStop, chain: f32) -> R::Mask {
+    (w * R::splat(stop.bound) * R::splat(chain)).ge(R::splat(STOP_CONTRIBUTION))
 }
 
 /// Linear radiance to 8 bits: clamp to [0, 1], scale by 255, round to nearest.
@@ -114,6 +215,23 @@ pub fn secondary(m: &Material, s: &Surface, dir: Vec3) -> Option<Secondary> {
 pub fn to_u8(c: Vec3) -> [u8; 3] {
     let q = |x: f32| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
     [q(c.x), q(c.y), q(c.z)]
+}
+
+/// [`to_u8`] for eight lanes: the same clamp (`f32::clamp` keeps a NaN, which `as u8` turns into
+/// 0), scale and offset; then every value lies in [0.5, 255.5], where `as u8` is truncation.
+#[inline(always)]
+pub fn to_u8_lanes<L: Lanes>(c: V3<L>) -> [[u8; 3]; LANES] {
+    let (r, g, b) = (quantize(c.x), quantize(c.y), quantize(c.z));
+    std::array::from_fn(|i| [r[i] as u8, g[i] as u8, b[i] as u8])
+}
+
+#[inline(always)]
+fn quantize<L: Lanes>(x: L) -> [i32; LANES] {
+    let (zero, one) = (L::splat(0.0), L::splat(1.0));
+    let x = L::select(x.lt(zero), zero, x);
+    let x = L::select(x.gt(one), one, x);
+    let x = x * L::splat(255.0) + L::splat(0.5);
+    L::select(x.eq(x), x, zero).trunc()
 }
 
 #[cfg(test)]

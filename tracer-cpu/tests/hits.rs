@@ -77,19 +77,14 @@ fn check_scene(name: &str, scene: &SceneFile, n: usize, seed: u64) {
                     ordered.push(a);
                 }
                 if packet::available() {
-                    let mut p = packet::Rays {
-                        rays: [Ray::new(Vec3::ZERO, Vec3::Z); packet::LANES],
-                        valid: [false; packet::LANES],
-                        t_max: [f32::INFINITY; packet::LANES],
-                    };
+                    let mut p = packet::Rays::default();
                     for (i, &(o, d)) in chunk.iter().enumerate() {
-                        p.rays[i] = Ray::new(o, d);
-                        p.valid[i] = true;
+                        p.set(i, &Ray::new(o, d), f32::INFINITY);
                     }
                     let nodes = scene.child_pair.as_deref().unwrap();
                     let res = packet::trace::<false>(nodes, &tris, &p, pstack);
                     for (i, a) in ordered.iter().enumerate() {
-                        assert_eq!(res.hits[i], *a, "{name}: packet and ordered disagree on lane {i}");
+                        assert_eq!(res.get(i), *a, "{name}: packet and ordered disagree on lane {i}");
                     }
                 }
                 for (&(o, d), fast) in chunk.iter().zip(ordered) {

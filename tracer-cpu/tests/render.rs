@@ -193,3 +193,25 @@ fn bad_settings_are_errors() {
     let s = settings(&scene, "down", Mode::Cast, Method::Ordered, 8, 8);
     assert!(render(&Tracer::new(&only_escape), &s).unwrap_err().to_string().contains("child-pair"));
 }
+
+#[test]
+fn progress_reports_every_row_once_and_the_image_is_unchanged() {
+    let room = common::compile(&common::scenes_dir().join("room.toml"));
+    let tracer = Tracer::new(&room);
+    // 203 rows: bands of 8 and a last band of 3.
+    let s = settings(&room, "medium", Mode::Whitted, Method::Auto, 65, 203);
+    let rows = std::sync::atomic::AtomicU64::new(0);
+    let calls = std::sync::atomic::AtomicU64::new(0);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
+    let img = pool
+        .install(|| {
+            tracer_cpu::render_with_progress(&tracer, &s.0, s.1, &|n| {
+                rows.fetch_add(n as u64, std::sync::atomic::Ordering::Relaxed);
+                calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            })
+        })
+        .unwrap();
+    assert_eq!(rows.into_inner(), 203);
+    assert!(calls.into_inner() > 1, "progress comes band by band, not once at the end");
+    same_image(&img, &render(&tracer, &s).unwrap(), "with and without progress");
+}

@@ -1,9 +1,12 @@
 //! `trace-cpu`: renders a scene file on the CPU (the baseline tracer).
 
+use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
+use render_spec::Settings;
 use std::process::ExitCode;
 use std::time::Instant;
-use tools::cli::{duration, rays_per_second};
+use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed};
+use tools::cli::{Progress, duration, rays_per_second};
 use tools::render_args::{RenderArgs, parse_count};
 use tools::say;
 use tracer_cpu::{Method, Tracer};
@@ -20,7 +23,7 @@ enum Command {
     /// Render one image (and optionally a cost heatmap and AOVs).
     Render {
         #[command(flatten)]
-        args: RenderArgs,
+        args: Box<RenderArgs>,
         /// Traversal: SIMD packets where the CPU has AVX2 (else ordered), ordered child-pair
         /// traversal, or the stackless escape-pointer walk; auto takes the stackless walk for a
         /// file compiled with only the escape-pointer layout.
@@ -30,6 +33,22 @@ enum Command {
         #[arg(long, value_parser = parse_threads, allow_hyphen_values = true)]
         threads: Option<usize>,
     },
+    /// Time the thesis's evaluation matrix: scenes x cameras x sizes x modes x methods, wall-clock
+    /// time per frame (median of --frames), written as CSV and Markdown with the columns of
+    /// `trace-vk bench`.
+    Bench(Box<BenchArgs>),
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    #[command(flatten)]
+    matrix: MatrixArgs,
+    /// Traversals.
+    #[arg(long, value_delimiter = ',', value_enum, default_value = "packet,ordered,stackless")]
+    methods: Vec<MethodArg>,
+    /// Worker threads, 1 to 1024 [default: all cores].
+    #[arg(long, value_parser = parse_threads, allow_hyphen_values = true)]
+    threads: Option<usize>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -40,13 +59,27 @@ enum MethodArg {
     Stackless,
 }
 
+impl MethodArg {
+    fn method(self) -> Method {
+        match self {
+            MethodArg::Auto => Method::Auto,
+            MethodArg::Packet => Method::Packet,
+            MethodArg::Ordered => Method::Ordered,
+            MethodArg::Stackless => Method::Stackless,
+        }
+    }
+}
+
 fn parse_threads(s: &str) -> Result<usize, String> {
     parse_count(s, 1, 1024, "the number of threads").map(|n| n as usize)
 }
 
 fn main() -> ExitCode {
-    let Command::Render { args, method, threads } = tools::cli::parse::<Cli>().command;
-    tools::cli::run(|| render(&args, method, threads))
+    let command = tools::cli::parse::<Cli>().command;
+    tools::cli::run(|| match command {
+        Command::Render { args, method, threads } => render(&args, method, threads),
+        Command::Bench(b) => bench(&b),
+    })
 }
 
 fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Result<(), String> {
@@ -54,33 +87,31 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
-    let method = match method {
-        MethodArg::Auto => Method::Auto,
-        MethodArg::Packet => Method::Packet,
-        MethodArg::Ordered => Method::Ordered,
-        MethodArg::Stackless => Method::Stackless,
-    };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads.unwrap_or(0))
-        .build()
-        .map_err(|e| format!("cannot start the worker threads: {e}"))?;
+    let method = method.method();
+    let pool = pool(threads)?;
     let tracer = Tracer::new(scene);
+    let bar = Progress::new(settings.height as u64, "{bar:40} {pos}/{len} rows ({elapsed}, {eta} left)", false);
     let t0 = Instant::now();
-    let image = pool.install(|| tracer_cpu::render(&tracer, &settings, method)).map_err(|e| e.to_string())?;
+    let image = pool
+        .install(|| tracer_cpu::render_with_progress(&tracer, &settings, method, &|rows| bar.inc(rows as u64)))
+        .map_err(|e| e.to_string())?;
     let seconds = t0.elapsed().as_secs_f64();
+    bar.finish();
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
     let written = outputs.write(&image, args.heatmap_max)?;
     let mut lines = Vec::new();
     let r = image.rays;
     lines.push(format!(
-        "{}x{} {:?} with {:?} on {} threads: {}{}, rays: {} primary, {} shadow, {} secondary ({}) -> {}",
+        "{}x{} {:?} with {:?} on {} threads: {} to trace and shade into the 8-bit image{}{}, rays: {} primary, \
+         {} shadow, {} secondary ({}) -> {}",
         image.width,
         image.height,
         settings.mode,
         method.resolve(scene),
         pool.current_num_threads(),
         duration(seconds),
+        if settings.aovs { " and the AOVs" } else { "" },
         loaded.timing_note(),
         r.primary,
         r.shadow,
@@ -91,5 +122,72 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     for line in lines.into_iter().chain(written) {
         say!("{line}");
     }
+    Ok(())
+}
+
+fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool, String> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.unwrap_or(0))
+        .build()
+        .map_err(|e| format!("cannot start the worker threads: {e}"))
+}
+
+/// The CPU side of the benchmark matrix: wall-clock time of whole frames on a thread pool.
+struct CpuBench {
+    pool: rayon::ThreadPool,
+}
+
+impl Bench for CpuBench {
+    type Renderer<'a> = (Tracer<'a>, Method);
+
+    fn tracer(&self) -> &'static str {
+        "cpu"
+    }
+
+    fn device(&self) -> String {
+        format!("{}, {} threads", tools::cpu_model(), self.pool.current_num_threads())
+    }
+
+    fn timing(&self) -> String {
+        "a frame's time is the wall-clock time of `tracer_cpu::render`: primary rays, tracing and shading \
+         into the 8-bit image, no AOVs; the scene is loaded and prepared before"
+            .to_owned()
+    }
+
+    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<(Tracer<'a>, Method), String> {
+        let method = MethodArg::from_str(method, false).map_err(|e| format!("{method:?}: {e}"))?.method();
+        if method == Method::Packet && method.resolve(scene) != method {
+            return Err("this CPU cannot run the packet method: it needs AVX2".to_owned());
+        }
+        Ok((Tracer::new(scene), method))
+    }
+
+    fn frame(&self, (tracer, method): &mut (Tracer<'_>, Method), f: &FrameSpec) -> Result<Timed, String> {
+        let settings = Settings {
+            width: f.width,
+            height: f.height,
+            camera: f.camera,
+            mode: f.mode,
+            lights: f.lights.clone(),
+            max_indirections: f.max_indirections,
+            aovs: false,
+        };
+        let t0 = Instant::now();
+        let image = self.pool.install(|| tracer_cpu::render(tracer, &settings, *method)).map_err(|e| e.to_string())?;
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let r = image.rays;
+        Ok(Timed { ms, rays: [r.primary, r.shadow, r.secondary] })
+    }
+}
+
+fn bench(b: &BenchArgs) -> Result<(), String> {
+    let names: Vec<String> = b
+        .methods
+        .iter()
+        .map(|m| m.to_possible_value().expect("every method has a name").get_name().to_owned())
+        .collect();
+    let methods: Vec<&str> = names.iter().map(String::as_str).collect();
+    let bench = CpuBench { pool: pool(b.threads)? };
+    tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 10, warmup: 1 })?;
     Ok(())
 }

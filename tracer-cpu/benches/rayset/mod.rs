@@ -148,7 +148,7 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
                     } else {
                         packet::trace::<false>(nodes, tris, p, pstack)
                     };
-                    res.hits.map(|h| match h {
+                    std::array::from_fn(|i| match res.get(i) {
                         Some(_) if any => 0.0,
                         Some(h) => h.t,
                         None => f32::INFINITY,
@@ -182,16 +182,15 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
 /// packets with no ray.
 fn blocks(rays: &[Option<(Ray, f32)>], out: &mut [f32], w: usize, mut f: impl FnMut(&Rays) -> [f32; LANES]) {
     let h = rays.len() / w;
-    let idle = Ray::new(Vec3::ZERO, Vec3::Z);
     for x0 in (0..w).step_by(4) {
-        let mut p = Rays { rays: [idle; LANES], valid: [false; LANES], t_max: [0.0; LANES] };
+        let mut p = Rays::default();
         for i in 0..LANES {
             let (x, dy) = (x0 + i % 4, i / 4);
             if x < w
                 && dy < h
                 && let Some((r, t)) = rays[dy * w + x]
             {
-                (p.rays[i], p.valid[i], p.t_max[i]) = (r, true, t);
+                p.set(i, &r, t);
             }
         }
         if !p.valid.contains(&true) {
@@ -222,11 +221,56 @@ pub fn agreement(a: &[f32], reference: &[f32]) -> (usize, usize) {
     (same, n)
 }
 
+/// What a pass is timed by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Clock {
+    /// Wall-clock time.
+    Wall,
+    /// CPU time of all the process's threads: on a machine shared with other work, time spent
+    /// waiting for a core does not count (the figures are then rays per CPU-second).
+    Cpu,
+}
+
+impl Clock {
+    /// Seconds on this clock since some fixed start.
+    pub fn now(self) -> f64 {
+        match self {
+            Clock::Wall => {
+                static START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
+                START.get_or_init(Instant::now).elapsed().as_secs_f64()
+            }
+            Clock::Cpu => cpu_seconds(),
+        }
+    }
+}
+
+/// Nanoseconds on a CPU summed over the process's threads (Linux: the first field of each
+/// thread's `schedstat`).
+fn cpu_seconds() -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return f64::NAN };
+    let ns: u64 = tasks
+        .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("schedstat")).ok())
+        .filter_map(|s| s.split_whitespace().next()?.parse::<u64>().ok())
+        .sum();
+    ns as f64 * 1e-9
+}
+
 /// Times passes of several tracers interleaved (one pass of each per round), so that a change in
 /// the machine's load during the measurement hits all of them alike: at least `reps` rounds and
-/// enough to fill `min_seconds`, at most `max_rounds`. Returns each one's median pass in seconds.
-/// The caller warms up first.
+/// enough to fill `min_seconds`, at most `max_rounds`. Returns each one's median pass in seconds
+/// of wall-clock time. The caller warms up first.
 pub fn interleaved_medians(
+    reps: usize,
+    min_seconds: f64,
+    max_rounds: usize,
+    passes: &mut [&mut dyn FnMut()],
+) -> Vec<f64> {
+    interleaved_medians_on(Clock::Wall, reps, min_seconds, max_rounds, passes)
+}
+
+/// [`interleaved_medians`] on `clock`.
+pub fn interleaved_medians_on(
+    clock: Clock,
     reps: usize,
     min_seconds: f64,
     max_rounds: usize,
@@ -237,9 +281,9 @@ pub fn interleaved_medians(
     let mut elapsed = 0.0;
     loop {
         for (p, s) in passes.iter_mut().zip(samples.iter_mut()) {
-            let start = Instant::now();
+            let start = clock.now();
             p();
-            let t = start.elapsed().as_secs_f64();
+            let t = clock.now() - start;
             elapsed += t;
             s.push(t);
         }
@@ -260,4 +304,20 @@ fn median(mut t: Vec<f64>) -> f64 {
 /// The scenes directory of this checkout.
 pub fn scenes_dir() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes")
+}
+
+/// The load average over 1, 5 and 15 minutes, as /proc/loadavg gives it.
+pub fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map_or("?".into(), |s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+}
+
+/// The CPU's model name.
+pub fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_owned())
+        })
+        .unwrap_or_else(|| "?".into())
 }

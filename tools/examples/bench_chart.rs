@@ -1,0 +1,179 @@
+//! A chart of rays per second from `trace-cpu bench` and `trace-vk bench` CSV files: one panel per
+//! scene, one group of bars per setting (mode, and camera and size where a scene has several), one
+//! bar per tracer and method (and thread count or device, where one tracer ran on several), on a
+//! logarithmic axis so that CPU and GPU rates share it.
+//!
+//! ```text
+//! cargo run --release -p tools --example bench_chart -- CSV... [-o chart.svg|chart.png]
+//! ```
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::PathBuf;
+use tools::bench::{Row, read_csv, significant};
+
+fn main() {
+    let mut csvs = Vec::new();
+    let mut out = PathBuf::from("bench-chart.svg");
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "-o" | "--output" => out = args.next().map(PathBuf::from).unwrap_or_else(|| fail("-o needs a file name")),
+            "-h" | "--help" => {
+                println!("bench_chart CSV... [-o chart.svg|chart.png]: Mrays/s per scene, setting, tracer and method");
+                return;
+            }
+            _ => csvs.push(PathBuf::from(a)),
+        }
+    }
+    if csvs.is_empty() {
+        fail("give at least one CSV written by trace-cpu bench or trace-vk bench");
+    }
+    let mut rows = Vec::new();
+    for c in &csvs {
+        rows.extend(read_csv(c).unwrap_or_else(|e| fail(&e)));
+    }
+    if rows.is_empty() {
+        fail("the CSV files hold no rows");
+    }
+    let scenes = distinct(rows.iter().map(|r| r.scene.clone()));
+    let size = (1100, 380 * scenes.len() as u32);
+    let drawn = match out.extension().and_then(|e| e.to_str()) {
+        Some("svg") => draw(&rows, &scenes, SVGBackend::new(&out, size).into_drawing_area()),
+        Some("png") => draw(&rows, &scenes, BitMapBackend::new(&out, size).into_drawing_area()),
+        _ => fail("the chart can be written as .svg or .png; name the file accordingly"),
+    };
+    drawn.unwrap_or_else(|e| fail(&format!("cannot draw {}: {e}", out.display())));
+    println!("{} rows of {} -> {}", rows.len(), names(&csvs), out.display());
+}
+
+fn fail(msg: &str) -> ! {
+    eprintln!("error: {msg}");
+    std::process::exit(1)
+}
+
+fn names(paths: &[PathBuf]) -> String {
+    paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+}
+
+/// The values in order of first appearance, once each.
+fn distinct(items: impl Iterator<Item = String>) -> Vec<String> {
+    let mut v: Vec<String> = Vec::new();
+    for i in items {
+        if !v.contains(&i) {
+            v.push(i);
+        }
+    }
+    v
+}
+
+/// What a bar stands for: tracer and method, and the device's last words ("16 threads", the GPU's
+/// name) where one tracer's rows come from several devices. Ordered by tracer, then method, so
+/// that one method's bars on several devices stand side by side.
+fn series_of(rows: &[Row]) -> Vec<(String, String, String)> {
+    let tracers = distinct(rows.iter().map(|r| r.tracer.clone()));
+    let methods = distinct(rows.iter().map(|r| r.method.clone()));
+    let mut series: Vec<(String, String, String)> = Vec::new();
+    for r in rows {
+        let s = (r.tracer.clone(), r.method.clone(), r.device.clone());
+        if !series.contains(&s) {
+            series.push(s);
+        }
+    }
+    let rank =
+        |s: &(String, String, String)| (tracers.iter().position(|t| *t == s.0), methods.iter().position(|m| *m == s.1));
+    series.sort_by_key(rank);
+    series
+}
+
+fn label(series: &[(String, String, String)], s: &(String, String, String)) -> String {
+    let devices = distinct(series.iter().filter(|o| o.0 == s.0).map(|o| o.2.clone()));
+    if devices.len() > 1 {
+        let short = s.2.rsplit(';').next().unwrap_or(&s.2).trim();
+        format!("{} {}, {short}", s.0, s.1)
+    } else {
+        format!("{} {}", s.0, s.1)
+    }
+}
+
+fn setting(r: &Row, several: bool) -> String {
+    if several { format!("{} {}x{} {}", r.camera, r.width, r.height, r.mode) } else { r.mode.clone() }
+}
+
+fn draw<DB: DrawingBackend>(rows: &[Row], scenes: &[String], root: DrawingArea<DB, Shift>) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(err)?;
+    let series = series_of(rows);
+    let colour = |i: usize| Palette99::pick(i).to_rgba();
+    for (panel, scene) in root.split_evenly((scenes.len(), 1)).iter().zip(scenes) {
+        let mine: Vec<&Row> = rows.iter().filter(|r| &r.scene == scene).collect();
+        let several = distinct(mine.iter().map(|r| format!("{} {}x{}", r.camera, r.width, r.height))).len() > 1;
+        let settings = distinct(mine.iter().map(|r| setting(r, several)));
+        let present: Vec<usize> = (0..series.len())
+            .filter(|&i| {
+                mine.iter().any(|r| (&r.tracer, &r.method, &r.device) == (&series[i].0, &series[i].1, &series[i].2))
+            })
+            .collect();
+        // Each bar is a segment of its own; a setting's group is followed by one empty segment.
+        let slots = present.len() + 1;
+        let n = settings.len() * slots;
+        let rates: Vec<f64> = mine.iter().map(|r| r.mrays()).filter(|x| x.is_finite() && *x > 0.0).collect();
+        let (lo, hi) = rates.iter().fold((f64::INFINITY, 0.0f64), |(l, h), &x| (l.min(x), h.max(x)));
+        // Headroom above the tallest bar for the legend (the axis is logarithmic).
+        let (lo, hi) = if rates.is_empty() { (0.1, 10.0) } else { (lo / 2.0, hi * 20.0) };
+        let triangles = mine.first().map_or(0, |r| r.triangles);
+        let mut chart = ChartBuilder::on(panel)
+            .caption(format!("{scene} ({triangles} triangles)"), ("sans-serif", 20))
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(60)
+            .build_cartesian_2d((0..n).into_segmented(), (lo..hi).log_scale())
+            .map_err(err)?;
+        let middle = present.len() / 2;
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_label_style(("sans-serif", 14))
+            .x_labels(n + 1)
+            .x_label_formatter(&|v| match v {
+                SegmentValue::CenterOf(i) if i % slots == middle => settings[i / slots].clone(),
+                _ => String::new(),
+            })
+            .y_desc("Mrays/s")
+            .y_label_formatter(&|y| significant(*y))
+            .draw()
+            .map_err(err)?;
+        for (slot, &si) in present.iter().enumerate() {
+            let s = &series[si];
+            let bars: Vec<Rectangle<(SegmentValue<usize>, f64)>> = mine
+                .iter()
+                .filter(|r| (&r.tracer, &r.method, &r.device) == (&s.0, &s.1, &s.2) && r.mrays() > 0.0)
+                .filter_map(|r| {
+                    let g = settings.iter().position(|x| *x == setting(r, several))?;
+                    let x = g * slots + slot;
+                    Some(Rectangle::new(
+                        [(SegmentValue::Exact(x), lo), (SegmentValue::Exact(x + 1), r.mrays())],
+                        colour(si).filled(),
+                    ))
+                })
+                .collect();
+            chart
+                .draw_series(bars)
+                .map_err(err)?
+                .label(label(&series, s))
+                .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], colour(si).filled()));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(err)?;
+    }
+    root.present().map_err(err)?;
+    Ok(())
+}

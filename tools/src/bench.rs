@@ -1,0 +1,446 @@
+//! The evaluation matrix of the thesis (6.2.1) for any tracer: scenes x cameras x sizes x modes x
+//! methods, the median of repeated frames per setting, written as CSV and Markdown. `trace-cpu
+//! bench` and `trace-vk bench` both run it, so their rows have the same columns and one table or
+//! chart can hold CPU and GPU rows of a scene side by side (`bench-chart`).
+
+use crate::output::{self, Kind, Output};
+use crate::render_args::{MAX_LIGHTS, lights_n, parse_count, parse_res, stored_camera};
+use bvh_format::{Light, SceneFile};
+use render_spec::{CameraSpec, Mode};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// The options of the matrix, shared by both tracers' `bench` commands.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MatrixArgs {
+    /// Scenes: compiled .bvh files, meshes or scene descriptions [default: the built-in bunny].
+    pub scenes: Vec<PathBuf>,
+    /// Stored cameras to render from.
+    #[arg(long, value_delimiter = ',', default_value = "close-up,medium,wide", allow_hyphen_values = true)]
+    pub cameras: Vec<String>,
+    /// Image sizes.
+    #[arg(long, value_delimiter = ',', value_parser = parse_res, default_value = "640x480,1280x960,1920x1440", allow_hyphen_values = true)]
+    pub res: Vec<(u32, u32)>,
+    /// Modes: cast, or whitted with a light count (whitted1, whitted2, whitted4).
+    #[arg(long, value_delimiter = ',', value_parser = parse_mode, default_value = "cast,whitted1,whitted2", allow_hyphen_values = true)]
+    pub modes: Vec<BenchMode>,
+    /// Timed frames per setting, 1 to 100000; the median is reported [default: 50 on the GPU, 10
+    /// on the CPU, whose frames are a hundred times longer].
+    #[arg(long, value_parser = parse_frames, allow_hyphen_values = true)]
+    pub frames: Option<usize>,
+    /// Untimed frames before the timed ones, 0 to 100000 [default: 3 on the GPU, 1 on the CPU].
+    #[arg(long, value_parser = parse_warmup, allow_hyphen_values = true)]
+    pub warmup: Option<usize>,
+    /// Write the table as CSV here (and as Markdown next to it, .md).
+    #[arg(long, default_value = "bench.csv", allow_hyphen_values = true)]
+    pub csv: PathBuf,
+}
+
+fn parse_frames(s: &str) -> Result<usize, String> {
+    parse_count(s, 1, 100_000, "the number of frames").map(|n| n as usize)
+}
+
+fn parse_warmup(s: &str) -> Result<usize, String> {
+    parse_count(s, 0, 100_000, "the number of warm-up frames").map(|n| n as usize)
+}
+
+/// A mode of the matrix: ray casting, or Whitted ray tracing with this many lights (the scene's
+/// first ones, completed by [`lights_n`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BenchMode {
+    pub mode: Mode,
+    pub lights: usize,
+}
+
+impl BenchMode {
+    /// `cast`, `whitted1`, `whitted2`, ...: the name the options and the tables use.
+    pub fn name(&self) -> String {
+        match self.mode {
+            Mode::Cast => "cast".to_owned(),
+            Mode::Whitted => format!("whitted{}", self.lights),
+        }
+    }
+}
+
+pub fn parse_mode(s: &str) -> Result<BenchMode, String> {
+    match s.trim() {
+        "cast" => Ok(BenchMode { mode: Mode::Cast, lights: 0 }),
+        t => match t.strip_prefix("whitted") {
+            Some(n) => parse_count(n, 1, MAX_LIGHTS as u64, "the light count after \"whitted\"")
+                .map(|n| BenchMode { mode: Mode::Whitted, lights: n as usize }),
+            None => Err(format!("{s:?} is not a mode (cast, whitted1, whitted2, ...)")),
+        },
+    }
+}
+
+/// One frame to render: what both tracers' settings hold.
+#[derive(Clone, Debug)]
+pub struct FrameSpec {
+    pub width: u32,
+    pub height: u32,
+    pub camera: CameraSpec,
+    pub mode: Mode,
+    pub lights: Vec<Light>,
+    pub max_indirections: u32,
+}
+
+/// What one frame cost: milliseconds (whatever the tracer's [`Bench::timing`] says they cover) and
+/// primary, shadow and secondary rays.
+#[derive(Clone, Copy, Debug)]
+pub struct Timed {
+    pub ms: f64,
+    pub rays: [u64; 3],
+}
+
+/// A tracer the matrix can time.
+pub trait Bench {
+    /// What one (scene, method) pair keeps from frame to frame (a renderer with its buffers).
+    type Renderer<'a>
+    where
+        Self: 'a;
+    /// `cpu` or `vk`: the `tracer` column.
+    fn tracer(&self) -> &'static str;
+    /// The machine, in a few words: the `device` column.
+    fn device(&self) -> String;
+    /// What the time of a frame covers, for the Markdown preface.
+    fn timing(&self) -> String;
+    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<Self::Renderer<'a>, String>;
+    fn frame(&self, r: &mut Self::Renderer<'_>, f: &FrameSpec) -> Result<Timed, String>;
+    /// Checked once after the last frame (the Vulkan tracer's validation messages).
+    fn finish(&self) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+/// One measured setting: a line of the CSV.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    pub scene: String,
+    pub triangles: u64,
+    pub camera: String,
+    pub width: u32,
+    pub height: u32,
+    pub mode: String,
+    pub lights: usize,
+    pub method: String,
+    pub median_ms: f64,
+    pub min_ms: f64,
+    pub rays: [u64; 3],
+    pub tracer: String,
+    pub device: String,
+}
+
+/// The CSV columns, in order.
+pub const CSV_HEADER: &str = "scene,triangles,camera,width,height,mode,lights,method,median_ms,min_ms,primary,shadow,\
+                              secondary,mrays_per_s,tracer,device";
+
+impl Row {
+    pub fn total_rays(&self) -> u64 {
+        self.rays.iter().sum()
+    }
+
+    /// Million rays per second over the median frame.
+    pub fn mrays(&self) -> f64 {
+        self.total_rays() as f64 / self.median_ms / 1e3
+    }
+
+    pub fn csv(&self) -> String {
+        let [p, s, r] = self.rays;
+        format!(
+            "{},{},{},{},{},{},{},{},{:.4},{:.4},{p},{s},{r},{:.2},{},{}",
+            field(&self.scene),
+            self.triangles,
+            field(&self.camera),
+            self.width,
+            self.height,
+            self.mode,
+            self.lights,
+            self.method,
+            self.median_ms,
+            self.min_ms,
+            self.mrays(),
+            self.tracer,
+            field(&self.device)
+        )
+    }
+
+    fn markdown(&self) -> String {
+        let [p, s, r] = self.rays;
+        format!(
+            "| {} | {} | {}x{} | {} | {} {} | {} | {} | {p} | {s} | {r} |",
+            self.scene,
+            self.camera,
+            self.width,
+            self.height,
+            self.mode,
+            self.tracer,
+            self.method,
+            significant(self.median_ms),
+            significant(self.mrays()),
+        )
+    }
+}
+
+/// Commas would split a field: names keep their words, joined by semicolons instead.
+fn field(s: &str) -> String {
+    s.replace(',', ";")
+}
+
+/// A figure with three significant digits and no exponent (0.0123, 4.56, 789, 12345), so that a
+/// small rate never reads as 0.0 and a large one keeps its integer digits.
+pub fn significant(x: f64) -> String {
+    if !x.is_finite() || x == 0.0 {
+        return format!("{x}");
+    }
+    let digits = (2 - x.abs().log10().floor() as i32).max(0) as usize;
+    format!("{x:.digits$}")
+}
+
+/// Reads rows written by [`Row::csv`] (or by earlier versions of `trace-vk bench`, whose files have
+/// no `tracer` and `device` columns: those rows are `vk` on an unnamed device).
+pub fn read_csv(path: &Path) -> Result<Vec<Row>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
+    let (_, header) = lines.next().ok_or_else(|| format!("{} is empty", path.display()))?;
+    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    let col = |name: &str| names.iter().position(|n| *n == name);
+    let need = |name: &str| col(name).ok_or_else(|| format!("{} has no column {name:?}", path.display()));
+    let idx = [
+        need("scene")?,
+        need("triangles")?,
+        need("camera")?,
+        need("width")?,
+        need("height")?,
+        need("mode")?,
+        need("lights")?,
+        need("method")?,
+        need("median_ms")?,
+        need("min_ms")?,
+        need("primary")?,
+        need("shadow")?,
+        need("secondary")?,
+    ];
+    let (tracer, device) = (col("tracer"), col("device"));
+    let mut rows = Vec::new();
+    for (n, line) in lines {
+        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+        let bad = |what: &str| format!("{} line {}: {what}", path.display(), n + 1);
+        if f.len() != names.len() {
+            return Err(bad(&format!("{} fields where the header has {}", f.len(), names.len())));
+        }
+        let num = |i: usize| f[idx[i]].parse::<f64>().map_err(|_| bad(&format!("{:?} is not a number", f[idx[i]])));
+        let int = |i: usize| f[idx[i]].parse::<u64>().map_err(|_| bad(&format!("{:?} is not a count", f[idx[i]])));
+        rows.push(Row {
+            scene: f[idx[0]].to_owned(),
+            triangles: int(1)?,
+            camera: f[idx[2]].to_owned(),
+            width: int(3)? as u32,
+            height: int(4)? as u32,
+            mode: f[idx[5]].to_owned(),
+            lights: int(6)? as usize,
+            method: f[idx[7]].to_owned(),
+            median_ms: num(8)?,
+            min_ms: num(9)?,
+            rays: [int(10)?, int(11)?, int(12)?],
+            tracer: tracer.map_or("vk", |i| f[i]).to_owned(),
+            device: device.map_or("", |i| f[i]).to_owned(),
+        });
+    }
+    Ok(rows)
+}
+
+/// The Markdown table of `rows`, after a preface naming each device with what its times cover.
+pub fn markdown(prefaces: &[String], rows: &[Row]) -> String {
+    let mut s = String::new();
+    for p in prefaces {
+        let _ = writeln!(s, "{p}\n");
+    }
+    s.push_str(
+        "| scene | camera | size | mode | tracer, method | median ms | Mrays/s | primary | shadow | secondary |\n",
+    );
+    s.push_str("|---|---|---|---|---|---:|---:|---:|---:|---:|\n");
+    for r in rows {
+        let _ = writeln!(s, "{}", r.markdown());
+    }
+    s
+}
+
+/// Checks the CSV path and its Markdown copy (`.md` beside it) before any work.
+pub fn check_tables(csv: &Path) -> Result<[Output; 2], String> {
+    let md = csv.with_extension("md");
+    let checked =
+        output::check(&[("--csv", csv, Kind::Table), ("--csv (its Markdown copy)", &md, Kind::Markdown)], &[])
+            .map_err(|e| e.to_string())?;
+    let [csv, md]: [Output; 2] = checked.try_into().map_err(|_| "two outputs were checked".to_owned())?;
+    Ok([csv, md])
+}
+
+/// Writes the CSV and the Markdown next to it (`.md`), each complete or not at all.
+pub fn write_tables(csv: &Path, preface: &str, rows: &[Row]) -> Result<PathBuf, String> {
+    let [csv, md] = check_tables(csv)?;
+    let mut text = String::from(CSV_HEADER);
+    text.push('\n');
+    for r in rows {
+        text.push_str(&r.csv());
+        text.push('\n');
+    }
+    output::write_text(&csv, &text).map_err(|e| e.to_string())?;
+    output::write_text(&md, &markdown(&[preface.to_owned()], rows)).map_err(|e| e.to_string())?;
+    Ok(md.path)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+}
+
+/// Frames and warm-up frames per setting when the options leave them out.
+pub struct Defaults {
+    pub frames: usize,
+    pub warmup: usize,
+}
+
+/// Runs the matrix with `methods` on `bench`, shows progress, prints the Markdown table and
+/// writes the CSV and Markdown files. Returns the rows.
+pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defaults) -> Result<Vec<Row>, String> {
+    let frames = m.frames.unwrap_or(defaults.frames);
+    let warmup = m.warmup.unwrap_or(defaults.warmup);
+    if methods.is_empty() || m.cameras.is_empty() || m.res.is_empty() || m.modes.is_empty() {
+        return Err("the matrix is empty: give at least one method, camera, size and mode".to_owned());
+    }
+    check_tables(&m.csv)?;
+    let scenes: Vec<Option<PathBuf>> =
+        if m.scenes.is_empty() { vec![None] } else { m.scenes.iter().cloned().map(Some).collect() };
+    let total = scenes.len() * m.cameras.len() * m.res.len() * m.modes.len() * methods.len();
+    let bar =
+        crate::cli::Progress::new(total as u64, "{bar:40} {pos}/{len} settings ({elapsed}, {eta} left) {msg}", false);
+    let device = bench.device();
+    let mut rows = Vec::with_capacity(total);
+    for path in &scenes {
+        let name = path
+            .as_ref()
+            .and_then(|p| p.file_stem())
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "bunny (built-in)".to_owned());
+        bar.set_message(format!("loading {name}"));
+        let scene = crate::load_scene(path.as_deref())?.file;
+        // Every camera is looked up before the first frame, so a misspelt one fails at once.
+        let cameras: Vec<(&String, CameraSpec)> =
+            m.cameras.iter().map(|c| Ok((c, stored_camera(&scene, c)?))).collect::<Result<_, String>>()?;
+        for &method in methods {
+            let mut renderer = bench.prepare(&scene, method)?;
+            for &(cam, camera) in &cameras {
+                for &(width, height) in &m.res {
+                    for mode in &m.modes {
+                        bar.set_message(format!("{name} {cam} {width}x{height} {} {method}", mode.name()));
+                        let spec = FrameSpec {
+                            width,
+                            height,
+                            camera,
+                            mode: mode.mode,
+                            lights: lights_n(&scene, mode.lights, &camera),
+                            max_indirections: scene.settings.max_indirections,
+                        };
+                        let mut times = Vec::with_capacity(frames);
+                        let mut rays = [0u64; 3];
+                        for i in 0..warmup + frames {
+                            let t = bench.frame(&mut renderer, &spec)?;
+                            if i >= warmup {
+                                times.push(t.ms);
+                                rays = t.rays;
+                            }
+                        }
+                        let min_ms = times.iter().copied().fold(f64::INFINITY, f64::min);
+                        rows.push(Row {
+                            scene: name.clone(),
+                            triangles: scene.triangles.len() as u64,
+                            camera: cam.clone(),
+                            width,
+                            height,
+                            mode: mode.name(),
+                            lights: mode.lights,
+                            method: method.to_owned(),
+                            median_ms: median(&mut times),
+                            min_ms,
+                            rays,
+                            tracer: bench.tracer().to_owned(),
+                            device: device.clone(),
+                        });
+                        bar.inc(1);
+                    }
+                }
+            }
+        }
+    }
+    bar.finish();
+    bench.finish()?;
+    let preface = format!(
+        "Device: {device} (`{}`); {frames} frames per setting after {warmup} warm-up frames; {}.",
+        bench.tracer(),
+        bench.timing()
+    );
+    let md_path = write_tables(&m.csv, &preface, &rows)?;
+    crate::say!("{}", markdown(&[preface], &rows));
+    crate::say!("-> {} and {}", m.csv.display(), md_path.display());
+    Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn modes_parse_and_name_themselves() {
+        assert_eq!(parse_mode("cast").unwrap(), BenchMode { mode: Mode::Cast, lights: 0 });
+        assert_eq!(parse_mode("whitted2").unwrap().name(), "whitted2");
+        assert!(parse_mode("whitted0").is_err() && parse_mode("whitted").is_err() && parse_mode("trace").is_err());
+    }
+
+    #[test]
+    fn figures_keep_three_significant_digits() {
+        assert_eq!(significant(0.012345), "0.0123");
+        assert_eq!(significant(4.567), "4.57");
+        assert_eq!(significant(789.4), "789");
+        assert_eq!(significant(12345.6), "12346");
+    }
+
+    #[test]
+    fn rows_survive_a_round_trip_through_csv_and_old_files_read_as_vk() {
+        let row = Row {
+            scene: "dragon".into(),
+            triangles: 871416,
+            camera: "medium".into(),
+            width: 640,
+            height: 480,
+            mode: "whitted2".into(),
+            lights: 2,
+            method: "packet".into(),
+            median_ms: 12.5,
+            min_ms: 11.25,
+            rays: [307200, 400000, 100],
+            tracer: "cpu".into(),
+            device: "Some CPU, 16 threads".into(),
+        };
+        let dir = std::env::temp_dir().join(format!("bench-csv-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let csv = dir.join("b.csv");
+        let md = write_tables(&csv, "Device: test.", std::slice::from_ref(&row)).unwrap();
+        let back = read_csv(&csv).unwrap();
+        assert_eq!(back, vec![Row { device: "Some CPU; 16 threads".into(), ..row.clone() }]);
+        assert!(
+            std::fs::read_to_string(&md).unwrap().contains("| dragon | medium | 640x480 | whitted2 | cpu packet |")
+        );
+        let old = dir.join("old.csv");
+        std::fs::write(
+            &old,
+            "scene,triangles,camera,width,height,mode,lights,method,median_ms,min_ms,primary,shadow,secondary,mrays_per_s\n\
+             bunny,69453,medium,1920,1440,cast,0,lst,0.4416,0.4279,2764800,0,0,6260.9\n",
+        )
+        .unwrap();
+        let old = read_csv(&old).unwrap();
+        assert_eq!((old[0].tracer.as_str(), old[0].method.as_str(), old[0].rays), ("vk", "lst", [2764800, 0, 0]));
+        assert!((old[0].mrays() - 6260.9).abs() < 0.1);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,77 @@
+//! `trace-cpu bench` end to end on a tiny matrix: the CSV has one row per setting with the shared
+//! columns, and every row's ray counts are those of the image the tracer renders for it.
+
+use render_spec::{Mode, Settings};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use tools::bench::{CSV_HEADER, read_csv};
+use tracer_cpu::{Method, Tracer};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("tools/ sits in the workspace").to_path_buf()
+}
+
+#[test]
+fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
+    let dir = std::env::temp_dir().join(format!("trace-cpu-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("cpu.csv");
+    let room = repo().join("scenes/room.toml");
+    let o = Command::new(env!("CARGO_BIN_EXE_trace-cpu"))
+        .args(["bench", room.to_str().unwrap(), "--cameras", "medium,wide", "--res", "32x24,21x15"])
+        .args(["--modes", "cast,whitted1,whitted2", "--methods", "ordered,stackless", "--frames", "3"])
+        .args(["--warmup", "0", "--threads", "2", "--csv", csv.to_str().unwrap()])
+        .output()
+        .expect("trace-cpu runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert_eq!(text.lines().next(), Some(CSV_HEADER));
+    let rows = read_csv(&csv).unwrap();
+    assert_eq!(rows.len(), 2 * 2 * 2 * 3, "cameras x sizes x methods x modes");
+
+    let scene = tools::load_scene(Some(&room)).unwrap().file;
+    let tracer = Tracer::new(&scene);
+    for (i, r) in rows.iter().enumerate() {
+        // Scene, then method, then camera, size and mode: the order of the loops.
+        let method = ["ordered", "stackless"][i / 12];
+        let camera = ["medium", "wide"][i / 6 % 2];
+        let size = [(32, 24), (21, 15)][i / 3 % 2];
+        let (mode, lights) = [("cast", 0), ("whitted1", 1), ("whitted2", 2)][i % 3];
+        assert_eq!(
+            (r.scene.as_str(), r.method.as_str(), r.camera.as_str(), (r.width, r.height), r.mode.as_str(), r.lights),
+            ("room", method, camera, size, mode, lights),
+            "row {i}"
+        );
+        assert_eq!((r.tracer.as_str(), r.triangles), ("cpu", scene.triangles.len() as u64));
+        assert!(r.device.ends_with("2 threads"), "{}", r.device);
+        assert!(r.min_ms > 0.0 && r.min_ms <= r.median_ms, "row {i}: {} > {}", r.min_ms, r.median_ms);
+
+        let cam = tools::render_args::stored_camera(&scene, camera).unwrap();
+        let image = tracer_cpu::render(
+            &tracer,
+            &Settings {
+                width: r.width,
+                height: r.height,
+                camera: cam,
+                mode: if lights == 0 { Mode::Cast } else { Mode::Whitted },
+                lights: tools::render_args::lights_n(&scene, lights, &cam),
+                max_indirections: scene.settings.max_indirections,
+                aovs: false,
+            },
+            Method::Ordered,
+        )
+        .unwrap();
+        let rays = image.rays;
+        assert_eq!(r.rays, [rays.primary, rays.shadow, rays.secondary], "row {i}");
+        assert_eq!(r.rays[0], (r.width * r.height) as u64);
+        if lights == 0 {
+            assert_eq!(r.rays[1..], [0, 0], "row {i}: ray casting traces primary rays only");
+        } else {
+            assert!(r.rays[1] > 0 && r.rays[2] > 0, "row {i}: the room has lights, a mirror and glass");
+        }
+    }
+    let md = std::fs::read_to_string(csv.with_extension("md")).unwrap();
+    assert_eq!(md.lines().filter(|l| l.starts_with("| room |")).count(), rows.len());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,0 +1,89 @@
+//! How the rays of one stage of a pixel block are traced: the renderer hands up to 8 rays (the
+//! lanes of a 4 x 2 block: primary rays, the shadow rays towards one light, or the secondary rays
+//! of one indirection) to a [`TraceLanes`], which traces them as an AVX2 packet or one by one.
+//! Every way finds the same hits (bit for bit), so the choice changes speed and the cost AOV only.
+
+use crate::Method;
+use crate::packet::{self, Entry, LANES, Rays, Results};
+use crate::render::Tracer;
+use crate::traverse::Stack;
+
+/// Traces the valid lanes of `rays`; a lane's hit is its closest hit in `(0, t_max]`, or for
+/// [`TraceLanes::occluded`] any hit (Some means blocked). Lanes that are not valid get no hit and
+/// no cost.
+pub trait TraceLanes {
+    fn closest(&mut self, rays: &Rays) -> Results;
+    fn occluded(&mut self, rays: &Rays) -> Results;
+}
+
+/// One ray at a time with a scalar traversal ([`Method::Ordered`] or [`Method::Stackless`]).
+pub struct OneByOne<'a> {
+    tracer: &'a Tracer<'a>,
+    method: Method,
+    stack: Stack,
+}
+
+impl<'a> OneByOne<'a> {
+    pub fn new(tracer: &'a Tracer<'a>, method: Method) -> Self {
+        Self { tracer, method, stack: Stack::default() }
+    }
+
+    fn trace<const ANY: bool>(&mut self, rays: &Rays) -> Results {
+        let mut out = Results::default();
+        for i in 0..LANES {
+            if !rays.valid[i] {
+                continue;
+            }
+            let ray = rays.ray(i);
+            let hit =
+                self.tracer.trace::<ANY>(self.method, &ray, 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
+            out.set(i, hit);
+        }
+        out
+    }
+}
+
+impl TraceLanes for OneByOne<'_> {
+    fn closest(&mut self, rays: &Rays) -> Results {
+        self.trace::<false>(rays)
+    }
+    fn occluded(&mut self, rays: &Rays) -> Results {
+        self.trace::<true>(rays)
+    }
+}
+
+/// 8-wide AVX2 packets over the child-pair layout; a stage with few live lanes (the rays that
+/// are left after some bounces) goes one ray at a time with ordered traversal, which then costs
+/// less than walking the tree for a mostly empty packet.
+pub struct Packets<'a> {
+    tracer: &'a Tracer<'a>,
+    stack: Vec<Entry>,
+    single: OneByOne<'a>,
+}
+
+/// Lanes at or below which a stage is traced one ray at a time.
+const SPARSE: usize = 2;
+
+impl<'a> Packets<'a> {
+    /// Only where [`packet::available`] and the scene has the child-pair layout (the renderer checks).
+    pub fn new(tracer: &'a Tracer<'a>) -> Self {
+        Self { tracer, stack: Vec::with_capacity(128), single: OneByOne::new(tracer, Method::Ordered) }
+    }
+
+    fn trace<const ANY: bool>(&mut self, rays: &Rays) -> Results {
+        if rays.count() <= SPARSE {
+            return self.single.trace::<ANY>(rays);
+        }
+        let nodes = self.tracer.scene.child_pair.as_deref().expect("the renderer checked the layout");
+        packet::trace::<ANY>(nodes, self.tracer.triangles(), rays, &mut self.stack)
+    }
+}
+
+impl TraceLanes for Packets<'_> {
+    fn closest(&mut self, rays: &Rays) -> Results {
+        self.trace::<false>(rays)
+    }
+    fn occluded(&mut self, rays: &Rays) -> Results {
+        self.trace::<true>(rays)
+    }
+}

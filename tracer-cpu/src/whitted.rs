@@ -1,0 +1,228 @@
+//! The Whitted driver (docs/shading.md): shades a block of up to 8 pixels (4 x 2) stage by stage,
+//! as the thesis's pipeline runs a kernel per stage (code example 4.3): trace the primary rays,
+//! shade once per light with that light's shadow rays traced together, then per indirection trace
+//! the secondary rays of the paths still alive and shade their hits the same way. Ray casting is
+//! the first stage alone, lit by a white light at the eye without shadow rays.
+//!
+//! Each lane computes exactly what its pixel traced on its own would, in the same order, so an
+//! image does not depend on how its rays are grouped or traced ([`TraceLanes`]).
+
+use crate::geometry::Cost;
+use crate::lanes::TraceLanes;
+use crate::packet::{LANES, Rays, Results};
+use crate::shade;
+use crate::wide::{Lanes, Mask, V3};
+use bvh_format::{Light, Material, SceneFile};
+use glam::Vec3;
+use render_spec::{BounceStop, Mode, NO_TRIANGLE, RayCounts, Settings};
+
+/// Per-frame constants of the pipeline.
+pub struct Shading<'a> {
+    scene: &'a SceneFile,
+    mode: Mode,
+    lights: &'a [Light],
+    max_indirections: u32,
+    ambient: Vec3,
+    background: Vec3,
+    /// The adaptive bounce stop, computed once per frame.
+    stop: BounceStop,
+    /// Whether to fill [`Block::t`], [`Block::normal`] and [`Block::prim`].
+    aovs: bool,
+}
+
+/// What a block produced per lane, and the rays it traced.
+#[derive(Clone, Copy, Debug)]
+pub struct Block {
+    /// Linear radiance, component by component.
+    pub colour: [[f32; LANES]; 3],
+    /// Primary hit distance (+inf on a miss), shading normal and input triangle (with AOVs only).
+    pub t: [f32; LANES],
+    pub normal: [[f32; LANES]; 3],
+    pub prim: [u32; LANES],
+    /// Work over all of the lane's rays.
+    pub cost: [Cost; LANES],
+    pub rays: RayCounts,
+}
+
+impl Default for Block {
+    fn default() -> Self {
+        Self {
+            colour: [[0.0; LANES]; 3],
+            t: [f32::INFINITY; LANES],
+            normal: [[0.0; LANES]; 3],
+            prim: [NO_TRIANGLE; LANES],
+            cost: [Cost::default(); LANES],
+            rays: RayCounts::default(),
+        }
+    }
+}
+
+/// The materials of the lanes that hit something (a default material elsewhere).
+struct Materials<L: Lanes> {
+    kd: V3<L>,
+    ks: V3<L>,
+    shininess: L,
+    kr: L,
+    kt: L,
+    ior: L,
+}
+
+impl<L: Lanes> Materials<L> {
+    #[inline(always)]
+    fn gather(m: &[&Material; LANES]) -> Self {
+        Self {
+            kd: V3::from_lanes(|i| Vec3::from(m[i].kd)),
+            ks: V3::from_lanes(|i| Vec3::from(m[i].ks)),
+            shininess: L::from_fn(|i| m[i].shininess),
+            kr: L::from_fn(|i| m[i].kr),
+            kt: L::from_fn(|i| m[i].kt),
+            ior: L::from_fn(|i| m[i].ior),
+        }
+    }
+}
+
+impl<'a> Shading<'a> {
+    pub fn new(scene: &'a SceneFile, s: &'a Settings) -> Self {
+        Self {
+            scene,
+            mode: s.mode,
+            lights: &s.lights,
+            max_indirections: s.max_indirections,
+            ambient: Vec3::from(scene.settings.ambient),
+            background: Vec3::from(scene.settings.background),
+            stop: BounceStop::new(scene, &s.lights),
+            aovs: s.aovs,
+        }
+    }
+
+    /// Shades the valid lanes of `primary` (rays from the eye, `t_max` +inf) with lanes of type
+    /// `L`, tracing every ray through `lanes`. Inlined into the renderer's loop, which is compiled
+    /// for AVX2 where the CPU has it.
+    #[inline(always)]
+    pub(crate) fn block<L: Lanes, T: TraceLanes>(&self, primary: &Rays, lanes: &mut T) -> Block {
+        let scene = self.scene;
+        let zero = L::splat(0.0);
+        let background = V3::<L>::splat(self.background);
+        let mut out = Block::default();
+        let mut colour = V3::<L>::zero();
+        let mut rays = *primary;
+        let mut hits = lanes.closest(&rays);
+        out.rays.primary = rays.count() as u64;
+        let mut weight = L::splat(1.0);
+        for depth in 0u32.. {
+            // The surfaces hit; a miss adds the background and ends the path.
+            let valid = L::mask(rays.valid);
+            add_cost(&mut out.cost, &rays.valid, &hits);
+            let found = L::mask(hits.hit);
+            let hit = valid & found;
+            let miss = valid & !found;
+            let behind = if depth == 0 { background } else { colour + background * weight };
+            colour = V3::select(miss, behind, colour);
+            if !hit.any() {
+                break;
+            }
+            let hit_lanes = L::bools(hit);
+            let tri: [usize; LANES] = std::array::from_fn(|i| if hit_lanes[i] { hits.tri[i] as usize } else { 0 });
+            let (origin, dir) = (V3::<L>::from_arrays(&rays.origin), V3::<L>::from_arrays(&rays.dir));
+            // Edges and vertex normals (zero for a flat triangle) padded to 16 bytes per lane, for
+            // the 4-float gathers.
+            let pad = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
+            let edges: [[[f32; 4]; 2]; LANES] = tri.map(|k| {
+                let (e1, e2) = shade::edges(&scene.triangle(k));
+                [pad(e1), pad(e2)]
+            });
+            let normals: [[[f32; 4]; 3]; LANES] =
+                tri.map(|k| shade::shading_normals(scene.vertex_normals(k)).map(|n| pad(n.into())));
+            let s = shade::surface_of(
+                L::gather3(std::array::from_fn(|i| &edges[i][0])),
+                L::gather3(std::array::from_fn(|i| &edges[i][1])),
+                [
+                    L::gather3(std::array::from_fn(|i| &normals[i][0])),
+                    L::gather3(std::array::from_fn(|i| &normals[i][1])),
+                    L::gather3(std::array::from_fn(|i| &normals[i][2])),
+                ],
+                origin,
+                dir,
+                L::from_array(hits.t),
+                L::from_array(hits.u),
+                L::from_array(hits.v),
+            );
+            if depth == 0 && self.aovs {
+                out.t = L::select(hit, L::from_array(hits.t), L::from_array(out.t)).to_array();
+                out.normal = V3::select(hit, s.shading, V3::zero()).to_arrays();
+                for i in 0..LANES {
+                    if hit_lanes[i] {
+                        out.prim[i] = scene.input_index[tri[i]];
+                    }
+                }
+            }
+            let m =
+                Materials::<L>::gather(&std::array::from_fn(|i| &scene.materials[scene.triangles[tri[i]].material as usize]));
+            if self.mode == Mode::Cast {
+                colour = V3::select(hit, shade::cast_of(m.kd, s.shading, dir), colour);
+                break;
+            }
+
+            // Phong per light, each light's shadow rays traced together.
+            let mut local = V3::select(hit, V3::splat(self.ambient).mul_each(m.kd), V3::zero());
+            for light in self.lights {
+                let position = V3::<L>::splat(Vec3::from(light.position));
+                let l = (position - s.point).normalize_or_zero();
+                let term = shade::phong_of(m.kd, m.ks, m.shininess, s.shading, dir, l, hit);
+                // A light behind the surface needs no shadow ray.
+                let asks = hit & !term.is_zero();
+                if !asks.any() {
+                    continue;
+                }
+                // The shadow ray leaves from the side of the surface the light is on.
+                let side = V3::select(s.geometric.dot(l).ge(zero), s.geometric, -s.geometric);
+                let from = L::offset_origin(s.point, side);
+                let shadow = Rays {
+                    origin: from.to_arrays(),
+                    dir: l.to_arrays(),
+                    t_max: (position - from).length().to_array(),
+                    valid: L::bools(asks),
+                };
+                out.rays.shadow += L::count(asks) as u64;
+                let blocked = lanes.occluded(&shadow);
+                add_cost(&mut out.cost, &shadow.valid, &blocked);
+                let lit = asks & !L::mask(blocked.hit);
+                local = V3::select(lit, local + term.mul_each(V3::splat(Vec3::from(light.colour))), local);
+            }
+            colour = V3::select(hit, colour + local * weight, colour);
+
+            // Secondary rays of the paths that can still change their pixel.
+            let remaining = self.max_indirections - depth;
+            if remaining == 0 {
+                break;
+            }
+            let sec = shade::secondary_of(m.kr, m.kt, m.ior, s.shading, s.front, dir);
+            let go = hit & sec.exists & shade::worth_of(weight * sec.factor, &self.stop, self.stop.chain(remaining));
+            if !go.any() {
+                break;
+            }
+            weight = L::select(go, weight * sec.factor, weight);
+            let side = V3::select(sec.same_side, s.geometric, -s.geometric);
+            let from = L::offset_origin(s.point, side);
+            rays = Rays {
+                origin: from.to_arrays(),
+                dir: sec.dir.to_arrays(),
+                t_max: [f32::INFINITY; LANES],
+                valid: L::bools(go),
+            };
+            out.rays.secondary += L::count(go) as u64;
+            hits = lanes.closest(&rays);
+        }
+        out.colour = colour.to_arrays();
+        out
+    }
+}
+
+#[inline(always)]
+fn add_cost(cost: &mut [Cost; LANES], m: &[bool; LANES], r: &Results) {
+    for i in 0..LANES {
+        if m[i] {
+            cost[i] += r.cost[i];
+        }
+    }
+}
