@@ -156,8 +156,9 @@ impl<'a> Shading<'a> {
                     }
                 }
             }
-            let m =
-                Materials::<L>::gather(&std::array::from_fn(|i| &scene.materials[scene.triangles[tri[i]].material as usize]));
+            let m = Materials::<L>::gather(&std::array::from_fn(|i| {
+                &scene.materials[scene.triangles[tri[i]].material as usize]
+            }));
             if self.mode == Mode::Cast {
                 colour = V3::select(hit, shade::cast_of(m.kd, s.shading, dir), colour);
                 break;
