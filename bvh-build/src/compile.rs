@@ -6,7 +6,9 @@ use crate::binned::BinnedSah;
 use crate::build::{self, Costs};
 use crate::scene::Scene;
 use crate::sweep::SweepSah;
-use bvh_format::{BuildParams, SceneFile, Strategy, Triangle, TriangleNormals};
+use bvh_format::{BuildParams, FLAT, IndexedTriangle, SceneFile, Strategy};
+use glam::Vec3;
+use std::collections::HashMap;
 use std::sync::atomic::AtomicUsize;
 
 /// Which node layouts to store.
@@ -108,41 +110,16 @@ pub fn compile_with_progress(
     if scene.normals.len() != n || scene.material_ids.len() != n {
         return Err(BuildError::Params("the scene's normals or material ids do not match its triangles".to_owned()));
     }
-    use rayon::prelude::*;
     let tree = tree_with(&scene.positions, params, progress, layouts.escape)?;
-    let pad = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
-    let order = &tree.order;
-    let ((triangles, normals), material_ids) = rayon::join(
-        || {
-            rayon::join(
-                || {
-                    order
-                        .par_iter()
-                        .map(|&i| {
-                            let [a, b, c] = scene.positions[i as usize];
-                            Triangle::from_vertices(a.into(), b.into(), c.into())
-                        })
-                        .collect()
-                },
-                || {
-                    order
-                        .par_iter()
-                        .map(|&i| {
-                            let [a, b, c] = scene.normals[i as usize];
-                            TriangleNormals { n: [pad(a), pad(b), pad(c)] }
-                        })
-                        .collect()
-                },
-            )
-        },
-        || order.par_iter().map(|&i| scene.material_ids[i as usize]).collect(),
-    );
+    let geometry = index_geometry(scene, &tree.order);
     let file = SceneFile {
         build: *params,
         settings: scene.settings,
-        triangles,
-        normals,
-        material_ids,
+        origin: [0.0; 3],
+        vertices: geometry.vertices,
+        triangles: geometry.triangles,
+        normals: geometry.normals,
+        normal_indices: geometry.normal_indices,
         materials: scene.materials.clone(),
         material_names: scene.material_names.clone(),
         input_index: tree.order,
@@ -153,4 +130,61 @@ pub fn compile_with_progress(
     };
     file.validate().map_err(BuildError::Invalid)?;
     Ok(file)
+}
+
+/// The indexed geometry of the file, in leaf order.
+struct IndexedGeometry {
+    vertices: Vec<[f32; 3]>,
+    triangles: Vec<IndexedTriangle>,
+    normals: Vec<[f32; 3]>,
+    normal_indices: Vec<[u32; 3]>,
+}
+
+/// Welds equal positions (and equal normals) into shared vertices, numbered in order of first use
+/// so that a leaf's vertices lie close together. Welding is what makes the tracers' edge test
+/// consistent: the two triangles of an edge read the same two stored vertices. Triangles whose
+/// vertex normals all equal their geometric normal are stored flat (no normals); a scene of only
+/// flat triangles stores none.
+fn index_geometry(scene: &Scene, order: &[u32]) -> IndexedGeometry {
+    // Bit patterns as keys, with -0 made +0 (`+ 0.0`) so that equal coordinates weld.
+    fn key(v: Vec3) -> [u32; 3] {
+        (v + Vec3::ZERO).to_array().map(f32::to_bits)
+    }
+    fn weld(map: &mut HashMap<[u32; 3], u32>, out: &mut Vec<[f32; 3]>, v: Vec3) -> u32 {
+        *map.entry(key(v)).or_insert_with(|| {
+            out.push((v + Vec3::ZERO).to_array());
+            out.len() as u32 - 1
+        })
+    }
+    let mut positions = HashMap::new();
+    let mut vertices = Vec::new();
+    let triangles = order
+        .iter()
+        .map(|&i| IndexedTriangle {
+            vertices: scene.positions[i as usize].map(|p| weld(&mut positions, &mut vertices, p)),
+            material: scene.material_ids[i as usize],
+        })
+        .collect();
+    let mut normal_map = HashMap::new();
+    let mut normals = Vec::new();
+    let normal_indices: Vec<[u32; 3]> = order
+        .iter()
+        .map(|&i| {
+            let ns = scene.normals[i as usize];
+            if is_flat(scene.positions[i as usize], ns) {
+                FLAT
+            } else {
+                ns.map(|n| weld(&mut normal_map, &mut normals, n))
+            }
+        })
+        .collect();
+    let normal_indices = if normals.is_empty() { Vec::new() } else { normal_indices };
+    IndexedGeometry { vertices, triangles, normals, normal_indices }
+}
+
+/// Whether all three vertex normals are the triangle's own geometric normal (to rounding), so that
+/// shading with the geometric normal gives the same picture.
+fn is_flat([a, b, c]: [Vec3; 3], normals: [Vec3; 3]) -> bool {
+    let ng = crate::import::geometry::face_normal(a, b, c);
+    normals.iter().all(|&n| (n - ng).abs().max_element() <= 1e-6)
 }

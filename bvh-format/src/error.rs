@@ -24,6 +24,10 @@ pub enum FormatError {
     Truncated { what: &'static str, needed: u64, len: u64 },
     #[error("this is not a BVH scene file (wrong magic bytes)")]
     BadMagic,
+    #[error(
+        "the file has format version {found}, which this program no longer reads (it reads version {supported}); recompile it from its source with `bvhc compile`"
+    )]
+    OldVersion { found: u32, supported: u32 },
     #[error("the file has format version {found}, but this program reads version {supported}")]
     UnsupportedVersion { found: u32, supported: u32 },
     #[error("the header is damaged (its checksum does not match)")]

@@ -1,11 +1,11 @@
 //! The byte layout: the fixed header, the section table and the section kinds.
 //! `FORMAT.md` beside this crate documents the same layout for readers in other languages.
 
-use crate::types::{Camera, Light, Material, Node, Triangle, TriangleNormals};
+use crate::types::{Camera, IndexedTriangle, Light, Material, Node};
 use bytemuck::{Pod, Zeroable};
 
 pub const MAGIC: [u8; 8] = *b"BVHSCENE";
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Every section starts at a multiple of this.
 pub const ALIGN: u64 = 16;
 
@@ -14,7 +14,7 @@ pub const FLAG_CHILD_PAIR: u32 = 1;
 /// Header flag: the escape-pointer layout is present.
 pub const FLAG_ESCAPE: u32 = 2;
 
-/// The fixed header at offset 0, 144 bytes, little-endian.
+/// The fixed header at offset 0, 184 bytes, little-endian.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Header {
@@ -24,6 +24,8 @@ pub struct Header {
     pub flags: u32,
     pub section_count: u32,
     pub triangle_count: u32,
+    pub vertex_count: u32,
+    pub normal_count: u32,
     pub node_count: u32,
     pub leaf_count: u32,
     pub max_depth: u32,
@@ -44,6 +46,11 @@ pub struct Header {
     pub ambient: [f32; 3],
     pub _pad2: u32,
     pub background: [f32; 3],
+    pub _pad3: u32,
+    /// Offset of the scene's coordinates from the world origin, reserved for rebasing scenes far
+    /// from the origin; zero (the reader rejects anything else until a tracer uses it).
+    pub origin: [f64; 3],
+    pub _reserved: u32,
     /// CRC-32 of the header (with this field zero) followed by the section table.
     pub header_crc: u32,
 }
@@ -68,23 +75,25 @@ pub const SECTION_ENTRY_SIZE: usize = std::mem::size_of::<SectionEntry>();
 /// The kinds of section, with their numeric tags in the section table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum SectionKind {
-    Triangles = 1,
-    Normals = 2,
-    MaterialIds = 3,
-    Materials = 4,
-    MaterialNames = 5,
-    InputIndex = 6,
-    NodesChildPair = 7,
-    NodesEscape = 8,
-    Cameras = 9,
-    Lights = 10,
+    Vertices = 1,
+    Triangles = 2,
+    Normals = 3,
+    NormalIndices = 4,
+    Materials = 5,
+    MaterialNames = 6,
+    InputIndex = 7,
+    NodesChildPair = 8,
+    NodesEscape = 9,
+    Cameras = 10,
+    Lights = 11,
 }
 
 impl SectionKind {
-    pub const ALL: [SectionKind; 10] = [
+    pub const ALL: [SectionKind; 11] = [
+        SectionKind::Vertices,
         SectionKind::Triangles,
         SectionKind::Normals,
-        SectionKind::MaterialIds,
+        SectionKind::NormalIndices,
         SectionKind::Materials,
         SectionKind::MaterialNames,
         SectionKind::InputIndex,
@@ -101,9 +110,9 @@ impl SectionKind {
     /// Bytes per element.
     pub fn element_size(self) -> u32 {
         (match self {
-            SectionKind::Triangles => std::mem::size_of::<Triangle>(),
-            SectionKind::Normals => std::mem::size_of::<TriangleNormals>(),
-            SectionKind::MaterialIds | SectionKind::InputIndex => 4,
+            SectionKind::Vertices | SectionKind::Normals | SectionKind::NormalIndices => 12,
+            SectionKind::Triangles => std::mem::size_of::<IndexedTriangle>(),
+            SectionKind::InputIndex => 4,
             SectionKind::Materials => std::mem::size_of::<Material>(),
             SectionKind::MaterialNames => 1,
             SectionKind::NodesChildPair | SectionKind::NodesEscape => std::mem::size_of::<Node>(),
@@ -114,9 +123,10 @@ impl SectionKind {
 
     pub fn name(self) -> &'static str {
         match self {
+            SectionKind::Vertices => "vertices",
             SectionKind::Triangles => "triangles",
             SectionKind::Normals => "normals",
-            SectionKind::MaterialIds => "material ids",
+            SectionKind::NormalIndices => "normal indices",
             SectionKind::Materials => "materials",
             SectionKind::MaterialNames => "material names",
             SectionKind::InputIndex => "input index",
@@ -134,5 +144,5 @@ impl std::fmt::Display for SectionKind {
     }
 }
 
-const _: () = assert!(HEADER_SIZE == 144);
+const _: () = assert!(HEADER_SIZE == 184);
 const _: () = assert!(SECTION_ENTRY_SIZE == 32);

@@ -18,22 +18,28 @@ pub use layout::SectionKind;
 pub use read::{SectionInfo, read, read_file, read_with_sections};
 pub use tree::{Tree, TreeStats};
 pub use types::{
-    BuildParams, CAMERA_NAME_LEN, Camera, Light, Material, Node, SceneSettings, Strategy, Triangle, TriangleNormals,
+    BuildParams, CAMERA_NAME_LEN, Camera, FLAT, IndexedTriangle, Light, Material, Node, SceneSettings, Strategy,
+    Triangle,
 };
 pub use write::{write, write_file};
 
-/// A whole scene as stored in one file: geometry in BVH leaf order, shading data, the tree in one
-/// or both layouts, and default cameras and lights.
+/// A whole scene as stored in one file: indexed geometry in BVH leaf order, shading data, the tree
+/// in one or both layouts, and default cameras and lights.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SceneFile {
     pub build: BuildParams,
     pub settings: SceneSettings,
-    /// Triangles in the order the leaves reference them.
-    pub triangles: Vec<Triangle>,
-    /// Shading normals, parallel to `triangles`.
-    pub normals: Vec<TriangleNormals>,
-    /// Material of each triangle, parallel to `triangles`.
-    pub material_ids: Vec<u32>,
+    /// Offset of every coordinate from the world origin (reserved; zero).
+    pub origin: [f64; 3],
+    /// Vertex positions, shared by the triangles that meet at them.
+    pub vertices: Vec<[f32; 3]>,
+    /// Triangles in the order the leaves reference them: vertex indices and material.
+    pub triangles: Vec<IndexedTriangle>,
+    /// Unit shading normals, referenced by `normal_indices`; empty when every triangle is flat.
+    pub normals: Vec<[f32; 3]>,
+    /// Per triangle, the normal of each vertex, or [`FLAT`] for a triangle shaded with its
+    /// geometric normal; empty (no triangle has normals) or parallel to `triangles`.
+    pub normal_indices: Vec<[u32; 3]>,
     pub materials: Vec<Material>,
     /// One name per material (may be empty strings).
     pub material_names: Vec<String>,
@@ -46,6 +52,28 @@ pub struct SceneFile {
 }
 
 impl SceneFile {
+    /// The three vertex positions of stored triangle `i`.
+    pub fn positions(&self, i: usize) -> [[f32; 3]; 3] {
+        self.triangles[i].vertices.map(|v| self.vertices[v as usize])
+    }
+
+    /// Stored triangle `i` in the tracers' intersection form.
+    pub fn triangle(&self, i: usize) -> Triangle {
+        let [a, b, c] = self.positions(i);
+        Triangle { material: self.triangles[i].material, ..Triangle::from_vertices(a, b, c) }
+    }
+
+    /// Every triangle in the tracers' intersection form, in leaf order (48 bytes each).
+    pub fn leaf_triangles(&self) -> Vec<Triangle> {
+        (0..self.triangles.len()).map(|i| self.triangle(i)).collect()
+    }
+
+    /// The vertex normals of stored triangle `i`, or `None` for a flat triangle.
+    pub fn vertex_normals(&self, i: usize) -> Option<[[f32; 3]; 3]> {
+        let idx = *self.normal_indices.get(i)?;
+        (idx != FLAT).then(|| idx.map(|n| self.normals[n as usize]))
+    }
+
     /// The tree in whichever layout is present (child-pair preferred).
     pub fn tree(&self) -> Tree<'_> {
         match (&self.child_pair, &self.escape) {

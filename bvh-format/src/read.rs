@@ -9,7 +9,7 @@ use crate::layout::{
     VERSION,
 };
 use crate::tree::{self, Tree};
-use crate::types::{BuildParams, SceneSettings, Strategy};
+use crate::types::{BuildParams, FLAT, SceneSettings, Strategy};
 use bytemuck::Pod;
 
 /// Size of one section, as `bvhc info` reports it.
@@ -52,6 +52,9 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
     let header: Header = bytemuck::pod_read_unaligned(&bytes[..HEADER_SIZE]);
     if header.magic != MAGIC {
         return Err(FormatError::BadMagic);
+    }
+    if header.version < VERSION {
+        return Err(FormatError::OldVersion { found: header.version, supported: VERSION });
     }
     if header.version != VERSION {
         return Err(FormatError::UnsupportedVersion { found: header.version, supported: VERSION });
@@ -166,9 +169,11 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
             background: header.background,
             max_indirections: header.max_indirections,
         },
+        origin: header.origin,
+        vertices: pod(required(SectionKind::Vertices)?),
         triangles: pod(required(SectionKind::Triangles)?),
         normals: pod(required(SectionKind::Normals)?),
-        material_ids: pod(required(SectionKind::MaterialIds)?),
+        normal_indices: pod(required(SectionKind::NormalIndices)?),
         materials: pod(required(SectionKind::Materials)?),
         material_names: names.split('\0').map(str::to_owned).collect(),
         input_index: pod(required(SectionKind::InputIndex)?),
@@ -220,21 +225,27 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     };
     if let Some(h) = header {
         count(SectionKind::Triangles, h.triangle_count as u64, s.triangles.len())?;
+        count(SectionKind::Vertices, h.vertex_count as u64, s.vertices.len())?;
+        count(SectionKind::Normals, h.normal_count as u64, s.normals.len())?;
         count(SectionKind::Materials, h.material_count as u64, s.materials.len())?;
         count(SectionKind::Cameras, h.camera_count as u64, s.cameras.len())?;
         count(SectionKind::Lights, h.light_count as u64, s.lights.len())?;
     }
-    count(SectionKind::Normals, n, s.normals.len())?;
-    count(SectionKind::MaterialIds, n, s.material_ids.len())?;
+    if !s.normal_indices.is_empty() || !s.normals.is_empty() {
+        count(SectionKind::NormalIndices, n, s.normal_indices.len())?;
+    }
     count(SectionKind::InputIndex, n, s.input_index.len())?;
     if s.material_names.len() != s.materials.len() || s.material_names.iter().any(|n| n.contains('\0')) {
         return Err(FormatError::BadNames);
     }
 
-    check_finite(SectionKind::Triangles, &s.triangles)?;
-    if let Some(i) = s.triangles.iter().position(|t| t.v0[3] != 0.0 || t.e1[3] != 0.0 || t.e2[3] != 0.0) {
-        return Err(FormatError::NonZeroPadding { section: SectionKind::Triangles, index: i as u64 });
+    if s.vertices.len() as u64 > u32::MAX as u64 || s.normals.len() as u64 > u32::MAX as u64 {
+        return Err(FormatError::BadHeader("it counts more vertices or normals than the format allows"));
     }
+    if s.origin != [0.0; 3] {
+        return Err(FormatError::BadHeader("it sets a scene origin offset, which this program does not support yet"));
+    }
+    check_finite(SectionKind::Vertices, &s.vertices)?;
     check_finite(SectionKind::Normals, &s.normals)?;
     check_finite(SectionKind::Lights, &s.lights)?;
     check_finite(SectionKind::Materials, &s.materials)?;
@@ -257,15 +268,23 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
         return Err(FormatError::BadHeader("it holds a non-finite setting"));
     }
 
-    let m = s.materials.len() as u64;
-    for (i, &id) in s.material_ids.iter().enumerate() {
-        if id as u64 >= m {
-            return Err(FormatError::IndexOutOfRange {
-                section: SectionKind::MaterialIds,
-                index: i as u64,
-                value: id as u64,
-                limit: m,
-            });
+    let out_of_range = |section, index: usize, value: u32, limit: usize| {
+        Err(FormatError::IndexOutOfRange { section, index: index as u64, value: value as u64, limit: limit as u64 })
+    };
+    for (i, t) in s.triangles.iter().enumerate() {
+        if let Some(&v) = t.vertices.iter().find(|&&v| v as usize >= s.vertices.len()) {
+            return out_of_range(SectionKind::Triangles, i, v, s.vertices.len());
+        }
+        if t.material as usize >= s.materials.len() {
+            return out_of_range(SectionKind::Triangles, i, t.material, s.materials.len());
+        }
+    }
+    for (i, idx) in s.normal_indices.iter().enumerate() {
+        if *idx == FLAT {
+            continue;
+        }
+        if let Some(&v) = idx.iter().find(|&&v| v as usize >= s.normals.len()) {
+            return out_of_range(SectionKind::NormalIndices, i, v, s.normals.len());
         }
     }
     for (i, mat) in s.materials.iter().enumerate() {
@@ -341,7 +360,7 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
         tree::check_same_tree(cp, esc)?;
     }
     let t = s.tree();
-    check_leaf_boxes(t, &s.triangles)?;
+    check_leaf_boxes(t, s)?;
     if let Some(h) = header
         && (h.bounds_min != t.nodes[0].min || h.bounds_max != t.nodes[0].max)
     {
@@ -350,20 +369,14 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     Ok(())
 }
 
-/// Every leaf's box must hold its triangles, or a tracer would skip triangles it should hit. The
-/// stored triangle is a vertex and two edges, so its other vertices are rebuilt with one rounding
-/// each: a few units in the last place of slack cover that, and nothing a forger could exploit.
-fn check_leaf_boxes(t: Tree<'_>, tris: &[crate::Triangle]) -> Result<(), FormatError> {
+/// Every leaf's box must hold its triangles' vertices, or a tracer would skip triangles it should
+/// hit. The vertices are stored exactly, so no slack is allowed.
+fn check_leaf_boxes(t: Tree<'_>, s: &SceneFile) -> Result<(), FormatError> {
     for (i, n) in t.nodes.iter().enumerate().filter(|(_, n)| n.is_leaf()) {
-        for tri in &tris[n.index as usize..(n.index + n.count) as usize] {
-            for (k, v) in tri.vertices().iter().enumerate() {
-                for (a, &x) in v.iter().enumerate() {
-                    // v0 is exact; v0 + e rounds once, by at most an ulp of the larger operand.
-                    let e = [0.0, tri.e1[a], tri.e2[a]][k];
-                    let slack = 4.0 * f32::EPSILON * (tri.v0[a].abs() + e.abs());
-                    if x < n.min[a] - slack || x > n.max[a] + slack {
-                        return Err(FormatError::TriangleOutsideLeaf { layout: t.layout, node: i as u32 });
-                    }
+        for tri in n.index as usize..(n.index + n.count) as usize {
+            for v in s.positions(tri) {
+                if (0..3).any(|a| v[a] < n.min[a] || v[a] > n.max[a]) {
+                    return Err(FormatError::TriangleOutsideLeaf { layout: t.layout, node: i as u32 });
                 }
             }
         }

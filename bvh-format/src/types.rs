@@ -1,5 +1,6 @@
 //! The plain-data records of the file. Every type here is `#[repr(C)]`, has no padding that
-//! bytemuck would reject, and a size that is a multiple of 16 (or 4 for the index arrays), so a
+//! bytemuck would reject, and a size that is a multiple of 16 (or 4 for the index arrays, 12 for
+//! positions and normals), so a
 //! section can be uploaded to a GPU storage buffer or mapped without conversion.
 
 use bytemuck::{Pod, Zeroable};
@@ -24,40 +25,44 @@ impl Node {
     }
 }
 
-/// A triangle stored for intersection only (thesis 4.2.2): one vertex and two edges, each padded
-/// to 16 bytes. The `w` components are zero.
+/// A triangle as the file stores it: three indices into the vertex positions and its material.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct IndexedTriangle {
+    pub vertices: [u32; 3],
+    pub material: u32,
+}
+
+/// Marks a triangle without vertex normals in [`SceneFile::normal_indices`](crate::SceneFile):
+/// it is shaded with its geometric normal.
+pub const FLAT: [u32; 3] = [u32::MAX; 3];
+
+/// A triangle as the tracers intersect it: its three vertices, each padded to 16 bytes, with the
+/// material in the first padding word, 48 bytes. The tracers expand the file's indexed form into
+/// this one at load ([`SceneFile::leaf_triangles`](crate::SceneFile::leaf_triangles)), in leaf
+/// order, so that a leaf's triangles are one contiguous read (thesis 4.2.2: 16-byte aligned
+/// vectors) and the edge test reads each vertex exactly as stored.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Triangle {
-    pub v0: [f32; 4],
-    pub e1: [f32; 4],
-    pub e2: [f32; 4],
+    pub p0: [f32; 3],
+    pub material: u32,
+    pub p1: [f32; 3],
+    pub _pad1: u32,
+    pub p2: [f32; 3],
+    pub _pad2: u32,
 }
 
 impl Triangle {
+    /// The triangle with vertices `a`, `b`, `c` and material 0.
     pub fn from_vertices(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> Self {
-        Self {
-            v0: [a[0], a[1], a[2], 0.0],
-            e1: [b[0] - a[0], b[1] - a[1], b[2] - a[2], 0.0],
-            e2: [c[0] - a[0], c[1] - a[1], c[2] - a[2], 0.0],
-        }
+        Self { p0: a, material: 0, p1: b, _pad1: 0, p2: c, _pad2: 0 }
     }
 
-    /// The three vertices, rebuilt from vertex and edges (exact for the first, rounded once for
-    /// the other two).
+    /// The three vertices, exactly as stored.
     pub fn vertices(&self) -> [[f32; 3]; 3] {
-        let a = [self.v0[0], self.v0[1], self.v0[2]];
-        let b = [a[0] + self.e1[0], a[1] + self.e1[1], a[2] + self.e1[2]];
-        let c = [a[0] + self.e2[0], a[1] + self.e2[1], a[2] + self.e2[2]];
-        [a, b, c]
+        [self.p0, self.p1, self.p2]
     }
-}
-
-/// Per-vertex shading normals of one triangle, in the same order as the triangle's vertices.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct TriangleNormals {
-    pub n: [[f32; 4]; 3],
 }
 
 /// A material of the Whitted model (docs/materials.md, docs/shading.md). A material is reflective (`kr > 0`) or
@@ -208,7 +213,7 @@ mod tests {
     fn records_have_gpu_friendly_sizes() {
         assert_eq!(std::mem::size_of::<Node>(), 32);
         assert_eq!(std::mem::size_of::<Triangle>(), 48);
-        assert_eq!(std::mem::size_of::<TriangleNormals>(), 48);
+        assert_eq!(std::mem::size_of::<IndexedTriangle>(), 16);
         assert_eq!(std::mem::size_of::<Material>(), 48);
         assert_eq!(std::mem::size_of::<Camera>(), 64);
         assert_eq!(std::mem::size_of::<Light>(), 32);

@@ -24,9 +24,10 @@ pub fn write(scene: &SceneFile) -> Result<Vec<u8>, FormatError> {
     let names = encode_names(&scene.material_names);
 
     let mut sections: Vec<(SectionKind, u64, &[u8])> = vec![
+        (SectionKind::Vertices, scene.vertices.len() as u64, bytemuck::cast_slice(&scene.vertices)),
         (SectionKind::Triangles, scene.triangles.len() as u64, bytemuck::cast_slice(&scene.triangles)),
         (SectionKind::Normals, scene.normals.len() as u64, bytemuck::cast_slice(&scene.normals)),
-        (SectionKind::MaterialIds, scene.material_ids.len() as u64, bytemuck::cast_slice(&scene.material_ids)),
+        (SectionKind::NormalIndices, scene.normal_indices.len() as u64, bytemuck::cast_slice(&scene.normal_indices)),
         (SectionKind::Materials, scene.materials.len() as u64, bytemuck::cast_slice(&scene.materials)),
         (SectionKind::MaterialNames, names.len() as u64, &names),
         (SectionKind::InputIndex, scene.input_index.len() as u64, bytemuck::cast_slice(&scene.input_index)),
@@ -66,6 +67,8 @@ pub fn write(scene: &SceneFile) -> Result<Vec<u8>, FormatError> {
         flags,
         section_count: sections.len() as u32,
         triangle_count: scene.triangles.len() as u32,
+        vertex_count: scene.vertices.len() as u32,
+        normal_count: scene.normals.len() as u32,
         node_count: stats.node_count,
         leaf_count: stats.leaf_count,
         max_depth: stats.max_depth,
@@ -83,6 +86,7 @@ pub fn write(scene: &SceneFile) -> Result<Vec<u8>, FormatError> {
         bounds_max,
         ambient: scene.settings.ambient,
         background: scene.settings.background,
+        origin: scene.origin,
         ..Header::default()
     };
     header.header_crc = header_crc(&header, bytemuck::cast_slice(&table));

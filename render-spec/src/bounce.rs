@@ -68,9 +68,11 @@ mod tests {
         let mut scene = SceneFile {
             build: Default::default(),
             settings: Default::default(),
+            origin: [0.0; 3],
+            vertices: vec![],
             triangles: vec![],
             normals: vec![],
-            material_ids: vec![],
+            normal_indices: vec![],
             materials: vec![
                 bvh_format::Material { kd: [0.5, 0.1, 0.1], ks: [0.25; 3], kr: 0.3, ..Default::default() },
                 bvh_format::Material { kd: [0.1; 3], kt: 0.6, ..Default::default() },

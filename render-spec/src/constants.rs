@@ -28,6 +28,10 @@ pub const STOP_CHAIN_TERM: f32 = 1e-9;
 /// of a pixel whose primary ray hit nothing.
 pub const NO_TRIANGLE: u32 = u32::MAX;
 
+/// A flat triangle's normal index (each of the three of [`bvh_format::FLAT`]): the kernels shade it
+/// with its geometric normal.
+pub const FLAT_NORMAL: u32 = bvh_format::FLAT[0];
+
 /// The largest finite f32: the kernels' "no upper limit" for a ray's distance, and the bound of
 /// their finiteness tests.
 pub const F32_MAX: f32 = f32::MAX;
@@ -53,6 +57,7 @@ pub const SHARED: &[(&str, Value)] = &[
     ("STOP_CONTRIBUTION", Value::F32(STOP_CONTRIBUTION)),
     ("STOP_CHAIN_TERM", Value::F32(STOP_CHAIN_TERM)),
     ("NO_TRIANGLE", Value::U32(NO_TRIANGLE)),
+    ("FLAT_NORMAL", Value::U32(FLAT_NORMAL)),
     ("F32_MAX", Value::F32(F32_MAX)),
     ("R2_STEP_X", Value::U32(R2_STEP_X)),
     ("R2_STEP_Y", Value::U32(R2_STEP_Y)),

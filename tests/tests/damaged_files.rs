@@ -178,7 +178,7 @@ fn truncation_at_every_section_boundary() {
     for len in cuts {
         check_cut(&bytes, len);
     }
-    assert!(matches!(rejected(&bytes[..HEADER_SIZE - 1]), FormatError::Truncated { needed: 144, len: 143, .. }));
+    assert!(matches!(rejected(&bytes[..HEADER_SIZE - 1]), FormatError::Truncated { needed: 184, len: 183, .. }));
     assert!(matches!(rejected(&bytes[..table_end - 1]), FormatError::Truncated { .. }));
     let last = table(&bytes).into_iter().max_by_key(|e| e.offset).unwrap();
     let section = SectionKind::from_u32(last.kind).unwrap();
@@ -206,13 +206,22 @@ fn wrong_magic_and_version() {
         b[i] ^= 0x20;
         assert_eq!(rejected(&b), FormatError::BadMagic);
     }
-    for version in [0u32, 2, 7, u32::MAX] {
+    for version in [3u32, 7, u32::MAX] {
         let mut b = bytes.clone();
         b[8..12].copy_from_slice(&version.to_le_bytes());
-        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 1 });
+        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 2 });
         // A correct checksum does not make an unknown version readable.
         reseal_header(&mut b);
-        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 1 });
+        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 2 });
+    }
+    // A file of an older version (version 1 stored one vertex and two edges per triangle) is
+    // named as such, with what to do about it.
+    for version in [0u32, 1] {
+        let mut b = bytes.clone();
+        b[8..12].copy_from_slice(&version.to_le_bytes());
+        let e = rejected(&b);
+        assert_eq!(e, FormatError::OldVersion { found: version, supported: 2 });
+        assert!(e.to_string().contains("recompile it from its source with `bvhc compile`"), "{e}");
     }
 }
 
@@ -227,7 +236,7 @@ fn every_bit_flip_of_header_and_table() {
             let e = rejected(&b);
             let ok = match byte {
                 0..8 => e == FormatError::BadMagic,
-                8..12 => matches!(e, FormatError::UnsupportedVersion { .. }),
+                8..12 => matches!(e, FormatError::UnsupportedVersion { .. } | FormatError::OldVersion { .. }),
                 12..16 => e == FormatError::BadHeader("its size field is wrong"),
                 // A larger section count reaches past the file or reads section data as table.
                 20..24 => matches!(e, FormatError::Truncated { .. } | FormatError::HeaderChecksum),
@@ -441,13 +450,12 @@ fn forged_non_finite_numbers() {
         }
     }
     let e = forge(|b| {
-        section_mut(b, SectionKind::Triangles)[48 * 7 + 4..48 * 7 + 8].copy_from_slice(&f32::NAN.to_le_bytes())
+        section_mut(b, SectionKind::Vertices)[12 * 7 + 4..12 * 7 + 8].copy_from_slice(&f32::NAN.to_le_bytes())
     });
-    assert_eq!(e, FormatError::NonFinite { section: SectionKind::Triangles, index: 7 });
-    let e = forge(|b| {
-        section_mut(b, SectionKind::Normals)[48 * 9..48 * 9 + 4].copy_from_slice(&f32::INFINITY.to_le_bytes())
-    });
-    assert_eq!(e, FormatError::NonFinite { section: SectionKind::Normals, index: 9 });
+    assert_eq!(e, FormatError::NonFinite { section: SectionKind::Vertices, index: 7 });
+    // Every triangle has the normal +y: one normal, welded.
+    let e = forge(|b| section_mut(b, SectionKind::Normals)[4..8].copy_from_slice(&f32::INFINITY.to_le_bytes()));
+    assert_eq!(e, FormatError::NonFinite { section: SectionKind::Normals, index: 0 });
     let e = forge(|b| section_mut(b, SectionKind::Lights)[32 + 16..32 + 20].copy_from_slice(&f32::NAN.to_le_bytes()));
     assert_eq!(e, FormatError::NonFinite { section: SectionKind::Lights, index: 1 });
     let e = forge(|b| section_mut(b, SectionKind::Cameras)[64..68].copy_from_slice(&f32::NAN.to_le_bytes()));
@@ -457,8 +465,8 @@ fn forged_non_finite_numbers() {
 #[test]
 fn forged_material_errors() {
     let e =
-        forge(|b| section_mut(b, SectionKind::MaterialIds)[4 * 11..4 * 11 + 4].copy_from_slice(&3u32.to_le_bytes()));
-    assert_eq!(e, FormatError::IndexOutOfRange { section: SectionKind::MaterialIds, index: 11, value: 3, limit: 3 });
+        forge(|b| section_mut(b, SectionKind::Triangles)[16 * 11 + 12..16 * 12].copy_from_slice(&3u32.to_le_bytes()));
+    assert_eq!(e, FormatError::IndexOutOfRange { section: SectionKind::Triangles, index: 11, value: 3, limit: 3 });
     // Material 1 is the mirror (kr = 0.6); give it transmission as well.
     let e = forge(|b| section_mut(b, SectionKind::Materials)[48 + 32..48 + 36].copy_from_slice(&0.5f32.to_le_bytes()));
     assert_eq!(e, FormatError::BadMaterial { index: 1, reason: "it is both reflective and refractive" });
@@ -539,7 +547,7 @@ fn forged_section_table_errors() {
         set_table(b, &t);
     });
     assert!(
-        matches!(e, FormatError::DuplicateSection(SectionKind::Triangles) | FormatError::ElementSize { .. }),
+        matches!(e, FormatError::DuplicateSection(SectionKind::Vertices) | FormatError::ElementSize { .. }),
         "{e:?}"
     );
     let e = forge(|b| {
@@ -553,13 +561,13 @@ fn forged_section_table_errors() {
         t[0].offset += 8;
         set_table(b, &t);
     });
-    assert!(matches!(e, FormatError::SectionMisaligned { section: SectionKind::Triangles, .. }), "{e:?}");
+    assert!(matches!(e, FormatError::SectionMisaligned { section: SectionKind::Vertices, .. }), "{e:?}");
     let e = forge(|b| {
         let mut t = table(b);
         t[0].element_size = 32;
         set_table(b, &t);
     });
-    assert_eq!(e, FormatError::ElementSize { section: SectionKind::Triangles, expected: 48, found: 32 });
+    assert_eq!(e, FormatError::ElementSize { section: SectionKind::Vertices, expected: 12, found: 32 });
     let e = forge(|b| {
         let mut t = table(b);
         t[1].offset = t[0].offset;
@@ -588,10 +596,10 @@ fn forged_nan_in_camera_padding() {
 
 #[test]
 fn forged_triangle_outside_its_leaf() {
-    // Move the first stored triangle far away: its leaf box no longer holds it, and a tracer
-    // would skip it.
+    // Move the first vertex far away: its triangles' leaf boxes no longer hold them, and a tracer
+    // would skip them.
     let e = forge(|b| {
-        let t = &mut section_mut(b, SectionKind::Triangles)[0..4];
+        let t = &mut section_mut(b, SectionKind::Vertices)[0..4];
         let x = f32::from_le_bytes(t.try_into().unwrap()) + 1000.0;
         t.copy_from_slice(&x.to_le_bytes());
     });
@@ -599,9 +607,43 @@ fn forged_triangle_outside_its_leaf() {
 }
 
 #[test]
-fn forged_triangle_padding_and_header_bounds() {
-    let e = forge(|b| section_mut(b, SectionKind::Triangles)[12..16].copy_from_slice(&1.0f32.to_le_bytes()));
-    assert_eq!(e, FormatError::NonZeroPadding { section: SectionKind::Triangles, index: 0 });
+fn forged_vertex_and_normal_indices() {
+    let vertices = header(&big_file()).vertex_count;
+    let e = forge(|b| {
+        section_mut(b, SectionKind::Triangles)[16 * 5 + 4..16 * 5 + 8].copy_from_slice(&vertices.to_le_bytes())
+    });
+    let expected = FormatError::IndexOutOfRange {
+        section: SectionKind::Triangles,
+        index: 5,
+        value: vertices as u64,
+        limit: vertices as u64,
+    };
+    assert_eq!(e, expected);
+    let e =
+        forge(|b| section_mut(b, SectionKind::NormalIndices)[12 * 4 + 8..12 * 5].copy_from_slice(&1u32.to_le_bytes()));
+    assert_eq!(e, FormatError::IndexOutOfRange { section: SectionKind::NormalIndices, index: 4, value: 1, limit: 1 });
+    // A triangle half flat: the flat marker is all three indices or none.
+    let e = forge(|b| section_mut(b, SectionKind::NormalIndices)[0..4].copy_from_slice(&u32::MAX.to_le_bytes()));
+    assert!(matches!(e, FormatError::IndexOutOfRange { section: SectionKind::NormalIndices, index: 0, .. }), "{e:?}");
+    // Normal indices for only some triangles.
+    let e = forge(|b| {
+        edit_header(b, |mut h| {
+            h.normal_count = 0;
+            h
+        })
+    });
+    assert!(matches!(e, FormatError::CountMismatch { section: SectionKind::Normals, .. }), "{e:?}");
+}
+
+#[test]
+fn forged_origin_and_header_bounds() {
+    let e = forge(|b| {
+        edit_header(b, |mut h| {
+            h.origin[2] = 1e6;
+            h
+        })
+    });
+    assert!(matches!(e, FormatError::BadHeader(m) if m.contains("origin")), "{e:?}");
     let e = forge(|b| {
         edit_header(b, |mut h| {
             h.bounds_max[1] += 1.0;
@@ -625,7 +667,7 @@ fn an_invalid_scene_is_not_written_and_the_message_blames_the_scene_not_a_file()
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("out.bvh");
     let mut s = scene(40, Layouts::default());
-    s.triangles[0].v0[0] = f32::NAN;
+    s.vertices[0][0] = f32::NAN;
     let e = bvh_format::write_file(&s, &path).unwrap_err();
     assert!(matches!(e, bvh_format::FileError::InvalidScene { .. }), "{e:?}");
     let msg = e.to_string();

@@ -242,8 +242,8 @@ proptest! {
         for (k, &src) in file.input_index.iter().enumerate() {
             prop_assert!(!std::mem::replace(&mut seen[src as usize], true), "input {} stored twice", src);
             let [a, b, c] = tris[src as usize];
-            prop_assert_eq!(file.triangles[k], Triangle::from_vertices(a, b, c));
-            prop_assert_eq!(file.material_ids[k], (src as usize % materials) as u32);
+            prop_assert_eq!(file.positions(k), [a, b, c]);
+            prop_assert_eq!(file.triangles[k].material, (src as usize % materials) as u32);
         }
 
         let order = walk_child_pair(cp, &tris, &file.input_index)?;
@@ -305,6 +305,7 @@ proptest! {
         // only its agreement with the traversals is checked there, not its accuracy.
         let f64_comparable = !matches!(kind, Kind::Huge | Kind::Tiny);
 
+        let leaf_tris = file.leaf_triangles();
         for (frac, mut d, zero_mask, aim) in rays {
             let o: [f32; 3] = std::array::from_fn(|k| lo[k] + frac[k] * pad[k]);
             // Random directions rarely meet small triangles; aim some rays at a point of one.
@@ -325,14 +326,14 @@ proptest! {
             }
             let ray = Ray::new(o, d, &pad);
 
-            let brute = brute_force_f32(&ray, &file.triangles);
-            let by_cp = traverse_child_pair(&ray, cp, &file.triangles, max_depth)?;
-            let by_esc = traverse_escape(&ray, esc, &file.triangles);
+            let brute = brute_force_f32(&ray, &leaf_tris);
+            let by_cp = traverse_child_pair(&ray, cp, &leaf_tris, max_depth)?;
+            let by_esc = traverse_escape(&ray, esc, &leaf_tris);
             for (name, hit) in [("child-pair", by_cp), ("escape", by_esc)] {
                 prop_assert_eq!(hit.map(|h| h.0), brute.map(|h| h.0), "{} traversal vs brute force, {:?}, ray {:?}", name, kind, ray);
                 if let Some((t, k)) = hit {
                     // Ties may name another triangle, but it must really be hit at that distance.
-                    prop_assert_eq!(intersect_f32(&ray, &file.triangles[k]), Some(t));
+                    prop_assert_eq!(intersect_f32(&ray, &leaf_tris[k]), Some(t));
                 }
             }
 
@@ -393,13 +394,12 @@ fn norm(a: [f32; 3]) -> f32 {
     dot(a, a).sqrt()
 }
 
-/// Möller–Trumbore in f32, the one intersection every f32 path uses. Near-degenerate
+/// Möller–Trumbore in f32 (a test of the trees, not of the tracers' triangle test). Near-degenerate
 /// determinants (zero-area triangles, rays in a triangle's plane) count as misses, because there
 /// the computed hit point can lie far outside the triangle and so outside every box holding it.
 fn intersect_f32(ray: &Ray, tri: &Triangle) -> Option<f32> {
-    let v0 = [tri.v0[0], tri.v0[1], tri.v0[2]];
-    let e1 = [tri.e1[0], tri.e1[1], tri.e1[2]];
-    let e2 = [tri.e2[0], tri.e2[1], tri.e2[2]];
+    let v0 = tri.p0;
+    let (e1, e2) = (sub(tri.p1, v0), sub(tri.p2, v0));
     let p = cross(ray.d, e2);
     let det = dot(e1, p);
     let limit = 1e-3 * norm(e1) * norm(e2) * norm(ray.d);

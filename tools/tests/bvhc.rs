@@ -28,6 +28,7 @@ fn compiles_verifies_and_describes_the_bunny() {
     let (info, _) = text(&o);
     for needle in [
         "triangles       69451",
+        "bytes/triangle  file ",
         "\"medium\"",
         "light 1",
         "SAH cost",

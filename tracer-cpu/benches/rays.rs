@@ -18,7 +18,7 @@ fn primary_rays(c: &mut Criterion) {
     assert_eq!(primary.kind, Kind::Primary);
     let tracer = Tracer::new(&scene);
     #[cfg(feature = "embree")]
-    let embree = tracer_cpu::embree::Scene::new(&scene.triangles, tracer_cpu::embree::Flags::Default)
+    let embree = tracer_cpu::embree::Scene::new(&scene.leaf_triangles(), tracer_cpu::embree::Flags::Default)
         .expect("Embree builds the bunny");
 
     let mut engines = vec![("ours-ordered", Engine::Scalar(&tracer, Method::Ordered))];

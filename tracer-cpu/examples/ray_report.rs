@@ -160,8 +160,8 @@ fn main() {
         let n_tris = scene.triangles.len();
         eprintln!("{name}: {n_tris} triangles, compiled in {:.1} s", t.elapsed().as_secs_f64());
         let t = Instant::now();
-        let em = embree::Scene::new(&scene.triangles, Flags::Default).expect("Embree builds the scene");
-        let em_robust = embree::Scene::new(&scene.triangles, Flags::Robust).expect("Embree builds the scene");
+        let em = embree::Scene::new(&scene.leaf_triangles(), Flags::Default).expect("Embree builds the scene");
+        let em_robust = embree::Scene::new(&scene.leaf_triangles(), Flags::Robust).expect("Embree builds the scene");
         eprintln!("{name}: Embree's two BVHs built in {:.1} s (not timed below)", t.elapsed().as_secs_f64());
         scene_lines.push(format!("{name} ({n_tris} triangles, {})", path.display()));
         let tracer = Tracer::new(&scene);

@@ -59,7 +59,8 @@ fn rtc_ray(ray: &Ray, t_min: f32, t_max: f32) -> RTCRay {
 }
 
 impl Scene {
-    /// Builds Embree's BVH over `tris` (vertices `v0`, `v0 + e1`, `v0 + e2`, unshared).
+    /// Builds Embree's BVH over `tris` (each triangle's three vertices, unshared but bit-identical
+    /// where triangles meet).
     pub fn new(tris: &[Triangle], flags: Flags) -> Result<Self, String> {
         let n = tris.len();
         // SAFETY: every handle is checked before use; the buffers Embree allocates are written
@@ -87,10 +88,7 @@ impl Scene {
             let verts = std::slice::from_raw_parts_mut(verts, 3 * n);
             let index = std::slice::from_raw_parts_mut(index, n);
             for (i, t) in tris.iter().enumerate() {
-                let v0 = [t.v0[0], t.v0[1], t.v0[2]];
-                let v1 = [v0[0] + t.e1[0], v0[1] + t.e1[1], v0[2] + t.e1[2]];
-                let v2 = [v0[0] + t.e2[0], v0[1] + t.e2[1], v0[2] + t.e2[2]];
-                for (k, v) in [v0, v1, v2].into_iter().enumerate() {
+                for (k, v) in t.vertices().into_iter().enumerate() {
                     verts[3 * i + k] = [v[0], v[1], v[2], 0.0];
                 }
                 let b = 3 * i as u32;

@@ -1,4 +1,5 @@
-//! Rays, the slab test and Möller-Trumbore, in f32: the arithmetic every fast path shares.
+//! Rays, the slab test and the edge-consistent triangle test, in f32: the arithmetic every fast
+//! path shares.
 
 use bvh_format::{Node, Triangle};
 use glam::Vec3;
@@ -86,16 +87,70 @@ pub fn slab(node: &Node, ray: &Ray, t_max: f32) -> Option<f32> {
     may_hold(near, far).then_some(near)
 }
 
-/// Möller-Trumbore (thesis 4.2.4): the distance and barycentrics of a hit in `(t_min, t_max]`
-/// (closed above so that a hit at exactly the best distance so far can still win a tie).
-/// Edges count as inside (`u, v >= 0`, `u + v <= 1`), so a ray through a shared edge hits both
-/// triangles and [`Hit::beats`] decides. A ray parallel to the plane (`det == 0`) misses.
+/// The edge function of the edge from `a` to `b` (vertices relative to the ray origin) for the
+/// direction `d`: `dot(cross(a - b, a + b), d)`, which is twice `dot(cross(a, b), d)`, the signed
+/// volume that says on which side of the edge the ray passes.
+///
+/// The triangle on the other side of the edge meets it as `(b, a)`: `a - b` then changes sign
+/// exactly and `a + b` not at all, so that triangle computes exactly the negated number, and a ray
+/// can never be outside both. That holds also where a GPU compiler contracts multiply-adds, since
+/// `fma(-x, y, -z) = -fma(x, y, z)`; a plain `cross(a, b)` would lose it there (`a.y * b.z` kept
+/// exact on one side of the edge is `b.z * a.y` rounded on the other). The packet path and the
+/// kernels (`common.wgsl`) make exactly these operations in this order.
+#[inline(always)]
+pub fn edge_function(a: [f32; 3], b: [f32; 3], d: Vec3) -> f32 {
+    let e = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let s = [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
+    let c = [e[1] * s[2] - e[2] * s[1], e[2] * s[0] - e[0] * s[2], e[0] * s[1] - e[1] * s[0]];
+    d.x * c[0] + d.y * c[1] + d.z * c[2]
+}
+
+/// The edge-consistent triangle test (docs/shading.md): the distance and barycentrics of a hit in
+/// `(t_min, t_max]` (closed above so that a hit at exactly the best distance so far can still win
+/// a tie). The ray hits when the three [`edge_function`]s have one sign, zeros counting as inside
+/// on both sides, so a ray through a shared edge hits both triangles and [`Hit::beats`] decides;
+/// a ray parallel to the plane (`det == 0`) misses. `u` and `v`, the weights of vertices 1 and 2,
+/// are their edge functions over the sum of all three.
 #[inline(always)]
 pub fn intersect(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
-    // Written out component by component: the SIMD path repeats exactly these operations in
-    // this order, so both find bit-identical hits.
     let (o, d) = (ray.origin, ray.dir);
-    let (v0, e1, e2) = (tri.v0, tri.e1, tri.e2);
+    let rel = |p: [f32; 3]| [p[0] - o.x, p[1] - o.y, p[2] - o.z];
+    let (a0, a1, a2) = (rel(tri.p0), rel(tri.p1), rel(tri.p2));
+    let w2 = edge_function(a0, a1, d);
+    let w0 = edge_function(a1, a2, d);
+    let w1 = edge_function(a2, a0, d);
+    let inside = (w0 >= 0.0 && w1 >= 0.0 && w2 >= 0.0) || (w0 <= 0.0 && w1 <= 0.0 && w2 <= 0.0);
+    let sum = w0 + w1 + w2;
+    if !inside || sum == 0.0 {
+        return None;
+    }
+    // The distance from the plane, not from the edge functions: their sum cancels for an origin
+    // far from a small triangle.
+    let (p0, p1, p2) = (tri.p0, tri.p1, tri.p2);
+    let e1 = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
+    let e2 = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
+    let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+    let den = n[0] * d.x + n[1] * d.y + n[2] * d.z;
+    if den == 0.0 {
+        return None;
+    }
+    let t = (n[0] * a0[0] + n[1] * a0[1] + n[2] * a0[2]) / den;
+    if !(t > t_min && t <= t_max) {
+        return None;
+    }
+    let inv = 1.0 / sum;
+    Some((t, w1 * inv, w2 * inv))
+}
+
+/// Möller-Trumbore (thesis 4.2.4) on vertex 0 and the two edges from it, as every path tested
+/// before format version 2: kept to show, by test, the leaks at shared edges that the default
+/// test removes (each triangle decides a shared edge after its own roundings), and for a future
+/// `--intersect mt`. Same contract as [`intersect`].
+pub fn intersect_moller_trumbore(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
+    let (o, d) = (ray.origin, ray.dir);
+    let v0 = tri.p0;
+    let e1 = [tri.p1[0] - v0[0], tri.p1[1] - v0[1], tri.p1[2] - v0[2]];
+    let e2 = [tri.p2[0] - v0[0], tri.p2[1] - v0[1], tri.p2[2] - v0[2]];
     let p = [d.y * e2[2] - e2[1] * d.z, d.z * e2[0] - e2[2] * d.x, d.x * e2[1] - e2[0] * d.y];
     let det = e1[0] * p[0] + e1[1] * p[1] + e1[2] * p[2];
     if det == 0.0 {
@@ -143,7 +198,7 @@ mod tests {
     }
 
     #[test]
-    fn moller_trumbore_hits_inside_and_on_edges_and_misses_outside() {
+    fn triangle_test_hits_inside_and_on_edges_and_misses_outside() {
         let t = unit_tri();
         let down = Vec3::new(0.0, 0.0, -1.0);
         let hit = intersect(&t, &Ray::new(Vec3::new(0.25, 0.25, 1.0), down), 0.0, f32::INFINITY).unwrap();
@@ -162,6 +217,49 @@ mod tests {
         // Back faces are hit too.
         let up = Vec3::new(0.0, 0.0, 1.0);
         assert!(intersect(&t, &Ray::new(Vec3::new(0.2, 0.2, -1.0), up), 0.0, f32::INFINITY).is_some());
+    }
+
+    /// A tiny deterministic generator (xorshift) for test inputs.
+    fn randoms(seed: u64) -> impl FnMut() -> f32 {
+        let mut x = seed;
+        move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        }
+    }
+
+    #[test]
+    fn edge_function_is_antisymmetric_also_with_contracted_multiply_adds() {
+        // A GPU compiler may contract `x * y - z * w` into `fma(x, y, -(z * w))` and a dot product
+        // into a chain of fmas; emulated here with mul_add.
+        fn dot_fma(d: Vec3, c: [f32; 3]) -> f32 {
+            d.x.mul_add(c[0], d.y.mul_add(c[1], d.z * c[2]))
+        }
+        fn cross_fma(x: [f32; 3], y: [f32; 3]) -> [f32; 3] {
+            [x[1].mul_add(y[2], -(x[2] * y[1])), x[2].mul_add(y[0], -(x[0] * y[2])), x[0].mul_add(y[1], -(x[1] * y[0]))]
+        }
+        let ours = |a: [f32; 3], b: [f32; 3], d: Vec3| {
+            let e = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+            let s = [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
+            dot_fma(d, cross_fma(e, s))
+        };
+        let plain = |a: [f32; 3], b: [f32; 3], d: Vec3| dot_fma(d, cross_fma(a, b));
+        let mut r = randoms(0x9e3779b97f4a7c15);
+        let (mut ours_broken, mut plain_broken) = (0, 0);
+        for _ in 0..100_000 {
+            let scale = 10f32.powi((r() * 4.0) as i32);
+            let mut p = || [r() * scale, r() * scale, r() * scale];
+            let (a, b) = (p(), p());
+            let d = Vec3::new(r(), r(), r());
+            assert_eq!(edge_function(a, b, d).to_bits(), (-edge_function(b, a, d)).to_bits(), "{a:?} {b:?} {d}");
+            ours_broken += usize::from(ours(a, b, d).to_bits() != (-ours(b, a, d)).to_bits());
+            plain_broken += usize::from(plain(a, b, d).to_bits() != (-plain(b, a, d)).to_bits());
+        }
+        assert_eq!(ours_broken, 0, "contracted edge functions lost their antisymmetry");
+        // The check can fail: the plain cross product loses it under contraction.
+        assert!(plain_broken > 1000, "only {plain_broken} plain cross products broke");
     }
 
     #[test]

@@ -75,7 +75,7 @@ impl<'a> Packets<'a> {
             return self.single.trace::<ANY>(rays);
         }
         let nodes = self.tracer.scene.child_pair.as_deref().expect("the renderer checked the layout");
-        packet::trace::<ANY>(nodes, &self.tracer.scene.triangles, rays, &mut self.stack)
+        packet::trace::<ANY>(nodes, self.tracer.triangles(), rays, &mut self.stack)
     }
 }
 

@@ -61,3 +61,20 @@ impl Method {
         }
     }
 }
+
+/// Bytes of scene data trace-cpu holds while rendering `scene` (for `bvhc info`): the file as read
+/// (both layouts, indexed geometry, normals, materials, input indices) and the triangles expanded
+/// to three vertices each for intersection.
+pub fn held_bytes(scene: &bvh_format::SceneFile) -> u64 {
+    let nodes = |n: &Option<Vec<bvh_format::Node>>| n.as_ref().map_or(0, |n| std::mem::size_of_val(&n[..]));
+    let s = scene;
+    (std::mem::size_of_val(&s.vertices[..])
+        + std::mem::size_of_val(&s.triangles[..])
+        + std::mem::size_of_val(&s.normals[..])
+        + std::mem::size_of_val(&s.normal_indices[..])
+        + std::mem::size_of_val(&s.materials[..])
+        + std::mem::size_of_val(&s.input_index[..])
+        + nodes(&s.child_pair)
+        + nodes(&s.escape)
+        + s.triangles.len() * std::mem::size_of::<bvh_format::Triangle>()) as u64
+}

@@ -212,39 +212,60 @@ mod avx2 {
         unsafe { _mm256_add_ps(a, b) }
     }
 
-    /// Möller-Trumbore with the scalar path's operations; returns (hit mask, t, u, v).
+    /// [`geometry::edge_function`](crate::geometry::edge_function) on 8 lanes, same operations.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn edge_function(a: &[__m256; 3], b: &[__m256; 3], d: &[__m256; 3]) -> __m256 {
+        let e = [sub(a[0], b[0]), sub(a[1], b[1]), sub(a[2], b[2])];
+        let s = [add(a[0], b[0]), add(a[1], b[1]), add(a[2], b[2])];
+        let c = [
+            sub(mul(e[1], s[2]), mul(e[2], s[1])),
+            sub(mul(e[2], s[0]), mul(e[0], s[2])),
+            sub(mul(e[0], s[1]), mul(e[1], s[0])),
+        ];
+        add(add(mul(d[0], c[0]), mul(d[1], c[1])), mul(d[2], c[2]))
+    }
+
+    /// The edge-consistent test with the scalar path's operations
+    /// ([`geometry::intersect`](crate::geometry::intersect)); returns (hit mask, t, u, v).
     #[target_feature(enable = "avx2")]
     #[inline]
     fn intersect(tri: &Triangle, pk: &Packet, t_min: __m256, t_max: __m256) -> (__m256, __m256, __m256, __m256) {
         let (o, d) = (&pk.o, &pk.d);
-        let e1 = [splat(tri.e1[0]), splat(tri.e1[1]), splat(tri.e1[2])];
-        let e2 = [splat(tri.e2[0]), splat(tri.e2[1]), splat(tri.e2[2])];
-        let p = [
-            sub(mul(d[1], e2[2]), mul(e2[1], d[2])),
-            sub(mul(d[2], e2[0]), mul(e2[2], d[0])),
-            sub(mul(d[0], e2[1]), mul(e2[0], d[1])),
-        ];
-        let det = add(add(mul(e1[0], p[0]), mul(e1[1], p[1])), mul(e1[2], p[2]));
-        let inv = _mm256_div_ps(splat(1.0), det);
-        let s = [sub(o[0], splat(tri.v0[0])), sub(o[1], splat(tri.v0[1])), sub(o[2], splat(tri.v0[2]))];
-        let u = mul(add(add(mul(s[0], p[0]), mul(s[1], p[1])), mul(s[2], p[2])), inv);
-        let q = [
-            sub(mul(s[1], e1[2]), mul(e1[1], s[2])),
-            sub(mul(s[2], e1[0]), mul(e1[2], s[0])),
-            sub(mul(s[0], e1[1]), mul(e1[0], s[1])),
-        ];
-        let v = mul(add(add(mul(d[0], q[0]), mul(d[1], q[1])), mul(d[2], q[2])), inv);
-        let t = mul(add(add(mul(e2[0], q[0]), mul(e2[1], q[1])), mul(e2[2], q[2])), inv);
+        // Written out, not in closures: a closure does not inherit AVX2, so its lane operations
+        // would not inline.
+        let (p0, p1, p2) = (tri.p0, tri.p1, tri.p2);
+        let a0 = [sub(splat(p0[0]), o[0]), sub(splat(p0[1]), o[1]), sub(splat(p0[2]), o[2])];
+        let a1 = [sub(splat(p1[0]), o[0]), sub(splat(p1[1]), o[1]), sub(splat(p1[2]), o[2])];
+        let a2 = [sub(splat(p2[0]), o[0]), sub(splat(p2[1]), o[1]), sub(splat(p2[2]), o[2])];
+        let w2 = edge_function(&a0, &a1, d);
+        let w0 = edge_function(&a1, &a2, d);
+        let w1 = edge_function(&a2, &a0, d);
         let zero = _mm256_setzero_ps();
-        let one = splat(1.0);
-        let mut m = _mm256_cmp_ps::<_CMP_NEQ_OQ>(det, zero);
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GE_OQ>(u, zero));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(u, one));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GE_OQ>(v, zero));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(add(u, v), one));
+        let positive = _mm256_and_ps(
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_GE_OQ>(w1, zero)),
+            _mm256_cmp_ps::<_CMP_GE_OQ>(w2, zero),
+        );
+        let negative = _mm256_and_ps(
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(w1, zero)),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
+        );
+        let sum = add(add(w0, w1), w2);
+        // The plane's normal is the triangle's alone: computed once, in scalar, as the scalar
+        // path computes it.
+        let e1 = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
+        let e2 = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
+        let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+        let n = [splat(n[0]), splat(n[1]), splat(n[2])];
+        let den = add(add(mul(n[0], d[0]), mul(n[1], d[1])), mul(n[2], d[2]));
+        let t = _mm256_div_ps(add(add(mul(n[0], a0[0]), mul(n[1], a0[1])), mul(n[2], a0[2])), den);
+        let inv = _mm256_div_ps(splat(1.0), sum);
+        let mut m = _mm256_or_ps(positive, negative);
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(sum, zero));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(den, zero));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, t_min));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
-        (m, t, u, v)
+        (m, t, mul(w1, inv), mul(w2, inv))
     }
 
     /// Adds 1 to the counters of the lanes in `mask`.

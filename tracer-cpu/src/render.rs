@@ -9,20 +9,32 @@ use crate::shade;
 use crate::traverse::{self, Stack};
 use crate::whitted::Shading;
 use crate::wide::{F8, Lanes, V3};
-use bvh_format::{Node, SceneFile};
+use bvh_format::{Node, SceneFile, Triangle};
 use rayon::prelude::*;
 use render_spec::{Aovs, Frame, Image, RayCounts, RenderError, Settings};
 
 /// The scene prepared for tracing: layouts, and the bounds behind the adaptive bounce stop.
 pub struct Tracer<'a> {
     pub scene: &'a SceneFile,
+    /// The triangles expanded to three vertices each, in leaf order (48 bytes per triangle).
+    pub(crate) tris: Vec<Triangle>,
     child_pair: Option<&'a [Node]>,
     escape: Option<&'a [Node]>,
 }
 
 impl<'a> Tracer<'a> {
     pub fn new(scene: &'a SceneFile) -> Self {
-        Self { scene, child_pair: scene.child_pair.as_deref(), escape: scene.escape.as_deref() }
+        Self {
+            scene,
+            tris: scene.leaf_triangles(),
+            child_pair: scene.child_pair.as_deref(),
+            escape: scene.escape.as_deref(),
+        }
+    }
+
+    /// The triangles as every path intersects them: three vertices each, in leaf order.
+    pub fn triangles(&self) -> &[Triangle] {
+        &self.tris
     }
 
     fn layout_for(&self, method: Method) -> Result<(), RenderError> {
@@ -65,7 +77,7 @@ impl<'a> Tracer<'a> {
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Hit> {
-        let tris = &self.scene.triangles;
+        let tris = &self.tris;
         match (method, self.child_pair, self.escape) {
             (Method::Stackless, _, Some(esc)) | (_, None, Some(esc)) => {
                 traverse::escape::<ANY>(esc, tris, ray, t_min, t_max, cost)

@@ -2,7 +2,7 @@
 //! same formulas; the cross-backend tests hold them to it.
 
 use crate::wide::{LANES, Lanes, Real, V3};
-use bvh_format::{Material, Triangle, TriangleNormals};
+use bvh_format::{Material, Triangle};
 use glam::Vec3;
 use render_spec::BounceStop;
 use render_spec::constants::STOP_CONTRIBUTION;
@@ -15,7 +15,7 @@ pub struct Surface {
     pub geometric: Vec3,
     /// Unit interpolated shading normal, turned to the same side as `geometric`.
     pub shading: Vec3,
-    /// Whether the ray hit the triangle's front (the side `cross(e1, e2)` points to).
+    /// Whether the ray hit the triangle's front (the side `cross(p1 - p0, p2 - p0)` points to).
     pub front: bool,
 }
 
@@ -28,18 +28,38 @@ pub struct SurfaceOf<R: Real> {
     pub front: R::Mask,
 }
 
-fn v3(v: [f32; 4]) -> Vec3 {
-    Vec3::new(v[0], v[1], v[2])
+/// The edges `p1 - p0` and `p2 - p0` of a triangle, whose cross product is its geometric normal
+/// (the kernels compute them the same way).
+pub fn edges(tri: &Triangle) -> (Vec3, Vec3) {
+    let p0 = Vec3::from(tri.p0);
+    (Vec3::from(tri.p1) - p0, Vec3::from(tri.p2) - p0)
 }
 
-/// The surface at a hit `t` along `origin + t * dir` with barycentrics `(u, v)`.
-pub fn surface(tri: &Triangle, normals: &TriangleNormals, origin: Vec3, dir: Vec3, t: f32, u: f32, v: f32) -> Surface {
-    let n = normals.n.map(|n| v3(n).into());
-    let s = surface_of(v3(tri.e1).into(), v3(tri.e2).into(), n, origin.into(), dir.into(), t, u, v);
+/// The vertex normals shading interpolates: a flat triangle's are zero, which the interpolation
+/// turns into its geometric normal (the kernels take that normal directly).
+pub fn shading_normals(normals: Option<[[f32; 3]; 3]>) -> [[f32; 3]; 3] {
+    normals.unwrap_or([[0.0; 3]; 3])
+}
+
+/// The surface at a hit `t` along `origin + t * dir` with barycentrics `(u, v)`; `normals` are the
+/// triangle's vertex normals, `None` for a flat triangle (shaded with its geometric normal).
+pub fn surface(
+    tri: &Triangle,
+    normals: Option<[[f32; 3]; 3]>,
+    origin: Vec3,
+    dir: Vec3,
+    t: f32,
+    u: f32,
+    v: f32,
+) -> Surface {
+    let n = shading_normals(normals).map(|n| Vec3::from(n).into());
+    let (e1, e2) = edges(tri);
+    let s = surface_of(e1.into(), e2.into(), n, origin.into(), dir.into(), t, u, v);
     Surface { point: s.point.into(), geometric: s.geometric.into(), shading: s.shading.into(), front: s.front }
 }
 
-/// [`surface`] of a triangle given by its edges `e1`, `e2` and vertex normals `n`.
+/// [`surface`] of a triangle given by its edges `e1`, `e2` and vertex normals `n` (zero for a
+/// flat triangle).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub fn surface_of<R: Real>(
@@ -280,16 +300,18 @@ mod tests {
     #[test]
     fn surfaces_face_the_ray_and_fall_back_for_degenerate_triangles() {
         let tri = Triangle::from_vertices([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]);
-        let n = TriangleNormals { n: [[0.0, 1.0, 0.0, 0.0]; 3] };
-        let down = surface(&tri, &n, Vec3::new(0.2, 1.0, -0.2), Vec3::NEG_Y, 1.0, 0.2, 0.2);
+        let n = Some([[0.0, 1.0, 0.0]; 3]);
+        let down = surface(&tri, n, Vec3::new(0.2, 1.0, -0.2), Vec3::NEG_Y, 1.0, 0.2, 0.2);
         assert!(down.front && down.geometric == Vec3::Y && down.shading == Vec3::Y);
-        let up = surface(&tri, &n, Vec3::new(0.2, -1.0, -0.2), Vec3::Y, 1.0, 0.2, 0.2);
+        let up = surface(&tri, n, Vec3::new(0.2, -1.0, -0.2), Vec3::Y, 1.0, 0.2, 0.2);
         assert!(!up.front && up.geometric == Vec3::NEG_Y && up.shading == Vec3::NEG_Y);
         let sliver = Triangle::from_vertices([0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]);
-        let zero = TriangleNormals::default();
-        let s = surface(&sliver, &zero, Vec3::ZERO, Vec3::X, 0.5, 0.3, 0.3);
+        let s = surface(&sliver, Some([[0.0; 3]; 3]), Vec3::ZERO, Vec3::X, 0.5, 0.3, 0.3);
         assert_eq!(s.geometric, Vec3::NEG_X);
         assert!(s.shading.is_finite());
+        // A flat triangle is shaded with its geometric normal.
+        let flat = surface(&tri, None, Vec3::new(0.2, -1.0, -0.2), Vec3::Y, 1.0, 0.2, 0.2);
+        assert_eq!(flat.shading, flat.geometric);
     }
 
     #[test]

@@ -123,16 +123,23 @@ impl<'a> Shading<'a> {
             }
             let hit_lanes = L::bools(hit);
             let tri: [usize; LANES] = std::array::from_fn(|i| if hit_lanes[i] { hits.tri[i] as usize } else { 0 });
-            let (t, n) = (&scene.triangles, &scene.normals);
             let (origin, dir) = (V3::<L>::from_arrays(&rays.origin), V3::<L>::from_arrays(&rays.dir));
-            let (tris, normals) = (tri.map(|k| &t[k]), tri.map(|k| &n[k]));
+            // Edges and vertex normals (zero for a flat triangle) padded to 16 bytes per lane, for
+            // the 4-float gathers.
+            let pad = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
+            let edges: [[[f32; 4]; 2]; LANES] = tri.map(|k| {
+                let (e1, e2) = shade::edges(&scene.triangle(k));
+                [pad(e1), pad(e2)]
+            });
+            let normals: [[[f32; 4]; 3]; LANES] =
+                tri.map(|k| shade::shading_normals(scene.vertex_normals(k)).map(|n| pad(n.into())));
             let s = shade::surface_of(
-                L::gather3(tris.map(|t| &t.e1)),
-                L::gather3(tris.map(|t| &t.e2)),
+                L::gather3(std::array::from_fn(|i| &edges[i][0])),
+                L::gather3(std::array::from_fn(|i| &edges[i][1])),
                 [
-                    L::gather3(normals.map(|n| &n.n[0])),
-                    L::gather3(normals.map(|n| &n.n[1])),
-                    L::gather3(normals.map(|n| &n.n[2])),
+                    L::gather3(std::array::from_fn(|i| &normals[i][0])),
+                    L::gather3(std::array::from_fn(|i| &normals[i][1])),
+                    L::gather3(std::array::from_fn(|i| &normals[i][2])),
                 ],
                 origin,
                 dir,
@@ -149,8 +156,9 @@ impl<'a> Shading<'a> {
                     }
                 }
             }
-            let m =
-                Materials::<L>::gather(&std::array::from_fn(|i| &scene.materials[scene.material_ids[tri[i]] as usize]));
+            let m = Materials::<L>::gather(&std::array::from_fn(|i| {
+                &scene.materials[scene.triangles[tri[i]].material as usize]
+            }));
             if self.mode == Mode::Cast {
                 colour = V3::select(hit, shade::cast_of(m.kd, s.shading, dir), colour);
                 break;

@@ -30,14 +30,17 @@ fn classify(scene: &SceneFile, o: Vec3, d: Vec3, fast: Option<Hit>, exact: Optio
     match (fast, exact) {
         (None, None) => t.agree += 1,
         (Some(f), Some(e)) if f.tri == e.tri => {
-            assert!(((f.t as f64) - e.t).abs() <= 1e-4 * e.t.max(1e-6), "t {} vs {}", f.t, e.t);
+            // Relative to t, plus the rounding of the vertices relative to the origin (a few units
+            // in the last place of the coordinates), which dominates for a very near hit.
+            let slack = 1e-4 * e.t.max(1e-6) + 8.0 * f32::EPSILON as f64 * o.abs().max_element().max(1.0) as f64;
+            assert!(((f.t as f64) - e.t).abs() <= slack, "t {} vs {}", f.t, e.t);
             t.agree += 1
         }
         _ => {
             let near_edge_exact = exact.is_some_and(|e| reference::edge_distance(&e) < EDGE);
             let near_edge_fast = fast.is_some_and(|f| (f.u.min(f.v).min(1.0 - f.u - f.v) as f64) < EDGE);
             let tie = match (fast, exact) {
-                (Some(f), Some(e)) => reference::intersect64(&scene.triangles[f.tri as usize], o64, d64, 0.0)
+                (Some(f), Some(e)) => reference::intersect64(&scene.triangle(f.tri as usize), o64, d64, 0.0)
                     .is_some_and(|(tf, _, _)| (tf - e.t).abs() <= 1e-6 * e.t),
                 _ => false,
             };
@@ -55,6 +58,7 @@ fn classify(scene: &SceneFile, o: Vec3, d: Vec3, fast: Option<Hit>, exact: Optio
 }
 
 fn check_scene(name: &str, scene: &SceneFile, n: usize, seed: u64) {
+    let tris = scene.leaf_triangles();
     let tracer = Tracer::new(scene);
     let rays = common::random_rays(scene, n, seed);
     let chunks: Vec<Tally> = rays
@@ -78,13 +82,13 @@ fn check_scene(name: &str, scene: &SceneFile, n: usize, seed: u64) {
                         p.set(i, &Ray::new(o, d), f32::INFINITY);
                     }
                     let nodes = scene.child_pair.as_deref().unwrap();
-                    let res = packet::trace::<false>(nodes, &scene.triangles, &p, pstack);
+                    let res = packet::trace::<false>(nodes, &tris, &p, pstack);
                     for (i, a) in ordered.iter().enumerate() {
                         assert_eq!(res.get(i), *a, "{name}: packet and ordered disagree on lane {i}");
                     }
                 }
                 for (&(o, d), fast) in chunk.iter().zip(ordered) {
-                    let exact = reference::closest_hit(&scene.triangles, o.as_dvec3(), d.as_dvec3(), 0.0);
+                    let exact = reference::closest_hit(&tris, o.as_dvec3(), d.as_dvec3(), 0.0);
                     classify(scene, o, d, fast, exact, &mut tally);
                 }
                 tally
@@ -135,15 +139,16 @@ fn sphere_fast_paths_match_the_reference() {
 #[test]
 fn rays_through_shared_vertices_break_ties_the_same_way_on_every_path() {
     // Aim exactly at vertices of the sphere mesh: many triangles share each one, so every path
-    // must pick the same (lowest-index) triangle. Möller-Trumbore is not watertight: a few such
-    // rays slip between the triangles in f32. That is measured here and documented in
-    // docs/shading.md; it must stay rare, and the paths must agree on it.
+    // must pick the same (lowest-index) triangle. The edge-consistent test can still let a ray
+    // slip through a vertex in f32 (tests/tests/leaks.rs counts it); it must stay rare, and the
+    // paths must agree on it.
     let scene = common::sphere_scene();
     let tracer = Tracer::new(&scene);
     let mut stack = Stack::default();
     let (mut rays, mut misses) = (0, 0);
-    for (i, tri) in scene.triangles.iter().enumerate().step_by(7) {
-        let v = Vec3::new(tri.v0[0], tri.v0[1], tri.v0[2]);
+    let tris = scene.leaf_triangles();
+    for (i, tri) in tris.iter().enumerate().step_by(7) {
+        let v = Vec3::from(tri.p0);
         let o = v * 3.0 + Vec3::new(0.01, 0.02, 0.0) * (i % 3) as f32;
         let d = (v - o).normalize();
         let ray = Ray::new(o, d);
@@ -155,7 +160,7 @@ fn rays_through_shared_vertices_break_ties_the_same_way_on_every_path() {
         if a.is_none() {
             misses += 1;
         }
-        let exact = reference::closest_hit(&scene.triangles, o.as_dvec3(), d.as_dvec3(), 0.0);
+        let exact = reference::closest_hit(&tris, o.as_dvec3(), d.as_dvec3(), 0.0);
         assert!(exact.is_some(), "the f64 reference finds the vertex");
     }
     println!("rays aimed at shared vertices: {rays}, slipped through in f32: {misses}");

@@ -1,7 +1,7 @@
 // Shared by every kernel: the scene's data, the frame's state, and the intersection and shading
 // arithmetic of docs/shading.md. The host prepends the shading contract's constants (T_SLACK,
-// OFFSET_*, STOP_*, NO_TRIANGLE, F32_MAX, generated from render_spec::constants, where each is
-// defined and explained) and the per-scene constants STACK_SIZE, LEAF_SIZE, WG_X and WG_Y, and
+// OFFSET_*, STOP_*, NO_TRIANGLE, FLAT_NORMAL, F32_MAX, generated from render_spec::constants,
+// where each is defined and explained) and the per-scene constants STACK_SIZE, LEAF_SIZE, WG_X and WG_Y, and
 // strips the blocks between `//#if FEATURE` and `//#endif` for features the scene lacks.
 
 struct Node {
@@ -11,16 +11,15 @@ struct Node {
     index: u32,
 }
 
+// A triangle as the tracers intersect it (bvh_format::Triangle): three vertices, the material in
+// the first padding word.
 struct Tri {
-    v0: vec4<f32>,
-    e1: vec4<f32>,
-    e2: vec4<f32>,
-}
-
-struct TriNormals {
-    n0: vec4<f32>,
-    n1: vec4<f32>,
-    n2: vec4<f32>,
+    p0: vec3<f32>,
+    material: u32,
+    p1: vec3<f32>,
+    pad1: u32,
+    p2: vec3<f32>,
+    pad2: u32,
 }
 
 // Material as the file stores it: (kd, shininess), (ks, kr), (kt, ior, -, -).
@@ -83,8 +82,10 @@ struct Pass {
 @group(0) @binding(0) var<storage, read> frame: Frame;
 @group(0) @binding(1) var<storage, read> nodes: array<Node>;
 @group(0) @binding(2) var<storage, read> tris: array<Tri>;
-@group(0) @binding(3) var<storage, read> normals: array<TriNormals>;
-@group(0) @binding(4) var<storage, read> material_ids: array<u32>;
+// Three normal indices per triangle (all FLAT_NORMAL for a flat one) and three floats per normal; read
+// only when the scene has smooth triangles (feature SMOOTH), else one-entry placeholders.
+@group(0) @binding(3) var<storage, read> normal_indices: array<u32>;
+@group(0) @binding(4) var<storage, read> normals: array<f32>;
 @group(0) @binding(5) var<storage, read> materials: array<Material>;
 @group(0) @binding(6) var<storage, read> lights: array<Light>;
 @group(0) @binding(7) var<storage, read> input_index: array<u32>;
@@ -158,30 +159,43 @@ fn slab(n: Node, r: Ray, t_max: f32) -> f32 {
     return select(-1.0, near, may_hold(near, far));
 }
 
-// Möller-Trumbore in the CPU's operation order; returns (t, u, v) or t = -1 for a miss.
+// The edge function of the edge from a to b (vertices relative to the ray origin), in the CPU's
+// operation order (tracer-cpu geometry::edge_function): dot(cross(a - b, a + b), d), twice
+// dot(cross(a, b), d). The triangle on the other side of the edge meets it as (b, a): a - b
+// changes sign exactly and a + b not at all, so it gets exactly the negated number, also where a
+// driver contracts multiply-adds (fma(-x, y, -z) = -fma(x, y, z)).
+fn edge_function(a: vec3<f32>, b: vec3<f32>, d: vec3<f32>) -> f32 {
+    let e = a - b;
+    let s = a + b;
+    let c = vec3<f32>(e.y * s.z - e.z * s.y, e.z * s.x - e.x * s.z, e.x * s.y - e.y * s.x);
+    return d.x * c.x + d.y * c.y + d.z * c.z;
+}
+
+// The edge-consistent triangle test of docs/shading.md; returns (t, u, v) or t = -1 for a miss.
 fn intersect(tri: Tri, r: Ray, t_min: f32, t_max: f32) -> vec3<f32> {
     let d = r.d;
-    let e1 = tri.e1.xyz;
-    let e2 = tri.e2.xyz;
-    let p = vec3<f32>(d.y * e2.z - e2.y * d.z, d.z * e2.x - e2.z * d.x, d.x * e2.y - e2.x * d.y);
-    let det = e1.x * p.x + e1.y * p.y + e1.z * p.z;
-    if det == 0.0 {
+    let a0 = tri.p0 - r.o;
+    let a1 = tri.p1 - r.o;
+    let a2 = tri.p2 - r.o;
+    let w2 = edge_function(a0, a1, d);
+    let w0 = edge_function(a1, a2, d);
+    let w1 = edge_function(a2, a0, d);
+    let inside = (w0 >= 0.0 && w1 >= 0.0 && w2 >= 0.0) || (w0 <= 0.0 && w1 <= 0.0 && w2 <= 0.0);
+    let sum = w0 + w1 + w2;
+    if !inside || sum == 0.0 {
         return vec3<f32>(-1.0, 0.0, 0.0);
     }
-    let inv = 1.0 / det;
-    let s = r.o - tri.v0.xyz;
-    let u = (s.x * p.x + s.y * p.y + s.z * p.z) * inv;
-    if u < 0.0 || u > 1.0 {
+    let e1 = tri.p1 - tri.p0;
+    let e2 = tri.p2 - tri.p0;
+    let n = vec3<f32>(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x);
+    let den = n.x * d.x + n.y * d.y + n.z * d.z;
+    if den == 0.0 {
         return vec3<f32>(-1.0, 0.0, 0.0);
     }
-    let q = vec3<f32>(s.y * e1.z - e1.y * s.z, s.z * e1.x - e1.z * s.x, s.x * e1.y - e1.x * s.y);
-    let v = (d.x * q.x + d.y * q.y + d.z * q.z) * inv;
-    if v < 0.0 || u + v > 1.0 {
-        return vec3<f32>(-1.0, 0.0, 0.0);
-    }
-    let t = (e2.x * q.x + e2.y * q.y + e2.z * q.z) * inv;
+    let t = (n.x * a0.x + n.y * a0.y + n.z * a0.z) / den;
     if t > t_min && t <= t_max {
-        return vec3<f32>(t, u, v);
+        let inv = 1.0 / sum;
+        return vec3<f32>(t, w1 * inv, w2 * inv);
     }
     return vec3<f32>(-1.0, 0.0, 0.0);
 }
@@ -223,10 +237,16 @@ struct Surface {
     front: bool,
 }
 
+//#if SMOOTH
+fn vertex_normal(i: u32) -> vec3<f32> {
+    return vec3<f32>(normals[3u * i], normals[3u * i + 1u], normals[3u * i + 2u]);
+}
+//#endif
+
 fn surface_at(r: Ray, h: HitRec) -> Surface {
     let tri = tris[h.tri];
     let point = r.o + h.t * r.d;
-    let raw = cross(tri.e1.xyz, tri.e2.xyz);
+    let raw = cross(tri.p1 - tri.p0, tri.p2 - tri.p0);
     let len = length(raw);
     var ng = -r.d;
     if len > 0.0 && len <= F32_MAX {
@@ -234,21 +254,28 @@ fn surface_at(r: Ray, h: HitRec) -> Surface {
     }
     let front = dot(r.d, ng) < 0.0;
     let geometric = select(-ng, ng, front);
-    let nn = normals[h.tri];
-    let interp = (1.0 - h.u - h.v) * nn.n0.xyz + h.u * nn.n1.xyz + h.v * nn.n2.xyz;
-    let il = length(interp);
     var shading = geometric;
-    if il > 0.0 && il <= F32_MAX {
-        shading = interp / il;
-        if dot(shading, geometric) < 0.0 {
-            shading = -shading;
+//#if SMOOTH
+    let ni = 3u * h.tri;
+    if normal_indices[ni] != FLAT_NORMAL {
+        let n0 = vertex_normal(normal_indices[ni]);
+        let n1 = vertex_normal(normal_indices[ni + 1u]);
+        let n2 = vertex_normal(normal_indices[ni + 2u]);
+        let interp = (1.0 - h.u - h.v) * n0 + h.u * n1 + h.v * n2;
+        let il = length(interp);
+        if il > 0.0 && il <= F32_MAX {
+            shading = interp / il;
+            if dot(shading, geometric) < 0.0 {
+                shading = -shading;
+            }
         }
     }
+//#endif
     return Surface(point, geometric, shading, front);
 }
 
 fn material_of(tri: u32) -> Material {
-    return materials[material_ids[tri]];
+    return materials[tris[tri].material];
 }
 
 fn reflect_dir(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> {

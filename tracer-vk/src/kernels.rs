@@ -79,6 +79,8 @@ pub struct Specialisation {
     pub reflection: bool,
     /// Some material refracts (kt > 0).
     pub refraction: bool,
+    /// Some triangle has vertex normals (the others are shaded with their geometric normal).
+    pub smooth: bool,
 }
 
 /// Drops the lines between `//#if NAME` and `//#endif` when NAME is not enabled (no nesting).
@@ -145,6 +147,9 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
     if spec.refraction {
         features.push("REFRACTION");
     }
+    if spec.smooth {
+        features.push("SMOOTH");
+    }
     features.push(if spec.method == Method::SstSubgroup { "VOTE_SUBGROUP" } else { "VOTE_REDUCTION" });
     let traversal = match spec.method {
         Method::Lst => LST,
@@ -209,7 +214,9 @@ mod tests {
     use super::*;
 
     fn spec(method: Method, reflection: bool, refraction: bool) -> Specialisation {
-        Specialisation { method, stack_size: 23, leaf_size: 8, workgroup: (8, 8), reflection, refraction }
+        // Smooth normals with reflection, so that both settings of each feature translate.
+        let smooth = reflection;
+        Specialisation { method, stack_size: 23, leaf_size: 8, workgroup: (8, 8), reflection, refraction, smooth }
     }
 
     #[test]

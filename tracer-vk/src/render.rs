@@ -133,8 +133,8 @@ pub struct Renderer<'g> {
     spec: Specialisation,
     nodes: Buffer,
     tris: Buffer,
+    normal_indices: Buffer,
     normals: Buffer,
-    material_ids: Buffer,
     materials: Buffer,
     input_index: Buffer,
     pipelines: HashMap<Stage, Pipeline>,
@@ -149,8 +149,8 @@ const BINDING_NAMES: [&str; 14] = [
     "frame",
     "nodes",
     "tris",
+    "normal_indices",
     "normals",
-    "material_ids",
     "materials",
     "lights",
     "input_index",
@@ -263,6 +263,7 @@ impl<'g> Renderer<'g> {
             workgroup,
             reflection: scene.materials.iter().any(|m| m.kr > 0.0),
             refraction: scene.materials.iter().any(|m| m.kt > 0.0),
+            smooth: !scene.normals.is_empty(),
         };
         let info = gpu.info();
         let (wx, wy) = workgroup;
@@ -287,9 +288,10 @@ impl<'g> Renderer<'g> {
         }
         let node_what = if method == Method::Stackless { "escape-pointer nodes" } else { "child-pair nodes" };
         fits(info, node_what, nodes)?;
-        fits(info, "triangles", &scene.triangles)?;
-        fits(info, "triangle normals", &scene.normals)?;
-        fits(info, "material ids", &scene.material_ids)?;
+        let arrays = SceneArrays::new(scene);
+        fits(info, "triangles", &arrays.tris)?;
+        fits(info, "normal indices", &arrays.normal_indices)?;
+        fits(info, "normals", &arrays.normals)?;
         fits(info, "materials", &scene.materials)?;
         fits(info, "input indices", &scene.input_index)?;
         Ok(Self {
@@ -297,9 +299,9 @@ impl<'g> Renderer<'g> {
             scene,
             spec,
             nodes: gpu.create_buffer_with(nodes, "nodes")?,
-            tris: gpu.create_buffer_with(&scene.triangles, "triangles")?,
-            normals: gpu.create_buffer_with(&scene.normals, "normals")?,
-            material_ids: gpu.create_buffer_with(&scene.material_ids, "material ids")?,
+            tris: gpu.create_buffer_with(&arrays.tris, "triangles")?,
+            normal_indices: gpu.create_buffer_with(&arrays.normal_indices, "normal indices")?,
+            normals: gpu.create_buffer_with(&arrays.normals, "normals")?,
             materials: gpu.create_buffer_with(&scene.materials, "materials")?,
             input_index: gpu.create_buffer_with(&scene.input_index, "input index")?,
             pipelines: HashMap::new(),
@@ -500,8 +502,8 @@ impl<'g> Renderer<'g> {
             frame_buf,
             &self.nodes,
             &self.tris,
+            &self.normal_indices,
             &self.normals,
-            &self.material_ids,
             &self.materials,
             lights_buf,
             &self.input_index,
@@ -599,6 +601,47 @@ fn check_counts(
     Ok(())
 }
 
+/// The triangle arrays as the kernels read them: three vertices per triangle in leaf order (one
+/// contiguous 48-byte read per triangle, as the thesis's 16-byte aligned data), and the file's
+/// normal indices and normals, or one-entry placeholders for a scene without smooth triangles
+/// (whose kernels never read them).
+struct SceneArrays {
+    tris: Vec<bvh_format::Triangle>,
+    normal_indices: Vec<[u32; 3]>,
+    normals: Vec<[f32; 3]>,
+}
+
+impl SceneArrays {
+    fn new(scene: &SceneFile) -> Self {
+        let smooth = !scene.normals.is_empty();
+        Self {
+            tris: scene.leaf_triangles(),
+            normal_indices: if smooth { scene.normal_indices.clone() } else { vec![bvh_format::FLAT] },
+            normals: if smooth { scene.normals.clone() } else { vec![[0.0; 3]] },
+        }
+    }
+}
+
+/// Bytes of scene data a renderer with `method` uploads (nodes of the one layout it reads,
+/// triangles, normals, materials, input indices), for `bvhc info`.
+pub fn upload_bytes(scene: &SceneFile, method: Method) -> u64 {
+    let nodes = match method {
+        Method::Stackless => scene.escape.as_ref(),
+        _ => scene.child_pair.as_ref(),
+    };
+    let a = SceneArrays::new(scene);
+    [
+        std::mem::size_of_val(nodes.map_or(&[][..], |n| &n[..])),
+        std::mem::size_of_val(&a.tris[..]),
+        std::mem::size_of_val(&a.normal_indices[..]),
+        std::mem::size_of_val(&a.normals[..]),
+        std::mem::size_of_val(&scene.materials[..]),
+        std::mem::size_of_val(&scene.input_index[..]),
+    ]
+    .iter()
+    .sum::<usize>() as u64
+}
+
 /// Checks that a scene array fits one storage buffer binding and one allocation.
 fn fits<T>(info: &crate::device::DeviceInfo, what: &'static str, data: &[T]) -> Result<(), VkRenderError> {
     let bytes = std::mem::size_of_val(data) as u64;
@@ -677,7 +720,7 @@ mod tests {
 #[cfg(test)]
 mod layout_contract {
     use super::*;
-    use bvh_format::{Material, Node, Triangle, TriangleNormals};
+    use bvh_format::{Material, Node, Triangle};
     use naga::proc::Layouter;
     use std::mem::{offset_of, size_of};
 
@@ -690,6 +733,7 @@ mod layout_contract {
             workgroup: (8, 8),
             reflection: true,
             refraction: true,
+            smooth: true,
         };
         naga::front::wgsl::parse_str(&kernels::source(Stage::Bounce, &spec)).expect("the kernel parses")
     }
@@ -735,10 +779,15 @@ mod layout_contract {
             &l,
             "Tri",
             size_of::<Triangle>(),
-            &[("v0", offset_of!(Triangle, v0)), ("e1", offset_of!(Triangle, e1)), ("e2", offset_of!(Triangle, e2))],
+            &[
+                ("p0", offset_of!(Triangle, p0)),
+                ("material", offset_of!(Triangle, material)),
+                ("p1", offset_of!(Triangle, p1)),
+                ("pad1", offset_of!(Triangle, _pad1)),
+                ("p2", offset_of!(Triangle, p2)),
+                ("pad2", offset_of!(Triangle, _pad2)),
+            ],
         );
-        let n = offset_of!(TriangleNormals, n);
-        check(&m, &l, "TriNormals", size_of::<TriangleNormals>(), &[("n0", n), ("n1", n + 16), ("n2", n + 32)]);
         check(
             &m,
             &l,
@@ -841,8 +890,10 @@ mod layout_contract {
         assert_eq!(stride("frame"), size_of::<FrameData>() as u64);
         assert_eq!(stride("nodes"), size_of::<Node>() as u64);
         assert_eq!(stride("tris"), size_of::<Triangle>() as u64);
-        assert_eq!(stride("normals"), size_of::<TriangleNormals>() as u64);
-        assert_eq!(stride("material_ids"), 4);
+        // Three words per triangle and three floats per normal (SceneArrays uploads [u32; 3] and
+        // [f32; 3]).
+        assert_eq!(stride("normal_indices") * 3, size_of::<[u32; 3]>() as u64);
+        assert_eq!(stride("normals") * 3, size_of::<[f32; 3]>() as u64);
         assert_eq!(stride("materials"), size_of::<Material>() as u64);
         assert_eq!(stride("lights"), size_of::<Light>() as u64);
         assert_eq!(stride("input_index"), 4);

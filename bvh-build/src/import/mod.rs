@@ -19,7 +19,7 @@
 
 pub mod defaults;
 pub mod description;
-mod geometry;
+pub(crate) mod geometry;
 pub mod gltf;
 pub mod materials;
 pub mod obj;

@@ -240,7 +240,9 @@ fn info(file: &Path) -> Result<(), String> {
     let (lo, hi) = scene.bounds();
     let b = &scene.build;
     say!("{}{}", file.display(), if compiled { " (compiled on the fly with the default parameters)" } else { "" });
-    say!("  triangles       {}", scene.triangles.len());
+    let smooth = scene.normal_indices.iter().filter(|n| **n != bvh_format::FLAT).count();
+    say!("  triangles       {} ({} with vertex normals)", scene.triangles.len(), smooth);
+    say!("  vertices        {} ({} normals)", scene.vertices.len(), scene.normals.len());
     say!("  materials       {}", scene.materials.len());
     say!("  bounds          ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4})", lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
     say!("  layouts         {}", layout_names(&scene));
@@ -268,6 +270,16 @@ fn info(file: &Path) -> Result<(), String> {
         say!("    {:<22} {:>10} entries {:>12}", sec.kind.name(), sec.count, human_bytes(sec.bytes));
     }
     say!("    {:<22} {:>10}         {:>12}", "total", "", human_bytes(total));
+    let per_tri = |bytes: u64| bytes as f64 / scene.triangles.len().max(1) as f64;
+    let vk = |m| per_tri(tracer_vk::render::upload_bytes(&scene, m));
+    use tracer_vk::kernels::Method as Vk;
+    say!(
+        "  bytes/triangle  file {:.1}; trace-cpu holds {:.1}; trace-vk uploads {:.1} (lst, sst), {:.1} (stackless)",
+        per_tri(total),
+        per_tri(tracer_cpu::held_bytes(&scene)),
+        vk(Vk::Lst),
+        vk(Vk::Stackless)
+    );
     say!(
         "  shading         ambient {:?}, background {:?}, up to {} indirections",
         scene.settings.ambient,

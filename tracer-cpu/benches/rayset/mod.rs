@@ -78,7 +78,8 @@ pub fn generate(scene: &SceneFile, width: u32, height: u32) -> Result<[RaySet; 3
             let hit = tracer.closest(Method::Ordered, &ray, 0.0, f32::INFINITY, stack, &mut Cost::default());
             let Some(hit) = hit else { return (Some((ray, f32::INFINITY)), None, None) };
             let k = hit.tri as usize;
-            let surf = shade::surface(&scene.triangles[k], &scene.normals[k], ray.origin, ray.dir, hit.t, hit.u, hit.v);
+            let surf =
+                shade::surface(&scene.triangle(k), scene.vertex_normals(k), ray.origin, ray.dir, hit.t, hit.u, hit.v);
             let to = light - surf.point;
             let shadow = (to != Vec3::ZERO).then(|| {
                 let l = to.normalize();
@@ -140,7 +141,7 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
             }
             Engine::Packet(tracer) => {
                 let nodes = tracer.scene.child_pair.as_deref().expect("the scene has the child-pair layout");
-                let tris = &tracer.scene.triangles;
+                let tris = tracer.triangles();
                 blocks(rays, out, w, |p| {
                     let res = if any {
                         packet::trace::<true>(nodes, tris, p, pstack)
