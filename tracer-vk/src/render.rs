@@ -669,6 +669,7 @@ mod tests {
             workgroup: (8, 8),
             reflection: false,
             refraction: false,
+            smooth: false,
         }
     }
 
