@@ -4,6 +4,7 @@
 
 pub mod bench;
 pub mod cli;
+pub mod cpu_bench;
 pub mod output;
 pub mod render_args;
 

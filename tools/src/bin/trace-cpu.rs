@@ -1,11 +1,10 @@
 //! `trace-cpu`: renders a scene file on the CPU (the baseline tracer).
 
-use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
-use render_spec::Settings;
 use std::process::ExitCode;
 use std::time::Instant;
-use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed};
+use tools::bench::{Defaults, MatrixArgs};
+use tools::cpu_bench::{CpuBench, thread_pool};
 use tools::cli::{Progress, duration, rays_per_second};
 use tools::render_args::{RenderArgs, parse_count};
 use tools::say;
@@ -88,7 +87,7 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
     let method = method.method();
-    let pool = pool(threads)?;
+    let pool = thread_pool(threads)?;
     let tracer = Tracer::new(scene);
     let bar = Progress::new(settings.height as u64, "{bar:40} {pos}/{len} rows ({elapsed}, {eta} left)", false);
     let t0 = Instant::now();
@@ -125,61 +124,6 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     Ok(())
 }
 
-fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool, String> {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads.unwrap_or(0))
-        .build()
-        .map_err(|e| format!("cannot start the worker threads: {e}"))
-}
-
-/// The CPU side of the benchmark matrix: wall-clock time of whole frames on a thread pool.
-struct CpuBench {
-    pool: rayon::ThreadPool,
-}
-
-impl Bench for CpuBench {
-    type Renderer<'a> = (Tracer<'a>, Method);
-
-    fn tracer(&self) -> &'static str {
-        "cpu"
-    }
-
-    fn device(&self) -> String {
-        format!("{}, {} threads", tools::cpu_model(), self.pool.current_num_threads())
-    }
-
-    fn timing(&self) -> String {
-        "a frame's time is the wall-clock time of `tracer_cpu::render`: primary rays, tracing and shading \
-         into the 8-bit image, no AOVs; the scene is loaded and prepared before"
-            .to_owned()
-    }
-
-    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<(Tracer<'a>, Method), String> {
-        let method = MethodArg::from_str(method, false).map_err(|e| format!("{method:?}: {e}"))?.method();
-        if method == Method::Packet && method.resolve(scene) != method {
-            return Err("this CPU cannot run the packet method: it needs AVX2".to_owned());
-        }
-        Ok((Tracer::new(scene), method))
-    }
-
-    fn frame(&self, (tracer, method): &mut (Tracer<'_>, Method), f: &FrameSpec) -> Result<Timed, String> {
-        let settings = Settings {
-            width: f.width,
-            height: f.height,
-            camera: f.camera,
-            mode: f.mode,
-            lights: f.lights.clone(),
-            max_indirections: f.max_indirections,
-            aovs: false,
-        };
-        let t0 = Instant::now();
-        let image = self.pool.install(|| tracer_cpu::render(tracer, &settings, *method)).map_err(|e| e.to_string())?;
-        let ms = t0.elapsed().as_secs_f64() * 1e3;
-        let r = image.rays;
-        Ok(Timed { ms, rays: [r.primary, r.shadow, r.secondary] })
-    }
-}
-
 fn bench(b: &BenchArgs) -> Result<(), String> {
     let names: Vec<String> = b
         .methods
@@ -187,7 +131,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
         .map(|m| m.to_possible_value().expect("every method has a name").get_name().to_owned())
         .collect();
     let methods: Vec<&str> = names.iter().map(String::as_str).collect();
-    let bench = CpuBench { pool: pool(b.threads)? };
+    let bench = CpuBench { pool: thread_pool(b.threads)? };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 10, warmup: 1 })?;
     Ok(())
 }

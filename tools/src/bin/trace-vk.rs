@@ -2,9 +2,9 @@
 
 use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
-use render_spec::Settings;
+use render_spec::{Image, Settings};
 use std::process::ExitCode;
-use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed};
+use tools::bench::{Bench, Defaults, MatrixArgs, Timed};
 use tools::cli::{Progress, duration, rays_per_second};
 use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
@@ -201,19 +201,14 @@ impl Bench for VkBench {
         Renderer::new(&self.gpu, scene, method_of(method), self.workgroup).map_err(|e| e.to_string())
     }
 
-    fn frame(&self, r: &mut Renderer<'_>, f: &FrameSpec) -> Result<Timed, String> {
-        let settings = Settings {
-            width: f.width,
-            height: f.height,
-            camera: f.camera,
-            mode: f.mode,
-            lights: f.lights.clone(),
-            max_indirections: f.max_indirections,
-            aovs: false,
-        };
-        let out = r.render_frame(&settings, false).map_err(|e| e.to_string())?;
+    fn frame(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Timed, String> {
+        let out = r.render_frame(s, false).map_err(|e| e.to_string())?;
         let rays = out.image.rays;
         Ok(Timed { ms: out.gpu_ms, rays: [rays.primary, rays.shadow, rays.secondary] })
+    }
+
+    fn image(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Image, String> {
+        Ok(r.render(s).map_err(|e| e.to_string())?.image)
     }
 
     fn finish(&self) -> Result<(), String> {
