@@ -364,6 +364,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
                             lights: lights_n(&scene, mode.lights, &camera),
                             max_indirections: scene.settings.max_indirections,
                             aovs: false,
+                            accuracy: Default::default(),
                         };
                         let m = measure(bench, &mut renderer, &settings, warmup, frames)?;
                         rows.push(Row {

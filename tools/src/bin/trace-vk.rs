@@ -5,6 +5,9 @@ use clap::{Parser, Subcommand, ValueEnum};
 use render_spec::{Image, Settings};
 use std::process::ExitCode;
 use tools::bench::{Bench, Defaults, MatrixArgs, Timed};
+use tools::cpu_bench::{CpuBench, thread_pool};
+use tools::eval::EvalArgs;
+use tools::eval::reference::FastCpuStandIn;
 use tools::cli::{Progress, duration, rays_per_second};
 use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
@@ -36,6 +39,11 @@ enum Command {
     /// Time the thesis's evaluation matrix: scenes x cameras x sizes x modes x methods, GPU time
     /// per frame from timestamp queries (median of --frames), written as CSV and Markdown.
     Bench(Box<BenchArgs>),
+    /// Chart speed against accuracy: scenes x cameras x sizes x modes, each rendered by the CPU
+    /// tracer and on the Vulkan device with every method and accuracy setting, timed (medians) and
+    /// compared with a reference render (FLIP, PSNR, pixels off, hit errors); writes eval.csv,
+    /// eval.md and a chart per frame (SVG and PNG) with its Pareto front.
+    Eval(Box<EvalCommand>),
     /// Render one image (and optionally a cost heatmap and AOVs).
     Render {
         #[command(flatten)]
@@ -65,6 +73,24 @@ struct BenchArgs {
     device: DeviceArgs,
 }
 
+#[derive(clap::Args)]
+struct EvalCommand {
+    #[command(flatten)]
+    eval: EvalArgs,
+    /// Worker threads of the CPU tracer and the reference, 1 to 1024 [default: all cores].
+    #[arg(long, value_parser = parse_threads)]
+    threads: Option<usize>,
+    /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
+    #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
+    workgroup: (u32, u32),
+    #[command(flatten)]
+    device: DeviceArgs,
+}
+
+fn parse_threads(s: &str) -> Result<usize, String> {
+    parse_count(s, 1, 1024, "the number of threads").map(|n| n as usize)
+}
+
 #[derive(Clone, Copy, ValueEnum)]
 enum MethodArg {
     /// Local-memory stack, one ray per invocation (thesis 4.3.2).
@@ -86,6 +112,7 @@ fn main() -> ExitCode {
     tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
+        Command::Eval(e) => eval(&e),
         Command::Render { args, method, workgroup, device } => render(&args, method, workgroup, &device),
     })
 }
@@ -220,5 +247,33 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
     let methods: Vec<&str> = b.methods.iter().map(|&m| method_of(m).name()).collect();
     let bench = VkBench { gpu: open(&b.device)?, workgroup: b.workgroup };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;
+    Ok(())
+}
+
+/// Method names as the evaluation lists them; "none" leaves the tracer out.
+fn method_list(names: &[String]) -> Vec<String> {
+    names.iter().filter(|m| m.as_str() != "none").cloned().collect()
+}
+
+fn eval(e: &EvalCommand) -> Result<(), String> {
+    let a = &e.eval;
+    let cpu = CpuBench { pool: thread_pool(e.threads)? };
+    let gpu = VkBench { gpu: open(&e.device)?, workgroup: e.workgroup };
+    let reference = FastCpuStandIn { pool: thread_pool(e.threads)? };
+    let cpu = tools::eval::Tracer {
+        bench: &cpu,
+        methods: method_list(&a.cpu_methods),
+        exact_method: |_| None,
+        frames: a.frames.unwrap_or(3),
+        warmup: a.warmup.unwrap_or(1),
+    };
+    let gpu = tools::eval::Tracer {
+        bench: &gpu,
+        methods: method_list(&a.gpu_methods),
+        exact_method: |_| None,
+        frames: a.frames.unwrap_or(20),
+        warmup: a.warmup.unwrap_or(3),
+    };
+    tools::eval::run(a, &reference, &cpu, &gpu)?;
     Ok(())
 }
