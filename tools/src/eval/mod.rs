@@ -139,19 +139,13 @@ fn parse_on_off(s: &str) -> Result<bool, String> {
 }
 
 /// One point of the settings axes.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Variant {
     pub accuracy: Accuracy,
     /// `None`: the scene's.
     pub indirections: Option<u32>,
     /// GPU only: no contracted multiply-adds.
     pub exact: bool,
-}
-
-impl Default for Variant {
-    fn default() -> Self {
-        Variant { accuracy: Accuracy::default(), indirections: None, exact: false }
-    }
 }
 
 impl Variant {
