@@ -36,11 +36,11 @@ pub struct MatrixArgs {
     pub csv: PathBuf,
 }
 
-fn parse_frames(s: &str) -> Result<usize, String> {
+pub fn parse_frames(s: &str) -> Result<usize, String> {
     parse_count(s, 1, 100_000, "the number of frames").map(|n| n as usize)
 }
 
-fn parse_warmup(s: &str) -> Result<usize, String> {
+pub fn parse_warmup(s: &str) -> Result<usize, String> {
     parse_count(s, 0, 100_000, "the number of warm-up frames").map(|n| n as usize)
 }
 
@@ -174,7 +174,7 @@ impl Row {
 }
 
 /// Commas would split a field: names keep their words, joined by semicolons instead.
-fn field(s: &str) -> String {
+pub fn field(s: &str) -> String {
     s.replace(',', ";")
 }
 

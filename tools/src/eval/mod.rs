@@ -8,7 +8,7 @@ pub mod chart;
 pub mod reference;
 pub mod report;
 
-use crate::bench::{Bench, BenchMode, measure, parse_mode};
+use crate::bench::{Bench, BenchMode, measure, parse_frames, parse_mode, parse_warmup};
 use crate::render_args::{lights_n, parse_count, parse_res, stored_camera};
 use bvh_format::SceneFile;
 use reference::{Cache, Reference};
@@ -75,14 +75,6 @@ pub struct EvalArgs {
     /// Folder of cached references [default: OUT/reference-cache].
     #[arg(long)]
     pub cache: Option<PathBuf>,
-}
-
-fn parse_frames(s: &str) -> Result<usize, String> {
-    parse_count(s, 1, 100_000, "the number of frames").map(|n| n as usize)
-}
-
-fn parse_warmup(s: &str) -> Result<usize, String> {
-    parse_count(s, 0, 100_000, "the number of warm-up frames").map(|n| n as usize)
 }
 
 pub fn parse_intersect(s: &str) -> Result<Intersect, String> {

@@ -3,7 +3,7 @@
 //! fastest setting within FLIP 0.01, the cost of watertightness, the cost of bit-exactness).
 
 use super::{Variant, intersect_name, offset_name};
-use crate::bench::significant;
+use crate::bench::{field, significant};
 use crate::output::{self, Kind};
 use render_metrics::{HitErrors, ImageErrors, ShadingShifts};
 use render_spec::{Mode, Settings};
@@ -102,11 +102,6 @@ impl Row {
             sh.lighter,
         )
     }
-}
-
-/// Commas would split a field: names keep their words, joined by semicolons instead.
-fn field(s: &str) -> String {
-    s.replace(',', ";")
 }
 
 /// The rows not beaten by another in both time and FLIP mean (no other is at least as fast and
