@@ -230,6 +230,15 @@ pub struct Tracer<'b, B: Bench> {
     pub warmup: usize,
 }
 
+impl<B: Bench> Tracer<'_, B> {
+    /// How many settings of `variants` this tracer measures per frame: exact variants only
+    /// where it has an exact form.
+    fn settings(&self, variants: &[Variant]) -> usize {
+        let exact = |m: &String| variants.iter().filter(|v| !v.exact || (self.exact_method)(m).is_some()).count();
+        self.methods.iter().map(exact).sum()
+    }
+}
+
 /// One frame of the matrix with its references.
 struct Frame {
     camera: String,
@@ -257,9 +266,7 @@ pub fn run<C: Bench, G: Bench>(
     let scenes: Vec<Option<PathBuf>> =
         if args.scenes.is_empty() { vec![None] } else { args.scenes.iter().cloned().map(Some).collect() };
     let frames_per_scene = args.cameras.len() * args.res.len() * args.modes.len();
-    let cpu_settings = cpu.methods.len() * variants.iter().filter(|v| !v.exact).count();
-    let gpu_settings = gpu.methods.len() * variants.len();
-    let steps = scenes.len() * frames_per_scene * (2 + cpu_settings + gpu_settings);
+    let steps = scenes.len() * frames_per_scene * (2 + cpu.settings(&variants) + gpu.settings(&variants));
     let bar = crate::cli::Progress::new(steps as u64, "{bar:40} {pos}/{len} renders ({elapsed}, {eta} left) {msg}", false);
     let mut rows = Vec::new();
     for path in &scenes {
