@@ -93,8 +93,9 @@ fn plot<DB: DrawingBackend>(
     series.dedup();
     for (k, (name, gpu)) in series.iter().enumerate() {
         let colour = COLOURS[k % COLOURS.len()];
-        let points: Vec<(f64, f64, String)> =
+        let mut points: Vec<(f64, f64, String)> =
             rows.iter().filter(|r| r.series() == *name).map(|r| (r.median_ms, flip(r), r.setting.clone())).collect();
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
         let style = colour.filled();
         let drawn = if *gpu {
             chart.draw_series(points.iter().map(|(x, y, _)| TriangleMarker::new((*x, *y), 7, style)))
@@ -106,10 +107,12 @@ fn plot<DB: DrawingBackend>(
             .label(name.clone())
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], colour.filled()));
         chart
-            .draw_series(points.iter().map(|(x, y, label)| {
-                // Beside the marker, up and to the right, so that the marker stays visible.
+            .draw_series(points.iter().enumerate().map(|(i, (x, y, label))| {
+                // Beside the marker, up and to the right, staggered over three heights so that the
+                // labels of neighbouring markers do not overwrite each other.
+                let dy = -16 - 13 * (i as i32 % 3);
                 EmptyElement::at((*x, *y))
-                    + Text::new(label.clone(), (9, -14), ("sans-serif", 13).into_font().color(&colour.mix(0.95)))
+                    + Text::new(label.clone(), (6, dy), ("sans-serif", 13).into_font().color(&colour.mix(0.95)))
             }))
             .map_err(err)?;
     }
