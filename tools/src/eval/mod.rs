@@ -267,7 +267,8 @@ pub fn run<C: Bench, G: Bench>(
         if args.scenes.is_empty() { vec![None] } else { args.scenes.iter().cloned().map(Some).collect() };
     let frames_per_scene = args.cameras.len() * args.res.len() * args.modes.len();
     let steps = scenes.len() * frames_per_scene * (2 + cpu.settings(&variants) + gpu.settings(&variants));
-    let bar = crate::cli::Progress::new(steps as u64, "{bar:40} {pos}/{len} renders ({elapsed}, {eta} left) {msg}", false);
+    let bar =
+        crate::cli::Progress::new(steps as u64, "{bar:40} {pos}/{len} renders ({elapsed}, {eta} left) {msg}", false);
     let mut rows = Vec::new();
     for path in &scenes {
         let name = path
@@ -311,16 +312,15 @@ pub fn run<C: Bench, G: Bench>(
     bar.finish();
     cpu.bench.finish()?;
     gpu.bench.finish()?;
-    let devices = [(cpu.bench.tracer(), cpu.bench.device(), cpu.bench.timing(), cpu.frames, cpu.warmup), (
-        gpu.bench.tracer(),
-        gpu.bench.device(),
-        gpu.bench.timing(),
-        gpu.frames,
-        gpu.warmup,
-    )];
+    let devices = [
+        (cpu.bench.tracer(), cpu.bench.device(), cpu.bench.timing(), cpu.frames, cpu.warmup),
+        (gpu.bench.tracer(), gpu.bench.device(), gpu.bench.timing(), gpu.frames, gpu.warmup),
+    ];
     let preface: Vec<String> = devices
         .iter()
-        .map(|(t, d, timing, f, w)| format!("`{t}`: {d}; {f} timed frames per setting after {w} warm-up frames; {timing}."))
+        .map(|(t, d, timing, f, w)| {
+            format!("`{t}`: {d}; {f} timed frames per setting after {w} warm-up frames; {timing}.")
+        })
         .chain([format!(
             "Reference: {}, {} samples per pixel, every bounce up to the scene's indirections (cutoff 0); hit errors \
              against its one-sample render.",
@@ -443,7 +443,8 @@ mod tests {
 
     #[test]
     fn each_value_is_tried_alone_unless_every_combination_is_asked_for() {
-        let a = args(&["--intersect", "watertight,mt", "--offset", "scale,1e-3", "--spp", "1,4", "--cutoff", "default"]);
+        let a =
+            args(&["--intersect", "watertight,mt", "--offset", "scale,1e-3", "--spp", "1,4", "--cutoff", "default"]);
         let labels: Vec<String> = variants(&a).iter().map(Variant::label).collect();
         assert_eq!(labels, ["default", "mt", "offset 1e-3", "spp 4"]);
         let full = args(&["--intersect", "watertight,mt", "--offset", "scale,1e-3", "--spp", "1,4", "--full"]);

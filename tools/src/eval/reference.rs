@@ -83,7 +83,8 @@ const MAGIC: &[u8; 8] = b"EVALREF1";
 impl Cache {
     /// The cache in `dir`, created if missing.
     pub fn new(dir: &Path) -> Result<Cache, String> {
-        std::fs::create_dir_all(dir).map_err(|e| format!("cannot create the reference cache {}: {e}", dir.display()))?;
+        std::fs::create_dir_all(dir)
+            .map_err(|e| format!("cannot create the reference cache {}: {e}", dir.display()))?;
         Ok(Cache { dir: dir.to_owned() })
     }
 
@@ -179,9 +180,18 @@ mod tests {
 
     #[test]
     fn cache_files_round_trip_and_damaged_ones_are_refused() {
-        let aov = Aovs { prim: vec![1, 2, 3, 4, 5, u32::MAX], t: vec![0.5, 1.0, 2.0, 3.0, 4.0, f32::INFINITY], ..Default::default() };
-        let image =
-            Image { width: 3, height: 2, rgb: (0..6).map(|i| [i, 2 * i, 3 * i]).collect(), aov: Some(aov), rays: RayCounts::default() };
+        let aov = Aovs {
+            prim: vec![1, 2, 3, 4, 5, u32::MAX],
+            t: vec![0.5, 1.0, 2.0, 3.0, 4.0, f32::INFINITY],
+            ..Default::default()
+        };
+        let image = Image {
+            width: 3,
+            height: 2,
+            rgb: (0..6).map(|i| [i, 2 * i, 3 * i]).collect(),
+            aov: Some(aov),
+            rays: RayCounts::default(),
+        };
         let bytes = encode(&image);
         let back = decode(&bytes, &settings(true)).unwrap();
         assert_eq!((back.rgb, back.aov), (image.rgb.clone(), image.aov.clone()));

@@ -193,7 +193,8 @@ fn table_row(r: &Row) -> String {
 /// The chart's file name (without extension) of a frame.
 pub fn chart_stem(frame: &(String, String, u32, u32, String)) -> String {
     let (scene, camera, w, h, mode) = frame;
-    let clean = |s: &str| s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect::<String>();
+    let clean =
+        |s: &str| s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect::<String>();
     format!("{}-{}-{w}x{h}-{}", clean(scene), clean(camera), clean(mode))
 }
 
@@ -331,7 +332,10 @@ mod tests {
         let refs: Vec<&Row> = rows.iter().collect();
         let lines = derived_lines(&refs);
         assert!(lines[0].contains("**spp 4** (40.0 ms, FLIP 0.00800)"), "{lines:?}");
-        assert!(lines[1].contains("1.25x the time of Möller-Trumbore") && lines[1].contains("leaks 0 against 3"), "{lines:?}");
+        assert!(
+            lines[1].contains("1.25x the time of Möller-Trumbore") && lines[1].contains("leaks 0 against 3"),
+            "{lines:?}"
+        );
         let csv = rows[0].csv();
         assert_eq!(csv.split(',').count(), CSV_HEADER.split(',').count(), "{csv}");
         assert!(csv.contains("d; e"));
