@@ -151,6 +151,8 @@ impl<'a> Bvh<'a> {
         false
     }
 
+    /// Ordered walk of the child-pair layout: both children are tested and pushed, the farther
+    /// first, so the nearer is taken next; a popped box entered beyond the best hit is skipped.
     fn child_pair<const ANY: bool>(
         &self,
         nodes: &[Node],
@@ -162,47 +164,26 @@ impl<'a> Bvh<'a> {
     ) {
         stack.clear();
         cost.nodes += 1;
-        if slab(&nodes[0], ray, best.t).is_none() {
-            return;
-        }
-        let mut current = 0u32;
-        loop {
-            let node = &nodes[current as usize];
+        stack.extend(slab(&nodes[0], ray, best.t).map(|near| (0, near)));
+        while let Some((n, near)) = stack.pop() {
+            if !may_hold(near, best.t) {
+                continue;
+            }
+            let node = &nodes[n as usize];
             if node.is_leaf() {
                 if self.leaf::<ANY>(node, ray, t_min, best, cost) {
                     return;
                 }
-            } else {
-                let (l, r) = (node.index, node.index + 1);
-                cost.nodes += 2;
-                match (slab(&nodes[l as usize], ray, best.t), slab(&nodes[r as usize], ray, best.t)) {
-                    (Some(a), Some(b)) => {
-                        let (near, far, t_far) = if b < a { (r, l, a) } else { (l, r, b) };
-                        stack.push((far, t_far));
-                        current = near;
-                        continue;
-                    }
-                    (Some(_), None) => {
-                        current = l;
-                        continue;
-                    }
-                    (None, Some(_)) => {
-                        current = r;
-                        continue;
-                    }
-                    (None, None) => {}
-                }
+                continue;
             }
-            loop {
-                match stack.pop() {
-                    None => return,
-                    Some((n, t)) if may_hold(t, best.t) => {
-                        current = n;
-                        break;
-                    }
-                    Some(_) => {}
-                }
-            }
+            cost.nodes += 2;
+            let children = [node.index, node.index + 1].map(|c| slab(&nodes[c as usize], ray, best.t).map(|t| (c, t)));
+            let [a, b] = match children {
+                [Some(l), Some(r)] if r.1 < l.1 => [Some(l), Some(r)],
+                [l, r] => [r, l],
+            };
+            stack.extend(a);
+            stack.extend(b);
         }
     }
 
