@@ -27,6 +27,7 @@ fn the_reference_writes_the_librarys_image() {
         lights: room.lights.clone(),
         max_indirections: room.settings.max_indirections,
         aovs: false,
+        accuracy: render_spec::Accuracy::default(),
     };
     let exact = tracer_cpu::reference::render(&room, &settings).unwrap();
     assert_eq!(png.pixels().map(|p| p.0).collect::<Vec<_>>(), exact.image.rgb);

@@ -8,7 +8,7 @@ use bvh_format::SceneFile;
 use common::Rng;
 use glam::DVec3;
 use rayon::prelude::*;
-use render_spec::{CameraSpec, Image, Mode, Settings};
+use render_spec::{Accuracy, CameraSpec, Image, Mode, Settings};
 use tracer_cpu::reference::bvh::{Ray64, Stack};
 use tracer_cpu::reference::{self, Bvh, closest_hit};
 use tracer_cpu::{Cost, Method, Tracer};
@@ -96,6 +96,7 @@ fn settings(scene: &SceneFile, width: u32, height: u32, mode: Mode) -> Settings 
         lights: scene.lights.clone(),
         max_indirections: scene.settings.max_indirections,
         aovs: false,
+        accuracy: Accuracy::default(),
     }
 }
 
@@ -158,4 +159,42 @@ fn reference_images_agree_with_fast_ones_and_a_shading_change_shows() {
         let any = differing(&fast, &reference::render(&wrong, &s).unwrap().image, 0);
         assert!(any > ANY_DIFFERENCE * 3, "{mode:?}: a changed material moved only {any} pixels");
     }
+}
+
+/// `n x n` samples per pixel are the mean of the samples: the reference at `n W x n H` with one
+/// sample per pixel shoots exactly the rays of `W x H` with `n x n` (for n a power of two every
+/// sample position and camera step is exact, so the directions agree bit for bit), and averaging
+/// its `n x n` blocks gives the supersampled image up to the f32 rounding of the linear colours.
+#[test]
+fn samples_per_pixel_average_the_sub_pixel_rays() {
+    let room = common::compile(&common::scenes_dir().join("room.toml"));
+    let (w, h) = (40u32, 30u32);
+    let one = reference::render(&room, &settings(&room, w, h, Mode::Whitted)).unwrap();
+    for n in [2u32, 4] {
+        let spp = n * n;
+        let s = Settings { accuracy: Accuracy { spp, ..Accuracy::default() }, ..settings(&room, w, h, Mode::Whitted) };
+        let many = reference::render(&room, &s).unwrap();
+        assert_eq!(many.image.rays.primary, u64::from(w * h * spp));
+        let fine = reference::render(&room, &settings(&room, w * n, h * n, Mode::Whitted)).unwrap();
+        let mut worst = 0.0f32;
+        for y in 0..h {
+            for x in 0..w {
+                let mut sum = glam::Vec3::ZERO;
+                for j in 0..n {
+                    for i in 0..n {
+                        sum += glam::Vec3::from(fine.linear[((y * n + j) * w * n + x * n + i) as usize]);
+                    }
+                }
+                let got = glam::Vec3::from(many.linear[(y * w + x) as usize]);
+                worst = worst.max((got - sum / spp as f32).abs().max_element());
+            }
+        }
+        assert!(worst <= 1e-6, "{spp} samples: a pixel is {worst} away from the mean of its sub-pixel rays");
+        // Supersampling changes the edges, not the flat regions: the check above is not trivial.
+        let changed = differing(&one.image, &many.image, 1);
+        let pixels = (w * h) as usize;
+        assert!(changed > pixels / 50 && changed < pixels / 2, "{spp} samples changed {changed} of {pixels} pixels");
+    }
+    let bad = Settings { accuracy: Accuracy { spp: 3, ..Accuracy::default() }, ..settings(&room, w, h, Mode::Whitted) };
+    assert!(matches!(reference::render(&room, &bad), Err(render_spec::RenderError::SamplesPerPixel(3))));
 }

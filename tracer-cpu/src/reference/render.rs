@@ -10,6 +10,8 @@
 //! - Origins of shadow and secondary rays: the scale-aware offset of Wächter and Binder in f64
 //!   units in the last place ([`offset_origin`]).
 //! - Every secondary ray up to the indirection limit is traced: no adaptive stop.
+//! - Of the settings' [`render_spec::Accuracy`], only the samples per pixel count: the reference
+//!   always takes the edge-consistent triangle test, its own offset and no cutoff.
 //! - A pixel's colour is the mean of its samples' linear colours; the 8-bit image quantises that
 //!   mean as the fast tracers do (clamp to [0, 1], scale by 255, round to nearest).
 
@@ -19,6 +21,7 @@ use crate::geometry::Cost;
 use bvh_format::{Material, SceneFile};
 use glam::DVec3;
 use rayon::prelude::*;
+use render_spec::accuracy::sample_positions;
 use render_spec::{Aovs, Image, Mode, NO_TRIANGLE, RayCounts, RenderError, Settings};
 
 /// A reference render: the 8-bit image every tracer writes, and the linear colours it was
@@ -84,9 +87,10 @@ pub fn render_with_progress(
 }
 
 /// The sub-pixel positions of a pixel's samples in `[0, 1)^2`, in the order they are summed: the
-/// positions both fast tracers take, widened to f64.
-pub fn sample_offsets(_settings: &Settings) -> Vec<(f64, f64)> {
-    vec![(0.5, 0.5)]
+/// positions both fast tracers take ([`render_spec::accuracy::sample_positions`] of the settings'
+/// samples per pixel), widened to f64.
+pub fn sample_offsets(settings: &Settings) -> Vec<(f64, f64)> {
+    sample_positions(settings.accuracy.spp).map(|(x, y)| (f64::from(x), f64::from(y))).collect()
 }
 
 /// Linear radiance to 8 bits as the fast tracers quantise it: clamp to [0, 1], scale by 255, round
