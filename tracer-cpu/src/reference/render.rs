@@ -51,16 +51,21 @@ pub fn render_with_progress(
     settings: &Settings,
     progress: &(dyn Fn(u32) + Sync),
 ) -> Result<ReferenceImage, RenderError> {
+    // Bands of rows in parallel, each written out before the next: the pixels' records (about 100
+    // bytes each) are held for one band, not for a whole image of up to 2^28 pixels.
+    let band_rows = (BAND_PIXELS / settings.width.max(1) as usize).max(16);
+    render_in_bands(scene, settings, progress, band_rows)
+}
+
+/// [`render_with_progress`] in bands of `band_rows` rows.
+fn render_in_bands(
+    scene: &SceneFile,
+    settings: &Settings,
+    progress: &(dyn Fn(u32) + Sync),
+    band_rows: usize,
+) -> Result<ReferenceImage, RenderError> {
     let shading = Shading::new(scene, settings)?;
     let (w, h) = (settings.width as usize, settings.height as usize);
-    let rows: Vec<Vec<Pixel>> = (0..settings.height)
-        .into_par_iter()
-        .map_init(Stack::new, |stack, y| {
-            let row = (0..settings.width).map(|x| shading.pixel(x, y, stack)).collect();
-            progress(1);
-            row
-        })
-        .collect();
     let mut rgb = Vec::with_capacity(w * h);
     let mut linear = Vec::with_capacity(w * h);
     let mut aov = settings.aovs.then(|| Aovs {
@@ -71,20 +76,33 @@ pub fn render_with_progress(
         tris: Vec::with_capacity(w * h),
     });
     let mut rays = RayCounts::default();
-    for p in rows.iter().flatten() {
-        rgb.push(to_u8(p.colour));
-        linear.push(p.colour.as_vec3().to_array());
-        rays = rays + p.rays;
-        if let Some(a) = &mut aov {
-            a.t.push(p.t as f32);
-            a.normal.push(p.normal.as_vec3().to_array());
-            a.prim.push(p.prim);
-            a.nodes.push(p.cost.nodes);
-            a.tris.push(p.cost.tris);
+    for y0 in (0..h).step_by(band_rows) {
+        let rows: Vec<Vec<Pixel>> = (y0..(y0 + band_rows).min(h))
+            .into_par_iter()
+            .map_init(Stack::new, |stack, y| {
+                let row = (0..settings.width).map(|x| shading.pixel(x, y as u32, stack)).collect();
+                progress(1);
+                row
+            })
+            .collect();
+        for p in rows.iter().flatten() {
+            rgb.push(to_u8(p.colour));
+            linear.push(p.colour.as_vec3().to_array());
+            rays = rays + p.rays;
+            if let Some(a) = &mut aov {
+                a.t.push(p.t as f32);
+                a.normal.push(p.normal.as_vec3().to_array());
+                a.prim.push(p.prim);
+                a.nodes.push(p.cost.nodes);
+                a.tris.push(p.cost.tris);
+            }
         }
     }
     Ok(ReferenceImage { image: Image { width: settings.width, height: settings.height, rgb, aov, rays }, linear })
 }
+
+/// Pixels of one band of rows rendered in parallel (a 640-pixel-wide image is one band).
+const BAND_PIXELS: usize = 1 << 18;
 
 /// The sub-pixel positions of a pixel's samples in `[0, 1)^2`, in the order they are summed: the
 /// positions both fast tracers take ([`render_spec::accuracy::sample_positions`] of the settings'
@@ -365,6 +383,33 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn bands_do_not_change_the_image() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/room.toml");
+        let scene = bvh_build::import::load(&path, &Default::default()).unwrap();
+        let scene = bvh_build::compile(&scene, &Default::default(), Default::default()).unwrap();
+        let settings = Settings {
+            width: 23,
+            height: 17,
+            camera: render_spec::CameraSpec::from(&scene.cameras[0]),
+            mode: Mode::Whitted,
+            lights: scene.lights.clone(),
+            max_indirections: scene.settings.max_indirections,
+            aovs: true,
+            accuracy: render_spec::Accuracy { spp: 4, ..Default::default() },
+        };
+        let rows = std::sync::atomic::AtomicU32::new(0);
+        let count = |n: u32| {
+            rows.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+        };
+        let one = render_in_bands(&scene, &settings, &count, 1000).unwrap();
+        let many = render_in_bands(&scene, &settings, &count, 5).unwrap();
+        assert_eq!(rows.into_inner(), 2 * 17, "progress counts every row once");
+        assert_eq!((&one.image.rgb, &one.linear, &one.image.aov), (&many.image.rgb, &many.linear, &many.image.aov));
+        assert_eq!(one.image.rays, many.image.rays);
+        assert_eq!(one.image.rays.primary, 23 * 17 * 4);
     }
 
     #[test]
