@@ -129,6 +129,13 @@ fn make_ray(o: vec3<f32>, d: vec3<f32>) -> Ray {
     return Ray(o, d, vec3<f32>(1.0) / d);
 }
 
+// The unit vector in the CPU's operation order (tracer-cpu's V3::normalize): one division, then
+// three products. WGSL's normalize() leaves the order to the driver (lavapipe's differs in the
+// last bit for a third of the inputs: tests/tests/wgsl_functions.rs).
+fn unit(v: vec3<f32>) -> vec3<f32> {
+    return v * (1.0 / length(v));
+}
+
 fn is_nan(x: f32) -> bool {
     // Bit test: comparisons with themselves may be folded away by a driver's compiler.
     return (bitcast<u32>(x) & 0x7fffffffu) > 0x7f800000u;
@@ -250,7 +257,7 @@ fn surface_at(r: Ray, h: HitRec) -> Surface {
     let len = length(raw);
     var ng = -r.d;
     if len > 0.0 && len <= F32_MAX {
-        ng = raw / len;
+        ng = raw * (1.0 / len);
     }
     let front = dot(r.d, ng) < 0.0;
     let geometric = select(-ng, ng, front);
@@ -264,7 +271,7 @@ fn surface_at(r: Ray, h: HitRec) -> Surface {
         let interp = (1.0 - h.u - h.v) * n0 + h.u * n1 + h.v * n2;
         let il = length(interp);
         if il > 0.0 && il <= F32_MAX {
-            shading = interp / il;
+            shading = interp * (1.0 / il);
             if dot(shading, geometric) < 0.0 {
                 shading = -shading;
             }
@@ -282,6 +289,73 @@ fn reflect_dir(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
     return d - 2.0 * dot(d, n) * n;
 }
 
+// Refraction of the unit d through a surface with unit normal n facing the incoming ray, for the
+// ratio eta of the indices (incoming side over far side); w = 0 on total internal reflection.
+fn refract_dir(d: vec3<f32>, n: vec3<f32>, eta: f32) -> vec4<f32> {
+    let cos_i = -dot(d, n);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if k < 0.0 {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(unit(eta * d + (eta * cos_i - sqrt(k)) * n), 1.0);
+}
+
+// render_spec::power::phong_pow, operation for operation (see there why pow() is not used).
+fn phong_pow(x_in: f32, n: f32) -> f32 {
+    if !(x_in > 0.0) {
+        return 0.0;
+    }
+    var x = x_in;
+    var e = 0i;
+    if x < 1.17549435e-38f {
+        x *= 18446744073709551616.0f;
+        e = -64i;
+    }
+    let bits = bitcast<u32>(x);
+    e += i32(bits >> 23u) - 127i;
+    var m = bitcast<f32>((bits & 0x007fffffu) | 0x3f800000u);
+    if m > 1.4142135f {
+        m *= 0.5;
+        e += 1i;
+    }
+    let t = m - 1.0;
+    var p = POW_LOG2_8;
+    p = p * t + POW_LOG2_7;
+    p = p * t + POW_LOG2_6;
+    p = p * t + POW_LOG2_5;
+    p = p * t + POW_LOG2_4;
+    p = p * t + POW_LOG2_3;
+    p = p * t + POW_LOG2_2;
+    p = p * t + POW_LOG2_1;
+    p = p * t + POW_LOG2_0;
+    let y = n * (t * p + f32(e));
+    if y == 0.0 {
+        return 1.0;
+    }
+    if y < -150.0 {
+        return 0.0;
+    }
+    if y > 128.0 {
+        return bitcast<f32>(0x7f800000u);
+    }
+    let fi = floor(y + 0.5);
+    let f = y - fi;
+    var q = POW_EXP2_6;
+    q = q * f + POW_EXP2_5;
+    q = q * f + POW_EXP2_4;
+    q = q * f + POW_EXP2_3;
+    q = q * f + POW_EXP2_2;
+    q = q * f + POW_EXP2_1;
+    q = q * f + POW_EXP2_0;
+    var a = i32(fi);
+    var b = 0i;
+    if a < -126i {
+        a += 64i;
+        b = -64i;
+    }
+    return q * bitcast<f32>(u32(a + 127i) << 23u) * bitcast<f32>(u32(b + 127i) << 23u);
+}
+
 // kd cos(theta) + ks cos(phi)^n for a light in direction l; zero when the light is behind.
 fn phong(m: Material, s: Surface, d: vec3<f32>, l: vec3<f32>) -> vec3<f32> {
     let cos_t = dot(s.shading, l);
@@ -292,7 +366,7 @@ fn phong(m: Material, s: Surface, d: vec3<f32>, l: vec3<f32>) -> vec3<f32> {
     let cos_p = max(dot(r, -d), 0.0);
     var spec = 1.0;
     if m.kd_n.w > 0.0 {
-        spec = pow(cos_p, m.kd_n.w);
+        spec = phong_pow(cos_p, m.kd_n.w);
     }
     return m.kd_n.xyz * cos_t + m.ks_kr.xyz * spec;
 }
@@ -316,5 +390,5 @@ fn to_rgba8(c: vec3<f32>) -> u32 {
 }
 
 fn primary_dir(x: u32, y: u32) -> vec3<f32> {
-    return normalize(frame.top_left.xyz + (f32(x) + 0.5) * frame.h_step.xyz + (f32(y) + 0.5) * frame.v_step.xyz);
+    return unit(frame.top_left.xyz + (f32(x) + 0.5) * frame.h_step.xyz + (f32(y) + 0.5) * frame.v_step.xyz);
 }
