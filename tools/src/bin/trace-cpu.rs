@@ -28,6 +28,11 @@ enum Command {
         /// file compiled with only the escape-pointer layout.
         #[arg(long, value_enum, default_value = "auto")]
         method: MethodArg,
+        /// Render the exact reference instead: f64 arithmetic throughout, every bounce up to the
+        /// indirection limit (no adaptive stop); the ground truth other images are measured
+        /// against, several times slower than a fast render.
+        #[arg(long, conflicts_with = "method")]
+        reference: bool,
         /// Worker threads, 1 to 1024 [default: all cores].
         #[arg(long, value_parser = parse_threads, allow_hyphen_values = true)]
         threads: Option<usize>,
@@ -76,23 +81,29 @@ fn parse_threads(s: &str) -> Result<usize, String> {
 fn main() -> ExitCode {
     let command = tools::cli::parse::<Cli>().command;
     tools::cli::run(|| match command {
-        Command::Render { args, method, threads } => render(&args, method, threads),
+        Command::Render { args, method, reference, threads } => render(&args, method, reference, threads),
         Command::Bench(b) => bench(&b),
     })
 }
 
-fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Result<(), String> {
+fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option<usize>) -> Result<(), String> {
     let outputs = args.check()?;
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
     let method = method.method();
     let pool = thread_pool(threads)?;
-    let tracer = Tracer::new(scene);
     let bar = Progress::new(settings.height as u64, "{bar:40} {pos}/{len} rows ({elapsed}, {eta} left)", false);
     let t0 = Instant::now();
+    let progress = |rows: u32| bar.inc(rows as u64);
     let image = pool
-        .install(|| tracer_cpu::render_with_progress(&tracer, &settings, method, &|rows| bar.inc(rows as u64)))
+        .install(|| {
+            if reference {
+                tracer_cpu::reference::render_with_progress(scene, &settings, &progress).map(|r| r.image)
+            } else {
+                tracer_cpu::render_with_progress(&Tracer::new(scene), &settings, method, &progress)
+            }
+        })
         .map_err(|e| e.to_string())?;
     let seconds = t0.elapsed().as_secs_f64();
     bar.finish();
@@ -102,12 +113,12 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     let mut lines = Vec::new();
     let r = image.rays;
     lines.push(format!(
-        "{}x{} {:?} with {:?} on {} threads: {} to trace and shade into the 8-bit image{}{}, rays: {} primary, \
+        "{}x{} {:?} with {} on {} threads: {} to trace and shade into the 8-bit image{}{}, rays: {} primary, \
          {} shadow, {} secondary ({}) -> {}",
         image.width,
         image.height,
         settings.mode,
-        method.resolve(scene),
+        if reference { "the f64 reference".to_owned() } else { format!("{:?}", method.resolve(scene)) },
         pool.current_num_threads(),
         duration(seconds),
         if settings.aovs { " and the AOVs" } else { "" },
