@@ -233,4 +233,51 @@ mod tests {
         gpu.pipeline(&out, 1, kernels::PASS_BYTES, "plain").expect("the pipeline is made");
         assert!(gpu.validation_messages().is_empty(), "{:#?}", gpu.validation_messages());
     }
+
+    /// On the device: `a * b + c` of the exact kernel equals the CPU's two roundings on every
+    /// input, including those where a fused multiply-add rounds differently.
+    #[test]
+    fn the_device_rounds_the_exact_kernel_as_the_cpu() {
+        const N: usize = 4096;
+        let src = "@group(0) @binding(0) var<storage, read_write> v: array<vec4<f32>>;\n\
+                   @compute @workgroup_size(64) fn main(@builtin(global_invocation_id) id: vec3<u32>) {\n\
+                   let x = v[id.x]; v[id.x].w = x.x * x.y + x.z; }";
+        // Products that need more than 24 bits, offset by about their own size: where a fused
+        // multiply-add keeps the low bits the product's rounding drops.
+        let mut seed = 0x9e37_79b9_u32;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            1.0 + (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let input: Vec<[f32; 4]> = (0..N)
+            .map(|_| {
+                let (a, b) = (next(), next());
+                [a, b, -(a * b) * next().fract().max(0.5), 0.0]
+            })
+            .collect();
+        let fused = input.iter().filter(|x| x[0].mul_add(x[1], x[2]) != x[0] * x[1] + x[2]).count();
+        assert!(fused > N / 4, "the inputs must tell fused from unfused ({fused} of {N} do)");
+        let gpu = gpu();
+        let words = crate::shader::translate(src, "mad", &[]).unwrap();
+        let mut differ = [0; 2];
+        for (k, exact) in [false, true].into_iter().enumerate() {
+            let words = if exact { forbid_contraction(&words, "mad").unwrap() } else { words.clone() };
+            let p = gpu.pipeline(&words, 1, kernels::PASS_BYTES, "mad").unwrap();
+            let buf = gpu.create_buffer_with(&input, "mad").unwrap();
+            gpu.run(|rec| rec.dispatch(&p, &[&buf], &[0; kernels::PASS_BYTES as usize], [(N / 64) as u32, 1, 1]))
+                .unwrap();
+            let out: Vec<[f32; 4]> = gpu.download_as(&buf).unwrap();
+            differ[k] = out.iter().zip(&input).filter(|(o, x)| o[3].to_bits() != (x[0] * x[1] + x[2]).to_bits()).count();
+        }
+        println!(
+            "{}: a * b + c differs from the CPU's on {} of {N} inputs without NoContraction, {} with (a fused multiply-add would differ on {fused})",
+            gpu.info().name,
+            differ[0],
+            differ[1]
+        );
+        assert_eq!(differ[1], 0, "the exact kernel rounds as the CPU does");
+        assert!(gpu.validation_messages().is_empty(), "{:#?}", gpu.validation_messages());
+    }
 }
