@@ -9,6 +9,8 @@
 #   .bin/image_diff                            cargo build --release -p tools --example image_diff
 #   .bin/tracer-vk-tests (optional)            the binary `cargo test --release -p tracer-vk --lib
 #                                              --no-run` names (target/release/deps/tracer_vk-*)
+#   .bin/wgsl-functions-tests (optional)       the binary `cargo test --release -p tests --test
+#                                              wgsl_functions --no-run` names
 # and, where .gl/ holds the Vulkan loader packages of /work/shared/device.md, unpacks them first.
 # Writes $OUT (default out/h100-exact): summary.md (read this), log.txt, bench.tgz (the CSV and
 # Markdown tables) and differing.tgz (the images of every comparison that differs under --exact).
@@ -37,6 +39,8 @@ if [ -d .gl ] && [ -z "${VK_DRIVER_FILES:-}" ]; then
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
   export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+  # The validation layer the test binaries turn on, used on their command lines only.
+  if [ -d .gl/tools ]; then mkdir -p /tmp/vt; for f in .gl/tools/*.deb; do dpkg -x "$f" /tmp/vt; done; fi
 fi
 
 # Every shipped scene, compiled once; "default" is the built-in bunny (no scene argument).
@@ -112,24 +116,29 @@ done
   echo
 } >>"$OUT/summary.md"
 
-# The pass's own device test: a * b + c with and without NoContraction on inputs where a fused
-# multiply-add rounds differently (tracer-vk/src/no_contraction.rs).
-if [ -x "$BIN/tracer-vk-tests" ]; then
-  log "tracer-vk no_contraction tests"
+# The pass's own device tests: a * b + c with and without NoContraction on inputs where a fused
+# multiply-add rounds differently (tracer-vk/src/no_contraction.rs), and every shared WGSL function
+# against its Rust twin, bit for bit, without and with the pass (tests/tests/wgsl_functions.rs).
+with_layer() {
+  if [ -d /tmp/vt ]; then
+    env LD_LIBRARY_PATH=/tmp/vt/usr/lib/x86_64-linux-gnu VK_LAYER_PATH=/tmp/vt/usr/share/vulkan/explicit_layer.d "$@"
+  else
+    "$@"
+  fi
+}
+for t in tracer-vk-tests:no_contraction wgsl-functions-tests:every_shared; do
+  b=${t%%:*}
+  [ -x "$BIN/$b" ] || continue
+  log "$b ${t#*:}"
   {
-    echo "## tracer-vk's no_contraction tests on this device"
+    echo "## $b ${t#*:} on this device"
     echo
     echo '```'
-    if [ -d /tmp/vt ]; then
-      env LD_LIBRARY_PATH=/tmp/vt/usr/lib/x86_64-linux-gnu VK_LAYER_PATH=/tmp/vt/usr/share/vulkan/explicit_layer.d \
-        "$BIN/tracer-vk-tests" no_contraction --nocapture --test-threads 1 2>&1 | grep -v '^$' | tail -12
-    else
-      "$BIN/tracer-vk-tests" no_contraction --nocapture --test-threads 1 2>&1 | grep -v '^$' | tail -12
-    fi
+    with_layer "$BIN/$b" "${t#*:}" --nocapture --test-threads 1 2>&1 | grep -E 'differ|cases|^test |test result|panicked' | cut -c1-400 | head -20 || true
     echo '```'
     echo
   } >>"$OUT/summary.md"
-fi
+done
 
 # The cost: trace-vk bench, plain and exact alternating, the same matrix.
 BENCH_SCENES=()

@@ -127,7 +127,7 @@ var<private> cost_nodes: u32;
 var<private> cost_tris: u32;
 
 // Vector arithmetic in tracer-cpu's operation order (wide.rs `V3`): the builtins dot(), cross(),
-// length() and normalize() leave the order and the rounding to the driver, so an --exact kernel
+// length() and normalize() (see unit()) leave the order and the rounding to the driver, so an --exact kernel
 // (no_contraction.rs refuses them) could not round as the CPU does.
 fn dot3(a: vec3<f32>, b: vec3<f32>) -> f32 {
     return a.x * b.x + a.y * b.y + a.z * b.z;
@@ -141,7 +141,9 @@ fn length3(v: vec3<f32>) -> f32 {
     return sqrt(dot3(v, v));
 }
 
-fn normalize3(v: vec3<f32>) -> vec3<f32> {
+// tracer-cpu's V3::normalize: one division, then three products (lavapipe's normalize() differs in
+// the last bit for a third of the inputs: tests/tests/wgsl_functions.rs).
+fn unit(v: vec3<f32>) -> vec3<f32> {
     return v * (1.0 / length3(v));
 }
 
@@ -312,6 +314,73 @@ fn reflect_dir(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
     return d - n * (2.0 * dot3(d, n));
 }
 
+// Refraction of the unit d through a surface with unit normal n facing the incoming ray, for the
+// ratio eta of the indices (incoming side over far side); w = 0 on total internal reflection.
+fn refract_dir(d: vec3<f32>, n: vec3<f32>, eta: f32) -> vec4<f32> {
+    let cos_i = -dot3(d, n);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if k < 0.0 {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(unit(eta * d + (eta * cos_i - sqrt(k)) * n), 1.0);
+}
+
+// render_spec::power::phong_pow, operation for operation (see there why pow() is not used).
+fn phong_pow(x_in: f32, n: f32) -> f32 {
+    if !(x_in > 0.0) {
+        return 0.0;
+    }
+    var x = x_in;
+    var e = 0i;
+    if x < 1.17549435e-38f {
+        x *= 18446744073709551616.0f;
+        e = -64i;
+    }
+    let bits = bitcast<u32>(x);
+    e += i32(bits >> 23u) - 127i;
+    var m = bitcast<f32>((bits & 0x007fffffu) | 0x3f800000u);
+    if m > 1.4142135f {
+        m *= 0.5;
+        e += 1i;
+    }
+    let t = m - 1.0;
+    var p = POW_LOG2_8;
+    p = p * t + POW_LOG2_7;
+    p = p * t + POW_LOG2_6;
+    p = p * t + POW_LOG2_5;
+    p = p * t + POW_LOG2_4;
+    p = p * t + POW_LOG2_3;
+    p = p * t + POW_LOG2_2;
+    p = p * t + POW_LOG2_1;
+    p = p * t + POW_LOG2_0;
+    let y = n * (t * p + f32(e));
+    if y == 0.0 {
+        return 1.0;
+    }
+    if y < -150.0 {
+        return 0.0;
+    }
+    if y > 128.0 {
+        return bitcast<f32>(0x7f800000u);
+    }
+    let fi = floor(y + 0.5);
+    let f = y - fi;
+    var q = POW_EXP2_6;
+    q = q * f + POW_EXP2_5;
+    q = q * f + POW_EXP2_4;
+    q = q * f + POW_EXP2_3;
+    q = q * f + POW_EXP2_2;
+    q = q * f + POW_EXP2_1;
+    q = q * f + POW_EXP2_0;
+    var a = i32(fi);
+    var b = 0i;
+    if a < -126i {
+        a += 64i;
+        b = -64i;
+    }
+    return q * bitcast<f32>(u32(a + 127i) << 23u) * bitcast<f32>(u32(b + 127i) << 23u);
+}
+
 // kd cos(theta) + ks cos(phi)^n for a light in direction l; zero when the light is behind.
 fn phong(m: Material, s: Surface, d: vec3<f32>, l: vec3<f32>) -> vec3<f32> {
     let cos_t = dot3(s.shading, l);
@@ -322,7 +391,7 @@ fn phong(m: Material, s: Surface, d: vec3<f32>, l: vec3<f32>) -> vec3<f32> {
     let cos_p = max(dot3(r, -d), 0.0);
     var spec = 1.0;
     if m.kd_n.w > 0.0 {
-        spec = pow(cos_p, m.kd_n.w);
+        spec = phong_pow(cos_p, m.kd_n.w);
     }
     return m.kd_n.xyz * cos_t + m.ks_kr.xyz * spec;
 }
@@ -346,5 +415,5 @@ fn to_rgba8(c: vec3<f32>) -> u32 {
 }
 
 fn primary_dir(x: u32, y: u32) -> vec3<f32> {
-    return normalize3(frame.top_left.xyz + (f32(x) + 0.5) * frame.h_step.xyz + (f32(y) + 0.5) * frame.v_step.xyz);
+    return unit(frame.top_left.xyz + (f32(x) + 0.5) * frame.h_step.xyz + (f32(y) + 0.5) * frame.v_step.xyz);
 }

@@ -148,10 +148,9 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
 //#if REFRACTION
         if m.kt_ior.x > 0.0 {
             let eta = select(m.kt_ior.y, 1.0 / m.kt_ior.y, s.front);
-            let cos_i = -dot3(r.d, s.shading);
-            let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
-            if k >= 0.0 {
-                dir = normalize3(r.d * eta + s.shading * (eta * cos_i - sqrt(k)));
+            let refracted = refract_dir(r.d, s.shading, eta);
+            if refracted.w != 0.0 {
+                dir = refracted.xyz;
                 same_side = false;
             } else {
                 // Total internal reflection.

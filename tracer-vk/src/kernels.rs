@@ -178,19 +178,28 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
          \x20   {}(x, y, x < frame.tile.x + frame.tile.z && y < frame.tile.y + frame.tile.w);\n}}\n",
         stage.entry()
     );
+    format!(
+        "{}\n{}\n{}\n{}",
+        prelude(spec),
+        strip_features(traversal, &features),
+        strip_features(STAGES, &features),
+        entry
+    )
+}
+
+/// What every kernel starts with: the contract's constants, the counter slots, the per-scene
+/// constants, then common.wgsl (records, bindings, intersection and shading functions). Public so
+/// that a test can append its own entry point and call one shared function at a time.
+pub fn prelude(spec: &Specialisation) -> String {
     let counters: String = counters::WGSL.iter().map(|(name, v)| format!("const {name}: u32 = {v}u;\n")).collect();
     format!(
-        "{}{counters}const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n\
-         {}\n{}\n{}\n{}",
+        "{}{counters}const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n{}",
         render_spec::constants::wgsl_header(),
         spec.stack_size.max(1),
         spec.leaf_size.max(1),
         spec.workgroup.0,
         spec.workgroup.1,
         COMMON,
-        strip_features(traversal, &features),
-        strip_features(STAGES, &features),
-        entry
     )
 }
 

@@ -7,7 +7,8 @@
 //! sums in an order of its choosing, `cross` and `normalize` contract inside), because no
 //! decoration makes those equal to the CPU: the kernels spell such operations out in the CPU's
 //! operation order (`dot3`, `cross3`, `length3` in common.wgsl). What stays driver-defined is the
-//! precision of single operations the Vulkan spec lets be inexact (division, `sqrt`, `pow`).
+//! precision of single operations the Vulkan spec lets be inexact (division, `sqrt`); the kernels
+//! compute powers with adds and multiplies (`phong_pow`).
 
 use rspirv::binary::Assemble;
 use rspirv::dr::{Instruction, Operand};
