@@ -26,6 +26,7 @@ fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32,
             lights: scene.lights.clone(),
             max_indirections: scene.settings.max_indirections,
             aovs: true,
+            accuracy: render_spec::Accuracy::default(),
         };
         let cpu = tracer_cpu::render(&tracer, &settings, Method::Ordered).expect("the CPU renders");
         for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup] {
@@ -97,6 +98,7 @@ fn a_tree_deeper_than_32_levels_renders_with_stacks_sized_from_the_file() {
             lights: vec![],
             max_indirections: 0,
             aovs: true,
+            accuracy: render_spec::Accuracy::default(),
         })
         .unwrap();
     let deepest = out.image.aov.expect("AOVs were asked for").nodes.iter().copied().max().unwrap_or(0);
@@ -146,6 +148,7 @@ fn a_frame_beyond_the_storage_buffer_range_renders_in_tiles() {
         lights: vec![],
         max_indirections: 0,
         aovs: false,
+        accuracy: render_spec::Accuracy::default(),
     };
     let out = r.render(&s).expect("the frame renders in tiles").image;
     assert_eq!(out.rays.primary, side as u64 * side as u64);

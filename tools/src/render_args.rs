@@ -221,6 +221,7 @@ impl RenderArgs {
             lights: self.lights(scene, &camera),
             max_indirections: self.indirections(scene),
             aovs: self.aov.is_some() || self.heatmap.is_some(),
+            accuracy: render_spec::Accuracy::default(),
         })
     }
 

@@ -668,6 +668,7 @@ mod tests {
 
     use super::*;
     use crate::shade;
+    use render_spec::constants::STOP_CONTRIBUTION;
 
     /// Deterministic numbers, with the values that break formulas mixed in: zeros of both signs,
     /// tiny and huge magnitudes, infinities and NaN.
@@ -754,7 +755,11 @@ mod tests {
                 let p = shade::phong_of(a[0], a[1], a[5].x, a[2], a[3], a[4], true);
                 let front = a[6].y.lt(0.0);
                 let s = shade::secondary_of(a[5].y, a[5].z, a[6].x, a[2], front, a[3]);
-                let w = shade::worth_of(a[6].z, &render_spec::BounceStop { bound: 1.5, k_max: 0.5 }, 2.0);
+                let w = shade::worth_of(
+                    a[6].z,
+                    &render_spec::BounceStop { bound: 1.5, k_max: 0.5, cutoff: STOP_CONTRIBUTION },
+                    2.0,
+                );
                 let mut f = flat(&[c, p, s.dir, a[4].normalize_or_zero()]);
                 f.push(s.factor);
                 (f, vec![s.same_side, s.exists, w, a[4].is_zero()])
@@ -765,7 +770,11 @@ mod tests {
                 let p = shade::phong_of(a[0], a[1], a[5].x, a[2], a[3], a[4], all);
                 let front = a[6].y.lt(L::splat(0.0));
                 let s = shade::secondary_of(a[5].y, a[5].z, a[6].x, a[2], front, a[3]);
-                let w = shade::worth_of(a[6].z, &render_spec::BounceStop { bound: 1.5, k_max: 0.5 }, 2.0);
+                let w = shade::worth_of(
+                    a[6].z,
+                    &render_spec::BounceStop { bound: 1.5, k_max: 0.5, cutoff: STOP_CONTRIBUTION },
+                    2.0,
+                );
                 let mut f = flat(&[c, p, s.dir, a[4].normalize_or_zero()]);
                 f.push(s.factor);
                 (f, vec![s.same_side, s.exists, w, a[4].is_zero()])

@@ -220,6 +220,7 @@ impl Bench for VkBench {
             lights: f.lights.clone(),
             max_indirections: f.max_indirections,
             aovs: false,
+            accuracy: render_spec::Accuracy::default(),
         };
         let out = r.render_frame(&settings, false).map_err(|e| e.to_string())?;
         let rays = out.image.rays;
