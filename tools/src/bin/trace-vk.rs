@@ -8,7 +8,7 @@ use tools::bench::{Bench, Defaults, MatrixArgs, Timed};
 use tools::cli::{Progress, duration, rays_per_second};
 use tools::cpu_bench::{CpuBench, thread_pool};
 use tools::eval::EvalArgs;
-use tools::eval::reference::FastCpuStandIn;
+use tools::eval::reference::F64Reference;
 use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
 use tracer_vk::kernels::Method;
@@ -203,6 +203,9 @@ fn method_of(m: MethodArg) -> Method {
     }
 }
 
+/// Marks a method name for the exact kernels in [`VkBench::prepare`].
+const EXACT_SUFFIX: &str = "+exact";
+
 /// The GPU side of the benchmark matrix: one renderer per (scene, method), GPU time per frame.
 struct VkBench {
     gpu: Gpu,
@@ -231,10 +234,16 @@ impl Bench for VkBench {
         )
     }
 
+    /// `method` is a traversal's name, with [`EXACT_SUFFIX`] for its exact kernels (the
+    /// evaluation's `--exact on`).
     fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<Renderer<'a>, String> {
-        let method = MethodArg::from_str(method, false).map_err(|e| format!("{method:?}: {e}"))?;
+        let (name, exact) = match method.strip_suffix(EXACT_SUFFIX) {
+            Some(name) => (name, true),
+            None => (method, self.exact),
+        };
+        let method = MethodArg::from_str(name, false).map_err(|e| format!("{name:?}: {e}"))?;
         let mut r = Renderer::new(&self.gpu, scene, method_of(method), self.workgroup).map_err(|e| e.to_string())?;
-        r.set_exact(self.exact);
+        r.set_exact(exact);
         Ok(r)
     }
 
@@ -268,8 +277,8 @@ fn method_list(names: &[String]) -> Vec<String> {
 fn eval(e: &EvalCommand) -> Result<(), String> {
     let a = &e.eval;
     let cpu = CpuBench { pool: thread_pool(e.threads)? };
-    let gpu = VkBench { gpu: open(&e.device)?, workgroup: e.workgroup };
-    let reference = FastCpuStandIn { pool: thread_pool(e.threads)? };
+    let gpu = VkBench { gpu: open(&e.device)?, workgroup: e.workgroup, exact: false };
+    let reference = F64Reference { pool: thread_pool(e.threads)? };
     let cpu = tools::eval::Tracer {
         bench: &cpu,
         methods: method_list(&a.cpu_methods),
@@ -280,7 +289,7 @@ fn eval(e: &EvalCommand) -> Result<(), String> {
     let gpu = tools::eval::Tracer {
         bench: &gpu,
         methods: method_list(&a.gpu_methods),
-        exact_method: |_| None,
+        exact_method: |m| Some(format!("{m}{EXACT_SUFFIX}")),
         frames: a.frames.unwrap_or(20),
         warmup: a.warmup.unwrap_or(3),
     };

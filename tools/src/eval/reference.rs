@@ -19,24 +19,19 @@ pub trait Reference {
     fn render(&self, scene: &SceneFile, settings: &Settings) -> Result<Image, String>;
 }
 
-/// STAND-IN until the f64 reference renderer (issue 8.1) is in main: the fast CPU tracer with
-/// its default (watertight) test, every bounce (cutoff 0) and the reference's samples per pixel.
-/// Its f32 arithmetic is what the reference exists to check, so hit errors against it measure
-/// agreement with the CPU tracer, not with exact hits.
-pub struct FastCpuStandIn {
+/// The exact reference of issue 8.1 (`tracer_cpu::reference`): docs/shading.md in f64 through
+/// an f64 BVH walk, every bounce up to the indirection limit, the settings' samples per pixel.
+pub struct F64Reference {
     pub pool: rayon::ThreadPool,
 }
 
-impl Reference for FastCpuStandIn {
+impl Reference for F64Reference {
     fn name(&self) -> String {
-        "stand-in: trace-cpu f32, ordered traversal, cutoff 0".to_owned()
+        "the f64 reference (trace-cpu render --reference)".to_owned()
     }
 
     fn render(&self, scene: &SceneFile, settings: &Settings) -> Result<Image, String> {
-        let tracer = tracer_cpu::Tracer::new(scene);
-        self.pool
-            .install(|| tracer_cpu::render(&tracer, settings, tracer_cpu::Method::Ordered))
-            .map_err(|e| e.to_string())
+        self.pool.install(|| tracer_cpu::reference::render(scene, settings)).map(|r| r.image).map_err(|e| e.to_string())
     }
 }
 
