@@ -283,8 +283,8 @@ fn eval(e: &EvalCommand) -> Result<(), String> {
         bench: &cpu,
         methods: method_list(&a.cpu_methods),
         exact_method: |_| None,
-        frames: a.frames.unwrap_or(3),
-        warmup: a.warmup.unwrap_or(1),
+        frames: a.frames.unwrap_or(5),
+        warmup: a.warmup.unwrap_or(2),
     };
     let gpu = tools::eval::Tracer {
         bench: &gpu,

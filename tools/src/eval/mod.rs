@@ -62,11 +62,11 @@ pub struct EvalArgs {
     /// Samples per pixel of the reference image (a square).
     #[arg(long, value_parser = parse_spp, default_value = "64")]
     pub reference_spp: u32,
-    /// Timed frames per setting, 1 to 100000; the median is reported [default: 20 on the GPU, 3 on
+    /// Timed frames per setting, 1 to 100000; the median is reported [default: 20 on the GPU, 5 on
     /// the CPU].
     #[arg(long, value_parser = parse_frames)]
     pub frames: Option<usize>,
-    /// Untimed frames before the timed ones [default: 3 on the GPU, 1 on the CPU].
+    /// Untimed frames before the timed ones [default: 3 on the GPU, 2 on the CPU].
     #[arg(long, value_parser = parse_warmup)]
     pub warmup: Option<usize>,
     /// Folder for eval.csv, eval.md and the charts (created if missing).
@@ -319,7 +319,7 @@ pub fn run<C: Bench, G: Bench>(
     let preface: Vec<String> = devices
         .iter()
         .map(|(t, d, timing, f, w)| {
-            format!("`{t}`: {d}; {f} timed frames per setting after {w} warm-up frames; {timing}.")
+            format!("`{t}`: {d}; the median of {f} timed frames per setting after {w} untimed; {timing}.")
         })
         .chain([format!(
             "Reference: {}, {} samples per pixel, every bounce up to the scene's indirections (cutoff 0); hit errors \
