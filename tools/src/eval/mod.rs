@@ -9,8 +9,11 @@ pub mod reference;
 pub mod report;
 
 use crate::bench::{Bench, BenchMode, measure, parse_frames, parse_mode, parse_warmup};
-use crate::render_args::{lights_n, parse_count, parse_res, stored_camera};
+use crate::render_args::{
+    self, IntersectArg, lights_n, parse_count, parse_offset, parse_res, parse_spp, stored_camera,
+};
 use bvh_format::SceneFile;
+use clap::ValueEnum;
 use reference::{Cache, Reference};
 use render_spec::{Accuracy, Image, Intersect, Offset, Settings};
 use report::Row;
@@ -77,48 +80,21 @@ pub struct EvalArgs {
     pub cache: Option<PathBuf>,
 }
 
-pub fn parse_intersect(s: &str) -> Result<Intersect, String> {
-    match s.trim() {
-        "watertight" => Ok(Intersect::Watertight),
-        "mt" => Ok(Intersect::MollerTrumbore),
-        _ => Err(format!("{s:?} is not a triangle test (watertight, mt)")),
-    }
+fn parse_intersect(s: &str) -> Result<Intersect, String> {
+    IntersectArg::from_str(s.trim(), false)
+        .map(IntersectArg::intersect)
+        .map_err(|_| format!("{s:?} is not a triangle test (watertight, mt)"))
 }
 
-pub fn parse_offset(s: &str) -> Result<Offset, String> {
-    match s.trim() {
-        "scale" => Ok(Offset::ScaleAware),
-        t => match t.parse::<f32>() {
-            Ok(d) if d.is_finite() && d >= 0.0 => Ok(Offset::Fixed(d)),
-            _ => Err(format!("{s:?} is not an offset (scale, or a distance of at least 0 such as 1e-3)")),
-        },
-    }
-}
-
-pub fn parse_spp(s: &str) -> Result<u32, String> {
-    let n = parse_count(s, 1, u64::from(render_spec::accuracy::MAX_SPP), "the samples per pixel")? as u32;
-    let side = render_spec::accuracy::side(n);
-    if side * side != n {
-        return Err(format!("{s:?}: the samples per pixel must be a square (1, 4, 9, 16, ...)"));
-    }
-    Ok(n)
-}
-
-pub fn parse_cutoff(s: &str) -> Result<f32, String> {
-    match s.trim() {
-        "default" => Ok(Accuracy::default().cutoff),
-        t => match t.parse::<f32>() {
-            Ok(c) if c.is_finite() && c >= 0.0 => Ok(c),
-            _ => Err(format!("{s:?} is not a cutoff (default, or a contribution of at least 0 such as 0.001)")),
-        },
-    }
+/// `default` (half an 8-bit step), or a cutoff as `--cutoff` takes it.
+fn parse_cutoff(s: &str) -> Result<f32, String> {
+    if s.trim() == "default" { Ok(Accuracy::default().cutoff) } else { render_args::parse_cutoff(s) }
 }
 
 fn parse_indirections(s: &str) -> Result<Option<u32>, String> {
     match s.trim() {
         "scene" => Ok(None),
-        t => parse_count(t, 0, crate::render_args::MAX_INDIRECTIONS, "the number of indirections")
-            .map(|n| Some(n as u32)),
+        t => parse_count(t, 0, render_args::MAX_INDIRECTIONS, "the number of indirections").map(|n| Some(n as u32)),
     }
 }
 
@@ -457,7 +433,7 @@ mod tests {
         assert_eq!(parse_offset("1e-4").unwrap(), Offset::Fixed(1e-4));
         assert!(parse_offset("-1").is_err() && parse_offset("nan").is_err());
         assert_eq!(parse_spp("16").unwrap(), 16);
-        assert!(parse_spp("8").unwrap_err().contains("square"));
+        assert!(parse_spp("8").unwrap_err().contains("square"), "{}", parse_spp("8").unwrap_err());
         assert_eq!(parse_cutoff("0").unwrap(), 0.0);
         assert_eq!(parse_intersect("mt").unwrap(), Intersect::MollerTrumbore);
         assert_eq!(parse_indirections("scene").unwrap(), None);
