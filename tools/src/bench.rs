@@ -94,6 +94,11 @@ pub trait Bench {
     /// What the time of a frame covers, for the Markdown preface.
     fn timing(&self) -> String;
     fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<Self::Renderer<'a>, String>;
+    /// Whether the tracer implements these accuracy settings (the evaluation leaves out those it
+    /// does not, rather than report an image rendered without them).
+    fn honours(&self, _accuracy: &render_spec::Accuracy) -> bool {
+        true
+    }
     /// One timed frame; the tracer may leave out reading back the pixels and AOVs.
     fn frame(&self, r: &mut Self::Renderer<'_>, s: &Settings) -> Result<Timed, String>;
     /// One untimed frame with its pixels, and its AOVs when the settings ask for them.

@@ -1,5 +1,5 @@
 //! The CPU tracer as a [`Bench`]: wall-clock time of whole frames on a thread pool. `trace-cpu
-//! bench` times it, and `trace-vk eval` sets it beside the GPU.
+//! bench` times it, and `trace-eval` sets it beside the GPU.
 
 use crate::bench::{Bench, Timed};
 use bvh_format::SceneFile;

@@ -1,16 +1,12 @@
 //! `trace-vk`: renders a scene file with the Vulkan compute tracer on any Vulkan device.
 
-use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
-use render_spec::{Image, Settings};
 use std::process::ExitCode;
-use tools::bench::{Bench, Defaults, MatrixArgs, Timed};
+use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
-use tools::cpu_bench::{CpuBench, thread_pool};
-use tools::eval::EvalArgs;
-use tools::eval::reference::F64Reference;
 use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
+use tools::vk_bench::{VkBench, check_validation, unimplemented};
 use tracer_vk::kernels::Method;
 use tracer_vk::render::Renderer;
 use tracer_vk::{Gpu, list_devices};
@@ -39,11 +35,6 @@ enum Command {
     /// Time the thesis's evaluation matrix: scenes x cameras x sizes x modes x methods, GPU time
     /// per frame from timestamp queries (median of --frames), written as CSV and Markdown.
     Bench(Box<BenchArgs>),
-    /// Chart speed against accuracy: scenes x cameras x sizes x modes, each rendered by the CPU
-    /// tracer and on the Vulkan device with every method and accuracy setting, timed (medians) and
-    /// compared with a reference render (FLIP, PSNR, pixels off, hit errors); writes eval.csv,
-    /// eval.md and a chart per frame (SVG and PNG) with its Pareto front.
-    Eval(Box<EvalCommand>),
     /// Render one image (and optionally a cost heatmap and AOVs).
     Render {
         #[command(flatten)]
@@ -76,24 +67,6 @@ struct BenchArgs {
     device: DeviceArgs,
 }
 
-#[derive(clap::Args)]
-struct EvalCommand {
-    #[command(flatten)]
-    eval: EvalArgs,
-    /// Worker threads of the CPU tracer and the reference, 1 to 1024 [default: all cores].
-    #[arg(long, value_parser = parse_threads)]
-    threads: Option<usize>,
-    /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
-    #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
-    workgroup: (u32, u32),
-    #[command(flatten)]
-    device: DeviceArgs,
-}
-
-fn parse_threads(s: &str) -> Result<usize, String> {
-    parse_count(s, 1, 1024, "the number of threads").map(|n| n as usize)
-}
-
 #[derive(Clone, Copy, ValueEnum)]
 enum MethodArg {
     /// Local-memory stack, one ray per invocation (thesis 4.3.2).
@@ -115,7 +88,6 @@ fn main() -> ExitCode {
     tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
-        Command::Eval(e) => eval(&e),
         Command::Render { args, method, workgroup, device } => render(&args, method, workgroup, &device),
     })
 }
@@ -145,19 +117,14 @@ fn open(device: &DeviceArgs) -> Result<Gpu, String> {
     Gpu::new(device.device, device.validate).map_err(|e| e.to_string())
 }
 
-fn check_validation(gpu: &Gpu) -> Result<(), String> {
-    match gpu.validation_messages().first() {
-        None => Ok(()),
-        Some(m) => Err(format!("the validation layer reported a problem: {}", m.lines().next().unwrap_or(""))),
-    }
-}
-
 fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &DeviceArgs) -> Result<(), String> {
     let outputs = args.check()?;
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
-    refuse_unimplemented(&settings.accuracy)?;
+    if let Some(missing) = unimplemented(&settings.accuracy) {
+        return Err(format!("trace-vk does not implement {missing} yet; render with trace-cpu, which does"));
+    }
     let method = method_of(method);
     let gpu = open(device)?;
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
@@ -196,24 +163,6 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     Ok(())
 }
 
-/// The accuracy settings the kernels do not implement yet are refused, never ignored: an image
-/// rendered without them would be taken for one rendered with them.
-fn refuse_unimplemented(a: &render_spec::Accuracy) -> Result<(), String> {
-    let d = render_spec::Accuracy::default();
-    let missing = if a.intersect != d.intersect {
-        "--intersect mt"
-    } else if a.offset != d.offset {
-        "a fixed --offset"
-    } else if a.spp != d.spp {
-        "--spp above 1"
-    } else if a.cutoff != d.cutoff {
-        "--cutoff"
-    } else {
-        return Ok(());
-    };
-    Err(format!("trace-vk does not implement {missing} yet; render with trace-cpu, which does"))
-}
-
 fn method_of(m: MethodArg) -> Method {
     match m {
         MethodArg::Lst => Method::Lst,
@@ -223,96 +172,9 @@ fn method_of(m: MethodArg) -> Method {
     }
 }
 
-/// Marks a method name for the exact kernels in [`VkBench::prepare`].
-const EXACT_SUFFIX: &str = "+exact";
-
-/// The GPU side of the benchmark matrix: one renderer per (scene, method), GPU time per frame.
-struct VkBench {
-    gpu: Gpu,
-    workgroup: (u32, u32),
-    exact: bool,
-}
-
-impl Bench for VkBench {
-    type Renderer<'a> = Renderer<'a>;
-
-    fn tracer(&self) -> &'static str {
-        "vk"
-    }
-
-    fn device(&self) -> String {
-        let i = self.gpu.info();
-        format!("{} ({:?}, {})", i.name, i.kind, i.driver)
-    }
-
-    fn timing(&self) -> String {
-        format!(
-            "a frame's time is the GPU time of its passes from timestamp queries (workgroup {}x{}{})",
-            self.workgroup.0,
-            self.workgroup.1,
-            if self.exact { ", exact kernels: no fused multiply-adds" } else { "" }
-        )
-    }
-
-    /// `method` is a traversal's name, with [`EXACT_SUFFIX`] for its exact kernels (the
-    /// evaluation's `--exact on`).
-    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<Renderer<'a>, String> {
-        let (name, exact) = match method.strip_suffix(EXACT_SUFFIX) {
-            Some(name) => (name, true),
-            None => (method, self.exact),
-        };
-        let method = MethodArg::from_str(name, false).map_err(|e| format!("{name:?}: {e}"))?;
-        let mut r = Renderer::new(&self.gpu, scene, method_of(method), self.workgroup).map_err(|e| e.to_string())?;
-        r.set_exact(exact);
-        Ok(r)
-    }
-
-    fn frame(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Timed, String> {
-        let out = r.render_frame(s, false).map_err(|e| e.to_string())?;
-        let rays = out.image.rays;
-        Ok(Timed { ms: out.gpu_ms, rays: [rays.primary, rays.shadow, rays.secondary] })
-    }
-
-    fn image(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Image, String> {
-        Ok(r.render(s).map_err(|e| e.to_string())?.image)
-    }
-
-    fn finish(&self) -> Result<(), String> {
-        check_validation(&self.gpu)
-    }
-}
-
 fn bench(b: &BenchArgs) -> Result<(), String> {
     let methods: Vec<&str> = b.methods.iter().map(|&m| method_of(m).name()).collect();
     let bench = VkBench { gpu: open(&b.device)?, workgroup: b.workgroup, exact: b.exact };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;
-    Ok(())
-}
-
-/// Method names as the evaluation lists them; "none" leaves the tracer out.
-fn method_list(names: &[String]) -> Vec<String> {
-    names.iter().filter(|m| m.as_str() != "none").cloned().collect()
-}
-
-fn eval(e: &EvalCommand) -> Result<(), String> {
-    let a = &e.eval;
-    let cpu = CpuBench { pool: thread_pool(e.threads)? };
-    let gpu = VkBench { gpu: open(&e.device)?, workgroup: e.workgroup, exact: false };
-    let reference = F64Reference { pool: thread_pool(e.threads)? };
-    let cpu = tools::eval::Tracer {
-        bench: &cpu,
-        methods: method_list(&a.cpu_methods),
-        exact_method: |_| None,
-        frames: a.frames.unwrap_or(5),
-        warmup: a.warmup.unwrap_or(2),
-    };
-    let gpu = tools::eval::Tracer {
-        bench: &gpu,
-        methods: method_list(&a.gpu_methods),
-        exact_method: |m| Some(format!("{m}{EXACT_SUFFIX}")),
-        frames: a.frames.unwrap_or(20),
-        warmup: a.warmup.unwrap_or(3),
-    };
-    tools::eval::run(a, &reference, &cpu, &gpu)?;
     Ok(())
 }

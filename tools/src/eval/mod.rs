@@ -19,7 +19,7 @@ use render_spec::{Accuracy, Image, Intersect, Offset, Settings};
 use report::Row;
 use std::path::PathBuf;
 
-/// The options of `trace-vk eval`.
+/// The options of `trace-eval`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct EvalArgs {
     /// Scenes: compiled .bvh files, meshes or scene descriptions [default: the built-in bunny].
@@ -207,10 +207,23 @@ pub struct Tracer<'b, B: Bench> {
 }
 
 impl<B: Bench> Tracer<'_, B> {
+    /// The settings of `variants` this tracer does not implement (left out, and said so).
+    fn left_out(&self, variants: &[Variant]) -> Vec<String> {
+        if self.methods.is_empty() {
+            return Vec::new();
+        }
+        variants.iter().filter(|v| !self.bench.honours(&v.accuracy)).map(Variant::label).collect()
+    }
+
     /// How many settings of `variants` this tracer measures per frame: exact variants only
     /// where it has an exact form.
     fn settings(&self, variants: &[Variant]) -> usize {
-        let exact = |m: &String| variants.iter().filter(|v| !v.exact || (self.exact_method)(m).is_some()).count();
+        let exact = |m: &String| {
+            variants
+                .iter()
+                .filter(|v| (!v.exact || (self.exact_method)(m).is_some()) && self.bench.honours(&v.accuracy))
+                .count()
+        };
         self.methods.iter().map(exact).sum()
     }
 }
@@ -297,6 +310,14 @@ pub fn run<C: Bench, G: Bench>(
         .map(|(t, d, timing, f, w)| {
             format!("`{t}`: {d}; the median of {f} timed frames per setting after {w} untimed; {timing}.")
         })
+        .chain(
+            [(cpu.bench.tracer(), cpu.left_out(&variants)), (gpu.bench.tracer(), gpu.left_out(&variants))]
+                .into_iter()
+                .filter(|(_, l)| !l.is_empty())
+                .map(|(t, l)| {
+                    format!("`{t}` does not implement these settings yet; they were left out: {}.", l.join(", "))
+                }),
+        )
         .chain([format!(
             "Reference: {}, {} samples per pixel, every bounce up to the scene's indirections (cutoff 0); hit errors \
              against its one-sample render.",
@@ -329,7 +350,8 @@ fn evaluate<B: Bench>(c: &Context<'_>, t: &Tracer<'_, B>, gpu: bool) -> Result<V
                 (true, Some(m)) => m,
                 (true, None) => continue,
             };
-            let chosen: Vec<&Variant> = c.variants.iter().filter(|v| v.exact == exact).collect();
+            let chosen: Vec<&Variant> =
+                c.variants.iter().filter(|v| v.exact == exact && t.bench.honours(&v.accuracy)).collect();
             if chosen.is_empty() {
                 continue;
             }
