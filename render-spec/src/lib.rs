@@ -1,7 +1,7 @@
 //! What both tracers mean identically, defined once: the render [`Settings`] with their [`Mode`]
 //! and [`Accuracy`] ([`accuracy`]: triangle test, ray offset, samples per pixel, bounce cutoff),
 //! the [`RenderError`]s both report, the [`Image`] with its [`Aovs`] and [`RayCounts`], the
-//! camera's primary rays ([`camera`]), the adaptive bounce stop ([`bounce`]), sample sequences
+//! camera's primary rays ([`camera`]), the adaptive bounce stop ([`bounce`]), the Phong power ([`power`]), sample sequences
 //! ([`sequence`]) and the numeric constants of the shading contract ([`constants`], with the WGSL
 //! header the Vulkan kernels are prepended with).
 //!
@@ -14,6 +14,7 @@ pub mod camera;
 pub mod constants;
 mod error;
 mod image;
+pub mod power;
 pub mod sequence;
 mod settings;
 
@@ -23,4 +24,5 @@ pub use camera::{CameraSpec, Frame};
 pub use constants::NO_TRIANGLE;
 pub use error::RenderError;
 pub use image::{Aovs, Image, RayCounts};
+pub use power::phong_pow;
 pub use settings::{MAX_INDIRECTIONS, Mode, Settings};

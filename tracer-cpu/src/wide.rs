@@ -35,7 +35,7 @@ pub trait Real:
     /// `if self > o { self } else { o }`: `f32::max`, except that a tie of +0 and -0 gives `o`
     /// and a NaN `o` is kept.
     fn max(self, o: Self) -> Self;
-    /// `f32::powf` in the lanes of `m`, 1 elsewhere (pow is costly: idle lanes skip it).
+    /// `render_spec::phong_pow` in the lanes of `m`, 1 elsewhere (idle lanes skip it).
     fn powf_in(self, e: Self, m: Self::Mask) -> Self;
     fn lt(self, o: Self) -> Self::Mask;
     fn le(self, o: Self) -> Self::Mask;
@@ -70,7 +70,7 @@ impl Real for f32 {
     }
     #[inline(always)]
     fn powf_in(self, e: Self, m: bool) -> Self {
-        if m { self.powf(e) } else { 1.0 }
+        if m { render_spec::phong_pow(self, e) } else { 1.0 }
     }
     #[inline(always)]
     fn lt(self, o: Self) -> bool {
@@ -259,7 +259,7 @@ impl Real for F8 {
     }
     #[inline(always)]
     fn powf_in(self, e: Self, m: M8) -> Self {
-        F8(std::array::from_fn(|i| if m.0[i] { self.0[i].powf(e.0[i]) } else { 1.0 }))
+        F8(std::array::from_fn(|i| if m.0[i] { render_spec::phong_pow(self.0[i], e.0[i]) } else { 1.0 }))
     }
     #[inline(always)]
     fn lt(self, o: Self) -> M8 {
@@ -530,7 +530,7 @@ mod avx {
         #[inline(always)]
         fn powf_in(self, e: Self, m: AvxMask) -> Self {
             let (b, e, m) = (self.to_array(), e.to_array(), Self::bools(m));
-            Self::from_fn(|i| if m[i] { b[i].powf(e[i]) } else { 1.0 })
+            Self::from_fn(|i| if m[i] { render_spec::phong_pow(b[i], e[i]) } else { 1.0 })
         }
         // Ordered, quiet comparisons: false where either side is NaN, as Rust's are.
         #[inline(always)]
