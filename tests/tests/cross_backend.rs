@@ -187,6 +187,7 @@ fn exact_kernels_equal_the_cpu_bit_for_bit() {
             lights: scene.lights.clone(),
             max_indirections: scene.settings.max_indirections,
             aovs: false,
+            accuracy: render_spec::Accuracy::default(),
         };
         let cpu = tracer_cpu::render(&Tracer::new(&scene), &settings, Method::Ordered).expect("the CPU renders");
         let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the scene uploads");

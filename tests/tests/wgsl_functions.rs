@@ -480,7 +480,8 @@ fn functions_equal_their_rust_twins(exact: bool) {
     let camera =
         CameraSpec { eye: Vec3::new(0.3, 1.7, -4.0), at: Vec3::new(0.1, 0.2, 0.5), up: Vec3::Y, fov_deg: 53.0 };
     let view = camera.frame(37, 23).expect("a valid camera");
-    let plain = frame_record(&view, BounceStop { bound: 1.0, k_max: 0.5 });
+    let plain =
+        frame_record(&view, BounceStop { bound: 1.0, k_max: 0.5, cutoff: render_spec::constants::STOP_CONTRIBUTION });
     let (refl, refr) = reflect_refract_cases(&mut rng);
     let mut failures = Vec::new();
     let mut total = 0;
@@ -498,9 +499,9 @@ fn functions_equal_their_rust_twins(exact: bool) {
         failures.extend(run(&gpu, &pipeline, &cases, &plain, &[]));
     }
     for stop in [
-        BounceStop { bound: 1.0, k_max: 0.5 },
-        BounceStop { bound: 3.7, k_max: 0.0 },
-        BounceStop { bound: 0.2, k_max: 1.0 },
+        BounceStop { bound: 1.0, k_max: 0.5, cutoff: render_spec::constants::STOP_CONTRIBUTION },
+        BounceStop { bound: 3.7, k_max: 0.0, cutoff: render_spec::constants::STOP_CONTRIBUTION },
+        BounceStop { bound: 0.2, k_max: 1.0, cutoff: render_spec::constants::STOP_CONTRIBUTION },
     ] {
         let cases = worth_cases(stop, &mut rng);
         total += cases.len();

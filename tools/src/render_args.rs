@@ -94,11 +94,6 @@ pub struct RenderArgs {
     /// --spp above 1: t, N and prim of each pixel's first sample, nodes and tris over all).
     #[arg(long, allow_hyphen_values = true)]
     pub aov: Option<PathBuf>,
-    /// Bit-exact arithmetic: trace-vk builds kernels whose float operations the GPU's compiler
-    /// may not fuse into multiply-adds, so that its images equal trace-cpu's bit for bit (at some
-    /// cost in speed). The CPU tracer never fuses them, so trace-cpu is always exact.
-    #[arg(long)]
-    pub exact: bool,
     /// Triangle test: watertight (no ray passes between two triangles sharing an edge) or mt
     /// (Möller-Trumbore: fewer operations, but leaks at shared edges).
     #[arg(long, value_enum, default_value = "watertight", help_heading = "Accuracy")]
@@ -118,6 +113,11 @@ pub struct RenderArgs {
     /// [default: half an 8-bit step, 1/510, which cannot change an 8-bit pixel].
     #[arg(long, value_parser = parse_cutoff, allow_hyphen_values = true, help_heading = "Accuracy")]
     pub cutoff: Option<f32>,
+    /// Bit-exact arithmetic: trace-vk builds kernels whose float operations the GPU's compiler
+    /// may not fuse into multiply-adds, so that its images equal trace-cpu's bit for bit (at some
+    /// cost in speed). The CPU tracer never fuses them, so trace-cpu is always exact.
+    #[arg(long, help_heading = "Accuracy")]
+    pub exact: bool,
 }
 
 /// The checked outputs of a render.
