@@ -448,6 +448,16 @@ fn primary_cases(frame: &Frame, width: u32, height: u32) -> Cases {
 
 #[test]
 fn every_shared_wgsl_function_equals_its_rust_twin_bit_for_bit() {
+    functions_equal_their_rust_twins(false);
+}
+
+/// The same with the `--exact` pass applied (NoContraction on every float operation).
+#[test]
+fn every_shared_wgsl_function_equals_its_rust_twin_under_exact() {
+    functions_equal_their_rust_twins(true);
+}
+
+fn functions_equal_their_rust_twins(exact: bool) {
     let gpu = common::gpu();
     let spec = Specialisation {
         method: Method::Lst,
@@ -457,9 +467,13 @@ fn every_shared_wgsl_function_equals_its_rust_twin_bit_for_bit() {
         reflection: true,
         refraction: true,
         smooth: true,
+        exact,
     };
     let source = format!("{}\n{HARNESS}", kernels::prelude(&spec));
-    let spirv = tracer_vk::translate(&source, "function harness", &[]).expect("the harness compiles");
+    let mut spirv = tracer_vk::translate(&source, "function harness", &[]).expect("the harness compiles");
+    if exact {
+        spirv = tracer_vk::no_contraction::forbid_contraction(&spirv, "function harness").expect("the pass takes it");
+    }
     let pipeline = gpu.pipeline(&spirv, 16, kernels::PASS_BYTES, "function harness").expect("the pipeline builds");
 
     let mut rng = Rng(0x5eed_f00d);
@@ -506,7 +520,7 @@ fn every_shared_wgsl_function_equals_its_rust_twin_bit_for_bit() {
     failures.extend(run(&gpu, &pipeline, &cases, &plain, &tris));
 
     assert!(gpu.validation_messages().is_empty(), "validation: {:?}", gpu.validation_messages());
-    println!("{total} cases, {} differ", failures.len());
+    println!("{total} cases (exact: {exact}), {} differ", failures.len());
     // The count per function, then the first few cases of each.
     let mut by_name: Vec<(&str, Vec<&String>)> = Vec::new();
     for f in &failures {

@@ -81,6 +81,8 @@ pub struct Specialisation {
     pub refraction: bool,
     /// Some triangle has vertex normals (the others are shaded with their geometric normal).
     pub smooth: bool,
+    /// No float operation may be contracted with another (`--exact`, [`crate::no_contraction`]).
+    pub exact: bool,
 }
 
 /// Drops the lines between `//#if NAME` and `//#endif` when NAME is not enabled (no nesting).
@@ -211,11 +213,12 @@ pub fn sst_shared_bytes(spec: &Specialisation) -> u64 {
 /// Translates one kernel to SPIR-V.
 pub fn compile(stage: Stage, spec: &Specialisation) -> Result<Vec<u32>, VkError> {
     let label = format!("{} {:?} kernel", spec.method.name(), stage);
-    if spec.method == Method::SstSubgroup {
-        shader::translate_with_subgroups(&source(stage, spec), &label, &[])
+    let words = if spec.method == Method::SstSubgroup {
+        shader::translate_with_subgroups(&source(stage, spec), &label, &[])?
     } else {
-        shader::translate(&source(stage, spec), &label, &[])
-    }
+        shader::translate(&source(stage, spec), &label, &[])?
+    };
+    if spec.exact { crate::no_contraction::forbid_contraction(&words, &label) } else { Ok(words) }
 }
 
 #[cfg(test)]
@@ -225,7 +228,7 @@ mod tests {
     fn spec(method: Method, reflection: bool, refraction: bool) -> Specialisation {
         // Smooth normals with reflection, so that both settings of each feature translate.
         let smooth = reflection;
-        Specialisation { method, stack_size: 23, leaf_size: 8, workgroup: (8, 8), reflection, refraction, smooth }
+        Specialisation { method, stack_size: 23, leaf_size: 8, workgroup: (8, 8), reflection, refraction, smooth, exact: false }
     }
 
     #[test]
