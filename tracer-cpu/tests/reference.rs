@@ -123,7 +123,9 @@ fn reference_images_agree_with_fast_ones_and_a_shading_change_shows() {
             let fast = tracer_cpu::render(&tracer, &s, Method::Ordered).unwrap();
             let exact = reference::render(&scene, &s).unwrap();
             let (any, step) = (differing(&fast, &exact.image, 0), differing(&fast, &exact.image, 1));
-            eprintln!("{name} {mode:?}: {any} of 19,200 pixels differ from the fast render, {step} by more than a step");
+            eprintln!(
+                "{name} {mode:?}: {any} of 19,200 pixels differ from the fast render, {step} by more than a step"
+            );
             assert!(
                 any <= ANY_DIFFERENCE && step <= MORE_THAN_A_STEP,
                 "{name} {mode:?}: {any} pixels differ, {step} by more than a step"
