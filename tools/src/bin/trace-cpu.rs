@@ -103,11 +103,12 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     let mut lines = Vec::new();
     let r = image.rays;
     lines.push(format!(
-        "{}x{} {:?} with {:?} on {} threads: {} to trace and shade into the 8-bit image{}{}, rays: {} primary, \
+        "{}x{} {:?}{} with {:?} on {} threads: {} to trace and shade into the 8-bit image{}{}, rays: {} primary, \
          {} shadow, {} secondary ({}) -> {}",
         image.width,
         image.height,
         settings.mode,
+        tools::render_args::accuracy_note(&settings.accuracy),
         method.resolve(scene),
         pool.current_num_threads(),
         duration(seconds),
