@@ -130,7 +130,6 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
-    refuse_unimplemented(&settings.accuracy)?;
     let method = method_of(method);
     let gpu = open(device)?;
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
@@ -167,24 +166,6 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
         say!("{line}");
     }
     Ok(())
-}
-
-/// The accuracy settings the kernels do not implement yet are refused, never ignored: an image
-/// rendered without them would be taken for one rendered with them.
-fn refuse_unimplemented(a: &render_spec::Accuracy) -> Result<(), String> {
-    let d = render_spec::Accuracy::default();
-    let missing = if a.intersect != d.intersect {
-        "--intersect mt"
-    } else if a.offset != d.offset {
-        "a fixed --offset"
-    } else if a.spp != d.spp {
-        "--spp above 1"
-    } else if a.cutoff != d.cutoff {
-        "--cutoff"
-    } else {
-        return Ok(());
-    };
-    Err(format!("trace-vk does not implement {missing} yet; render with trace-cpu, which does"))
 }
 
 fn method_of(m: MethodArg) -> Method {
