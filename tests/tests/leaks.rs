@@ -202,7 +202,10 @@ fn camera_grids_aimed_at_shared_edges_and_vertices_leak_nowhere_on_either_tracer
     const N: u32 = 96;
     let gpu = gpu();
     let (mut mt_edges, mut mt_vertices) = (0, 0);
-    println!("distance | aim | pixels | leaks: default (CPU and GPU) | Moller-Trumbore");
+    let mut gpu_mt_total = [0; 2];
+    println!(
+        "distance | aim | pixels | leaks: default (CPU and GPU) | Moller-Trumbore (local CPU, GPU --intersect mt)"
+    );
     for aim in [Aim::Edges, Aim::Vertices] {
         for distance in DISTANCES {
             let (scene, cam, aimed) = camera_grid(N, distance, aim);
@@ -232,8 +235,25 @@ fn camera_grids_aimed_at_shared_edges_and_vertices_leak_nowhere_on_either_tracer
                 }
             }
             let mt = local_leaks(&scene, cam, N, &fans, intersect_moller_trumbore);
+            // The same rays on the GPU with its Möller-Trumbore kernel (`--intersect mt`).
+            let mut r = Renderer::new(&gpu, &scene, VkMethod::Lst, (8, 8)).expect("the grid uploads");
+            let mt_settings = Settings {
+                accuracy: render_spec::Accuracy {
+                    intersect: render_spec::Intersect::MollerTrumbore,
+                    ..Default::default()
+                },
+                ..cast_settings(cam, N)
+            };
+            let out = r.render(&mt_settings).expect("the GPU renders with Moller-Trumbore").image;
+            let gpu_mt = misses(&out.aov.expect("AOVs were asked for").prim);
+            gpu_mt_total[usize::from(aim == Aim::Vertices)] += gpu_mt;
             let ours_local = local_leaks(&scene, cam, N, &fans, intersect);
-            println!("{distance} | {aim:?} | {} | CPU {leaks} GPU {gpu_leaks:?} (local {ours_local}) | {mt}", N * N);
+            println!(
+                "{distance} | {aim:?} | {} | CPU {leaks} GPU {gpu_leaks:?} (local {ours_local}) | {mt}, GPU {gpu_mt}",
+                N * N
+            );
+            // Not equal to the local count: a Möller-Trumbore distance off the plane can fall
+            // outside the leaf's box (beyond its slack), and the traversal then never tests it.
             assert!(ours_local >= leaks, "the local count misses leaks the tracer has");
             match aim {
                 Aim::Edges => {
@@ -252,6 +272,10 @@ fn camera_grids_aimed_at_shared_edges_and_vertices_leak_nowhere_on_either_tracer
     }
     assert!(mt_edges > 0, "Moller-Trumbore leaked at no shared edge: these rays do not test edges");
     assert!(mt_vertices > 0, "Moller-Trumbore leaked at no shared vertex: these rays do not test vertices");
+    assert!(
+        gpu_mt_total[0] > 0 && gpu_mt_total[1] > 0,
+        "the GPU's Moller-Trumbore kernel leaked at no shared edge or vertex ({gpu_mt_total:?}): is it the default test?"
+    );
     let messages = gpu.validation_messages();
     assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
 }

@@ -3,7 +3,7 @@
 
 use crate::bench::{Bench, Timed};
 use bvh_format::SceneFile;
-use render_spec::{Accuracy, Image, Settings};
+use render_spec::{Image, Settings};
 use tracer_vk::Gpu;
 use tracer_vk::kernels::Method;
 use tracer_vk::render::Renderer;
@@ -25,23 +25,6 @@ pub fn check_validation(gpu: &Gpu) -> Result<(), String> {
     match gpu.validation_messages().first() {
         None => Ok(()),
         Some(m) => Err(format!("the validation layer reported a problem: {}", m.lines().next().unwrap_or(""))),
-    }
-}
-
-/// The accuracy setting the kernels do not implement yet, if any: such a setting is refused,
-/// never ignored, since an image rendered without it would be taken for one rendered with it.
-pub fn unimplemented(a: &Accuracy) -> Option<&'static str> {
-    let d = Accuracy::default();
-    if a.intersect != d.intersect {
-        Some("--intersect mt")
-    } else if a.offset != d.offset {
-        Some("a fixed --offset")
-    } else if a.spp != d.spp {
-        Some("--spp above 1")
-    } else if a.cutoff != d.cutoff {
-        Some("--cutoff")
-    } else {
-        None
     }
 }
 
@@ -82,10 +65,6 @@ impl Bench for VkBench {
         let mut r = Renderer::new(&self.gpu, scene, method_of(name)?, self.workgroup).map_err(|e| e.to_string())?;
         r.set_exact(exact);
         Ok(r)
-    }
-
-    fn honours(&self, a: &Accuracy) -> bool {
-        unimplemented(a).is_none()
     }
 
     fn frame(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Timed, String> {

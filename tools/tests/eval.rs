@@ -5,17 +5,13 @@
 //! - FLIP against the f64 reference falls from 1 to 4 to 16 samples per pixel;
 //! - the watertight test leaks no more than Möller-Trumbore;
 //!
-//! on the CPU, and on the GPU for every setting its kernels implement
-//! (`tools::vk_bench::unimplemented`); a setting they do not implement must be left out of the
-//! table and named in eval.md, never reported as if it had been rendered;
+//! on the CPU and on the GPU;
 //! - the default setting's hits agree with the reference's but for a few rays;
 //! - a second run finds its references in the cache and measures the same errors.
 
-use render_spec::{Accuracy, Intersect};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use tools::vk_bench::unimplemented;
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("tools/ sits in the workspace").to_path_buf()
@@ -59,40 +55,27 @@ fn the_bunny_evaluation_shows_the_orderings_the_measurements_must_show() {
     std::fs::create_dir_all(&out).unwrap();
     let rows = run(&out);
     let md = std::fs::read_to_string(out.join("eval.md")).unwrap();
-    let implemented = |a: Accuracy| unimplemented(&a).is_none();
-    let d = Accuracy::default();
     for tracer in ["cpu", "vk"] {
-        let on_gpu = tracer == "vk";
-        let has = |setting: &str, a: Accuracy| {
-            let row = rows.iter().find(|r| r["tracer"] == tracer && r["setting"] == setting);
-            if !on_gpu || implemented(a) {
-                Some(row.unwrap_or_else(|| panic!("no row for {tracer} {setting}")))
-            } else {
-                assert!(row.is_none(), "{tracer} {setting}: the GPU does not implement it, yet it has a row");
-                assert!(md.contains("`vk` does not implement these settings yet") && md.contains(setting), "{md}");
-                println!("{tracer}: {setting} is not implemented by the kernels yet: left out and said so");
-                None
-            }
+        let has = |setting: &str| {
+            rows.iter()
+                .find(|r| r["tracer"] == tracer && r["setting"] == setting)
+                .unwrap_or_else(|| panic!("no row for {tracer} {setting}"))
         };
-        let default = has("default", d).expect("the defaults are implemented everywhere");
-        let spp4 = has("spp 4", Accuracy { spp: 4, ..d });
-        let spp16 = has("spp 16", Accuracy { spp: 16, ..d });
-        if let (Some(s4), Some(s16)) = (spp4, spp16) {
-            let flip = [num(default, "flip_mean"), num(s4, "flip_mean"), num(s16, "flip_mean")];
-            println!("{tracer}: FLIP at 1, 4, 16 spp: {flip:?}");
-            assert!(flip[0] > flip[1] && flip[1] > flip[2], "{tracer}: FLIP must fall with the samples: {flip:?}");
-            assert!(flip[2] < 0.01, "{tracer}: 16 samples per pixel should come close to the reference: {flip:?}");
-        }
-        if let Some(mt) = has("mt", Accuracy { intersect: Intersect::MollerTrumbore, ..d }) {
-            let (w, m) = (num(default, "leaks"), num(mt, "leaks"));
-            println!("{tracer}: leaks watertight {w}, Möller-Trumbore {m}");
-            assert!(w <= m, "{tracer}: the watertight test leaks {w} rays, Möller-Trumbore {m}");
-        }
+        let default = has("default");
+        let flip = [num(default, "flip_mean"), num(has("spp 4"), "flip_mean"), num(has("spp 16"), "flip_mean")];
+        println!("{tracer}: FLIP at 1, 4, 16 spp: {flip:?}");
+        assert!(flip[0] > flip[1] && flip[1] > flip[2], "{tracer}: FLIP must fall with the samples: {flip:?}");
+        assert!(flip[2] < 0.01, "{tracer}: 16 samples per pixel should come close to the reference: {flip:?}");
+        let (w, m) = (num(default, "leaks"), num(has("mt"), "leaks"));
+        println!("{tracer}: leaks watertight {w}, Möller-Trumbore {m}");
+        assert!(w <= m, "{tracer}: the watertight test leaks {w} rays, Möller-Trumbore {m}");
         let disagree = num(default, "hit_disagree") / num(default, "hit_rays");
         assert!(disagree < 0.01, "{tracer}: {disagree} of the default hits differ from the reference's");
         assert!(num(default, "median_ms") > 0.0 && num(default, "primary") == 160.0 * 120.0);
     }
-    assert!(rows.iter().filter(|r| r["tracer"] == "cpu").count() == 4, "default, mt, spp 4, spp 16 on the CPU");
+    for tracer in ["cpu", "vk"] {
+        assert_eq!(rows.iter().filter(|r| r["tracer"] == tracer).count(), 4, "{tracer}: default, mt, spp 4, spp 16");
+    }
     for f in ["eval.md", "bunny-medium-160x120-whitted1.svg", "bunny-medium-160x120-whitted1.png"] {
         assert!(std::fs::metadata(out.join(f)).map(|m| m.len() > 1000).unwrap_or(false), "{f} missing or empty");
     }

@@ -122,9 +122,6 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
-    if let Some(missing) = unimplemented(&settings.accuracy) {
-        return Err(format!("trace-vk does not implement {missing} yet; render with trace-cpu, which does"));
-    }
     let method = method_of(method);
     let gpu = open(device)?;
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
