@@ -6,7 +6,7 @@ use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
 use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
-use tools::vk_bench::{VkBench, check_validation, unimplemented};
+use tools::vk_bench::{VkBench, check_validation};
 use tracer_vk::kernels::Method;
 use tracer_vk::render::Renderer;
 use tracer_vk::{Gpu, list_devices};
