@@ -639,7 +639,14 @@ fn forged_vertex_and_normal_indices() {
 fn forged_origin_and_header_bounds() {
     let e = forge(|b| {
         edit_header(b, |mut h| {
-            h.origin[2] = 1e6;
+            h.origin[2] = f64::NAN;
+            h
+        })
+    });
+    assert!(matches!(e, FormatError::BadHeader(m) if m.contains("origin")), "{e:?}");
+    let e = forge(|b| {
+        edit_header(b, |mut h| {
+            h.origin[0] = f64::INFINITY;
             h
         })
     });

@@ -6,6 +6,7 @@ pub mod bench;
 pub mod cli;
 pub mod output;
 pub mod render_args;
+pub mod stress;
 
 use bvh_format::SceneFile;
 use std::path::Path;
