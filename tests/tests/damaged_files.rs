@@ -40,6 +40,7 @@ fn scene(triangles: usize, layouts: Layouts) -> SceneFile {
         settings: SceneSettings { max_indirections: 3, ..SceneSettings::default() },
         positions,
         warnings: Vec::new(),
+        origin: glam::DVec3::ZERO,
     };
     bvh_build::compile(&scene, &BuildParams { max_leaf_size: 4, ..BuildParams::default() }, layouts).unwrap()
 }
