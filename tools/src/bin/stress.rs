@@ -107,7 +107,8 @@ fn sweep(cli: &Cli) -> Result<(), String> {
 
     let silent: Vec<String> = rows
         .iter()
-        .filter(|r| r.tally.silent_failure())
+        // The f32-world axis shows what the compiler's rebasing prevents; it is not a method.
+        .filter(|r| r.tally.silent_failure() && r.axis != AXES[1])
         .map(|r| format!("{} {}: {} {}", r.axis, r.label, r.method.name(), report::cell(&r.tally)))
         .collect();
     let command = format!(
