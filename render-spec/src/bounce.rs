@@ -12,9 +12,14 @@ pub struct BounceStop {
     pub bound: f32,
     /// The largest `kr` or `kt` of the scene.
     pub k_max: f32,
+    /// The least a chain must be able to add to be traced ([`crate::Accuracy::cutoff`]); 0 traces
+    /// every bounce.
+    pub cutoff: f32,
 }
 
 impl BounceStop {
+    /// The stop for `scene` lit by `lights`, at the default cutoff of half an 8-bit step
+    /// ([`Self::with_cutoff`] sets another).
     pub fn new(scene: &SceneFile, lights: &[Light]) -> Self {
         let sum: [f32; 3] =
             lights.iter().fold([0.0; 3], |a, l| [a[0] + l.colour[0], a[1] + l.colour[1], a[2] + l.colour[2]]);
@@ -23,14 +28,20 @@ impl BounceStop {
             scene.materials.iter().flat_map(|m| (0..3).map(move |k| amb[k] * m.kd[k] + sum[k] * (m.kd[k] + m.ks[k])));
         let bound = per_material.fold(scene.settings.background.iter().copied().fold(0.0, f32::max), f32::max);
         let k_max = scene.materials.iter().map(|m| m.kr.max(m.kt)).fold(0.0, f32::max);
-        Self { bound, k_max }
+        Self { bound, k_max, cutoff: STOP_CONTRIBUTION }
+    }
+
+    /// This stop with another cutoff ([`crate::Accuracy::cutoff`]).
+    pub fn with_cutoff(self, cutoff: f32) -> Self {
+        Self { cutoff, ..self }
     }
 
     /// Whether a secondary ray of weight `w`, with `remaining` indirections left after it (itself
-    /// included), can still change an 8-bit pixel: the most the chain can add is
-    /// `w * bound * (1 + k + k^2 + ... )` over `remaining` terms, with `k` the largest kr or kt.
+    /// included), can still add the cutoff (by default: change an 8-bit pixel): the most the chain
+    /// can add is `w * bound * (1 + k + k^2 + ... )` over `remaining` terms, with `k` the largest
+    /// kr or kt. A cutoff of 0 passes every ray with an indirection left.
     pub fn worth_tracing(&self, w: f32, remaining: u32) -> bool {
-        w * self.bound * self.chain(remaining) >= STOP_CONTRIBUTION
+        remaining > 0 && w * self.bound * self.chain(remaining) >= self.cutoff
     }
 
     /// The sum `1 + k + k^2 + ...` of [`Self::worth_tracing`] over `remaining` terms, stopping once
@@ -55,12 +66,16 @@ mod tests {
 
     #[test]
     fn the_bounce_stop_is_exact_at_half_a_step() {
-        let stop = |bound, k_max| BounceStop { bound, k_max };
+        let stop = |bound, k_max| BounceStop { bound, k_max, cutoff: STOP_CONTRIBUTION };
         assert!(stop(1.0, 0.5).worth_tracing(1.0, 1));
         assert!(!stop(1.0, 0.0).worth_tracing(0.5 / 255.0 * 0.99, 1));
         assert!(stop(1.0, 0.5).worth_tracing(0.5 / 255.0 * 0.99, 2), "a longer chain adds more");
         assert!(!stop(1.0, 1.0).worth_tracing(0.1, 0), "no indirection left");
         assert!(stop(1.0, 0.0).worth_tracing(STOP_CONTRIBUTION, 1), "exactly half a step is traced");
+        let never = stop(1.0, 0.0).with_cutoff(0.0);
+        assert!(never.worth_tracing(0.0, 1) && never.worth_tracing(1e-30, 1), "a cutoff of 0 traces everything");
+        assert!(!never.worth_tracing(1.0, 0), "but not beyond the indirections");
+        assert!(!stop(1.0, 0.0).with_cutoff(0.1).worth_tracing(0.099, 1), "a higher cutoff stops earlier");
     }
 
     #[test]

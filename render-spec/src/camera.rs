@@ -64,7 +64,14 @@ impl Frame {
     /// top-left corner.
     #[inline(always)]
     pub fn direction(&self, x: u32, y: u32) -> Vec3 {
-        (self.top_left + (x as f32 + 0.5) * self.h_step + (y as f32 + 0.5) * self.v_step).normalize()
+        self.sample_direction(x, y, (0.5, 0.5))
+    }
+
+    /// Unit direction through the point `(sx, sy)` of pixel (x, y), from its top-left corner in
+    /// pixels ([`crate::accuracy::sample_positions`]); `(0.5, 0.5)` is [`Self::direction`].
+    #[inline(always)]
+    pub fn sample_direction(&self, x: u32, y: u32, (sx, sy): (f32, f32)) -> Vec3 {
+        (self.top_left + (x as f32 + sx) * self.h_step + (y as f32 + sy) * self.v_step).normalize()
     }
 }
 

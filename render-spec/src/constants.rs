@@ -41,6 +41,14 @@ pub const F32_MAX: f32 = f32::MAX;
 pub const R2_STEP_X: u32 = 0xC13F_A9A9;
 pub const R2_STEP_Y: u32 = 0x91E1_0DA6;
 
+/// Coefficients of the log2 of a mantissa in [sqrt(1/2), sqrt(2)): `log2(1 + t) = t * P(t)` with
+/// `P(t) = sum POW_LOG2[k] t^k` (see [`crate::power`]).
+#[allow(clippy::excessive_precision)]
+pub const POW_LOG2: [f32; 9] =
+    [1.442695, -0.72134745, 0.48091075, -0.36069328, 0.28790325, -0.23916988, 0.21607822, -0.20586188, 0.12310968];
+/// Coefficients of `2^f = sum POW_EXP2[k] f^k` for `|f| <= 1/2` (see [`crate::power`]).
+pub const POW_EXP2: [f32; 7] = [1.0, 0.6931472, 0.2402265, 0.05550327, 0.009618057, 0.0013400428, 0.00015461445];
+
 /// A constant's value, typed as the kernels declare it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Value {
@@ -61,6 +69,22 @@ pub const SHARED: &[(&str, Value)] = &[
     ("F32_MAX", Value::F32(F32_MAX)),
     ("R2_STEP_X", Value::U32(R2_STEP_X)),
     ("R2_STEP_Y", Value::U32(R2_STEP_Y)),
+    ("POW_LOG2_0", Value::F32(POW_LOG2[0])),
+    ("POW_LOG2_1", Value::F32(POW_LOG2[1])),
+    ("POW_LOG2_2", Value::F32(POW_LOG2[2])),
+    ("POW_LOG2_3", Value::F32(POW_LOG2[3])),
+    ("POW_LOG2_4", Value::F32(POW_LOG2[4])),
+    ("POW_LOG2_5", Value::F32(POW_LOG2[5])),
+    ("POW_LOG2_6", Value::F32(POW_LOG2[6])),
+    ("POW_LOG2_7", Value::F32(POW_LOG2[7])),
+    ("POW_LOG2_8", Value::F32(POW_LOG2[8])),
+    ("POW_EXP2_0", Value::F32(POW_EXP2[0])),
+    ("POW_EXP2_1", Value::F32(POW_EXP2[1])),
+    ("POW_EXP2_2", Value::F32(POW_EXP2[2])),
+    ("POW_EXP2_3", Value::F32(POW_EXP2[3])),
+    ("POW_EXP2_4", Value::F32(POW_EXP2[4])),
+    ("POW_EXP2_5", Value::F32(POW_EXP2[5])),
+    ("POW_EXP2_6", Value::F32(POW_EXP2[6])),
 ];
 
 /// The WGSL declarations of [`SHARED`], for the kernels to be prepended with.

@@ -15,6 +15,12 @@ pub enum RenderError {
         "the {method} traversal needs the {layout} layout, which the scene file does not contain (compile it with --layout both)"
     )]
     MissingLayout { method: &'static str, layout: &'static str },
+    #[error("{0} samples per pixel are not a square of a whole number from 1 to {max} (1, 4, 9, 16, ...)", max = crate::accuracy::MAX_SPP)]
+    SamplesPerPixel(u32),
+    #[error("the bounce cutoff must be a finite number of at least 0 (0 traces every bounce), not {0}")]
+    Cutoff(f32),
+    #[error("a fixed ray offset must be a finite distance of at least 0, not {0}")]
+    Offset(f32),
 }
 
 #[cfg(test)]
@@ -29,6 +35,9 @@ mod tests {
             RenderError::FieldOfView(180.0),
             RenderError::TooManyIndirections(2000),
             RenderError::MissingLayout { method: "stackless", layout: "escape-pointer" },
+            RenderError::SamplesPerPixel(2),
+            RenderError::Cutoff(-1.0),
+            RenderError::Offset(f32::NAN),
         ] {
             let s = e.to_string();
             assert!(!s.contains('\n') && !s.ends_with('.') && !s.starts_with(char::is_uppercase), "{s}");

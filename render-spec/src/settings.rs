@@ -1,6 +1,7 @@
 //! What to render: the settings both tracers take and check alike.
 
 use crate::RenderError;
+use crate::accuracy::Accuracy;
 use crate::camera::{CameraError, CameraSpec, Frame};
 use bvh_format::Light;
 
@@ -31,11 +32,13 @@ pub struct Settings {
     pub max_indirections: u32,
     /// Return the per-pixel outputs ([`crate::Aovs`]) besides the colour.
     pub aovs: bool,
+    /// What the frame trades between accuracy and speed; the default is docs/shading.md.
+    pub accuracy: Accuracy,
 }
 
 impl Settings {
-    /// Checks the image size, the indirections and the camera, and precomputes the camera for
-    /// this image.
+    /// Checks the image size, the indirections, the accuracy settings and the camera, and
+    /// precomputes the camera for this image.
     pub fn frame(&self) -> Result<Frame, RenderError> {
         if self.width == 0 || self.height == 0 {
             return Err(RenderError::EmptyImage);
@@ -43,6 +46,7 @@ impl Settings {
         if self.max_indirections > MAX_INDIRECTIONS {
             return Err(RenderError::TooManyIndirections(self.max_indirections));
         }
+        self.accuracy.check()?;
         self.camera.frame(self.width, self.height).map_err(|e| match e {
             CameraError::Degenerate => RenderError::DegenerateCamera,
             CameraError::FieldOfView => RenderError::FieldOfView(self.camera.fov_deg),

@@ -18,6 +18,7 @@ fn room_settings(scene: &bvh_format::SceneFile, width: u32, height: u32, max_ind
         lights: scene.lights.clone(),
         max_indirections,
         aovs: true,
+        accuracy: render_spec::Accuracy::default(),
     }
 }
 

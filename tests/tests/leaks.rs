@@ -114,7 +114,16 @@ fn misses(prim: &[u32]) -> usize {
 }
 
 fn cast_settings(cam: CameraSpec, n: u32) -> Settings {
-    Settings { width: n, height: n, camera: cam, mode: Mode::Cast, lights: Vec::new(), max_indirections: 0, aovs: true }
+    Settings {
+        width: n,
+        height: n,
+        camera: cam,
+        mode: Mode::Cast,
+        lights: Vec::new(),
+        max_indirections: 0,
+        aovs: true,
+        accuracy: Default::default(),
+    }
 }
 
 fn cpu_prims(scene: &SceneFile, cam: CameraSpec, n: u32, method: Method) -> (Vec<[u8; 3]>, Vec<u32>) {

@@ -29,6 +29,7 @@ fn settings(scene: &SceneFile, width: u32, height: u32) -> Settings {
         lights: scene.lights.clone(),
         max_indirections: scene.settings.max_indirections,
         aovs: true,
+        accuracy: render_spec::Accuracy::default(),
     }
 }
 

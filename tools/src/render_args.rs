@@ -75,6 +75,11 @@ pub struct RenderArgs {
     /// Also write per-pixel outputs as OpenEXR (.exr): t, N.X, N.Y, N.Z, prim, nodes, tris.
     #[arg(long, allow_hyphen_values = true)]
     pub aov: Option<PathBuf>,
+    /// Bit-exact arithmetic: trace-vk builds kernels whose float operations the GPU's compiler
+    /// may not fuse into multiply-adds, so that its images equal trace-cpu's bit for bit (at some
+    /// cost in speed). The CPU tracer never fuses them, so trace-cpu is always exact.
+    #[arg(long)]
+    pub exact: bool,
 }
 
 /// The checked outputs of a render.
@@ -237,6 +242,7 @@ impl RenderArgs {
             lights: self.lights(scene, &camera),
             max_indirections: self.indirections(scene),
             aovs: self.aov.is_some() || self.heatmap.is_some(),
+            accuracy: render_spec::Accuracy::default(),
         })
     }
 

@@ -58,6 +58,7 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
                 lights: tools::render_args::lights_n(&scene, lights, &cam),
                 max_indirections: scene.settings.max_indirections,
                 aovs: false,
+                accuracy: render_spec::Accuracy::default(),
             },
             Method::Ordered,
         )

@@ -245,6 +245,7 @@ fn main() {
                     lights: scene.lights.clone(),
                     max_indirections: scene.settings.max_indirections,
                     aovs: false,
+                    accuracy: render_spec::Accuracy::default(),
                 };
                 let sink = Mutex::new(Vec::new());
                 let image = one

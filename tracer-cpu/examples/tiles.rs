@@ -52,6 +52,7 @@ fn main() {
             lights: scene.lights.clone(),
             max_indirections: scene.settings.max_indirections,
             aovs: false,
+            accuracy: render_spec::Accuracy::default(),
         };
         let frame = |tiles: Tiles| {
             pool.install(|| match Method::Auto.resolve(&scene) {

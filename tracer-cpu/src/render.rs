@@ -371,6 +371,7 @@ mod tests {
                     lights: scene.lights.clone(),
                     max_indirections: scene.settings.max_indirections,
                     aovs: true,
+                    accuracy: render_spec::Accuracy::default(),
                 };
                 let tiles = Tiles { rows: 6, columns: 12 };
                 let image = |avx| match method.resolve(&scene) {

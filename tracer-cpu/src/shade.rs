@@ -5,7 +5,6 @@ use crate::wide::{LANES, Lanes, Real, V3};
 use bvh_format::{Material, Triangle};
 use glam::Vec3;
 use render_spec::BounceStop;
-use render_spec::constants::STOP_CONTRIBUTION;
 
 /// Everything shading needs to know about a hit.
 #[derive(Clone, Copy, Debug)]
@@ -207,7 +206,7 @@ pub fn secondary_of<R: Real>(kr: R, kt: R, ior: R, shading: V3<R>, front: R::Mas
 /// (common) depth: computed once per depth, not once per lane.
 #[inline(always)]
 pub fn worth_of<R: Real>(w: R, stop: &BounceStop, chain: f32) -> R::Mask {
-    (w * R::splat(stop.bound) * R::splat(chain)).ge(R::splat(STOP_CONTRIBUTION))
+    (w * R::splat(stop.bound) * R::splat(chain)).ge(R::splat(stop.cutoff))
 }
 
 /// Linear radiance to 8 bits: clamp to [0, 1], scale by 255, round to nearest.

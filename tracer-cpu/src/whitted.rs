@@ -90,7 +90,7 @@ impl<'a> Shading<'a> {
             max_indirections: s.max_indirections,
             ambient: Vec3::from(scene.settings.ambient),
             background: Vec3::from(scene.settings.background),
-            stop: BounceStop::new(scene, &s.lights),
+            stop: BounceStop::new(scene, &s.lights).with_cutoff(s.accuracy.cutoff),
             aovs: s.aovs,
         }
     }

@@ -35,7 +35,7 @@ pub trait Real:
     /// `if self > o { self } else { o }`: `f32::max`, except that a tie of +0 and -0 gives `o`
     /// and a NaN `o` is kept.
     fn max(self, o: Self) -> Self;
-    /// `f32::powf` in the lanes of `m`, 1 elsewhere (pow is costly: idle lanes skip it).
+    /// `render_spec::phong_pow` in the lanes of `m`, 1 elsewhere (idle lanes skip it).
     fn powf_in(self, e: Self, m: Self::Mask) -> Self;
     fn lt(self, o: Self) -> Self::Mask;
     fn le(self, o: Self) -> Self::Mask;
@@ -70,7 +70,7 @@ impl Real for f32 {
     }
     #[inline(always)]
     fn powf_in(self, e: Self, m: bool) -> Self {
-        if m { self.powf(e) } else { 1.0 }
+        if m { render_spec::phong_pow(self, e) } else { 1.0 }
     }
     #[inline(always)]
     fn lt(self, o: Self) -> bool {
@@ -259,7 +259,7 @@ impl Real for F8 {
     }
     #[inline(always)]
     fn powf_in(self, e: Self, m: M8) -> Self {
-        F8(std::array::from_fn(|i| if m.0[i] { self.0[i].powf(e.0[i]) } else { 1.0 }))
+        F8(std::array::from_fn(|i| if m.0[i] { render_spec::phong_pow(self.0[i], e.0[i]) } else { 1.0 }))
     }
     #[inline(always)]
     fn lt(self, o: Self) -> M8 {
@@ -530,7 +530,7 @@ mod avx {
         #[inline(always)]
         fn powf_in(self, e: Self, m: AvxMask) -> Self {
             let (b, e, m) = (self.to_array(), e.to_array(), Self::bools(m));
-            Self::from_fn(|i| if m[i] { b[i].powf(e[i]) } else { 1.0 })
+            Self::from_fn(|i| if m[i] { render_spec::phong_pow(b[i], e[i]) } else { 1.0 })
         }
         // Ordered, quiet comparisons: false where either side is NaN, as Rust's are.
         #[inline(always)]
@@ -668,6 +668,7 @@ mod tests {
 
     use super::*;
     use crate::shade;
+    use render_spec::constants::STOP_CONTRIBUTION;
 
     /// Deterministic numbers, with the values that break formulas mixed in: zeros of both signs,
     /// tiny and huge magnitudes, infinities and NaN.
@@ -754,7 +755,11 @@ mod tests {
                 let p = shade::phong_of(a[0], a[1], a[5].x, a[2], a[3], a[4], true);
                 let front = a[6].y.lt(0.0);
                 let s = shade::secondary_of(a[5].y, a[5].z, a[6].x, a[2], front, a[3]);
-                let w = shade::worth_of(a[6].z, &render_spec::BounceStop { bound: 1.5, k_max: 0.5 }, 2.0);
+                let w = shade::worth_of(
+                    a[6].z,
+                    &render_spec::BounceStop { bound: 1.5, k_max: 0.5, cutoff: STOP_CONTRIBUTION },
+                    2.0,
+                );
                 let mut f = flat(&[c, p, s.dir, a[4].normalize_or_zero()]);
                 f.push(s.factor);
                 (f, vec![s.same_side, s.exists, w, a[4].is_zero()])
@@ -765,7 +770,11 @@ mod tests {
                 let p = shade::phong_of(a[0], a[1], a[5].x, a[2], a[3], a[4], all);
                 let front = a[6].y.lt(L::splat(0.0));
                 let s = shade::secondary_of(a[5].y, a[5].z, a[6].x, a[2], front, a[3]);
-                let w = shade::worth_of(a[6].z, &render_spec::BounceStop { bound: 1.5, k_max: 0.5 }, 2.0);
+                let w = shade::worth_of(
+                    a[6].z,
+                    &render_spec::BounceStop { bound: 1.5, k_max: 0.5, cutoff: STOP_CONTRIBUTION },
+                    2.0,
+                );
                 let mut f = flat(&[c, p, s.dir, a[4].normalize_or_zero()]);
                 f.push(s.factor);
                 (f, vec![s.same_side, s.exists, w, a[4].is_zero()])

@@ -23,6 +23,7 @@ fn settings(scene: &SceneFile, camera: &str, mode: Mode, method: Method, w: u32,
         lights: scene.lights.clone(),
         max_indirections: scene.settings.max_indirections,
         aovs: true,
+        accuracy: render_spec::Accuracy::default(),
     };
     (settings, method)
 }

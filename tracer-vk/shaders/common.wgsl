@@ -63,6 +63,13 @@ struct HitRec {
     v: f32,
 }
 
+// A pixel's colour so far, and the local term of its current hit summed over the lights shaded
+// so far: added to the colour, times the path weight, after the last light, as the CPU does.
+struct Accum {
+    colour: vec4<f32>,
+    local: vec4<f32>,
+}
+
 struct Aov {
     normal: vec4<f32>,
     t: f32,
@@ -91,7 +98,7 @@ struct Pass {
 @group(0) @binding(7) var<storage, read> input_index: array<u32>;
 @group(0) @binding(8) var<storage, read_write> paths: array<PathRay>;
 @group(0) @binding(9) var<storage, read_write> hits: array<HitRec>;
-@group(0) @binding(10) var<storage, read_write> accum: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read_write> accum: array<Accum>;
 @group(0) @binding(11) var<storage, read_write> aovs: array<Aov>;
 @group(0) @binding(12) var<storage, read_write> image: array<u32>;
 // Ray counts, finished invocations, faults and live paths per bounce, at the SLOT_* words the
@@ -118,6 +125,38 @@ fn fault(bit: u32) {
 // Work done by the current invocation's rays, for the cost AOV.
 var<private> cost_nodes: u32;
 var<private> cost_tris: u32;
+
+// Vector arithmetic in tracer-cpu's operation order (wide.rs `V3`): the builtins dot(), cross(),
+// length() and normalize() (see unit()) leave the order and the rounding to the driver, so an --exact kernel
+// (no_contraction.rs refuses them) could not round as the CPU does.
+fn dot3(a: vec3<f32>, b: vec3<f32>) -> f32 {
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+fn cross3(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y);
+}
+
+fn length3(v: vec3<f32>) -> f32 {
+    return sqrt(dot3(v, v));
+}
+
+// tracer-cpu's V3::normalize: one division, then three products (lavapipe's normalize() differs in
+// the last bit for a third of the inputs: tests/tests/wgsl_functions.rs).
+fn unit(v: vec3<f32>) -> vec3<f32> {
+    return v * (1.0 / length3(v));
+}
+
+fn is_finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
+}
+
+// glam's try_normalize: the unit vector where the inverse length is finite and positive, else
+// `fallback`.
+fn normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
+    let rcp = 1.0 / length3(v);
+    return select(fallback, v * rcp, is_finite(rcp) && rcp > 0.0);
+}
 
 struct Ray {
     o: vec3<f32>,
@@ -246,13 +285,9 @@ fn vertex_normal(i: u32) -> vec3<f32> {
 fn surface_at(r: Ray, h: HitRec) -> Surface {
     let tri = tris[h.tri];
     let point = r.o + h.t * r.d;
-    let raw = cross(tri.p1 - tri.p0, tri.p2 - tri.p0);
-    let len = length(raw);
-    var ng = -r.d;
-    if len > 0.0 && len <= F32_MAX {
-        ng = raw / len;
-    }
-    let front = dot(r.d, ng) < 0.0;
+    // A degenerate (zero-area) triangle has no normal of its own: face the ray.
+    let ng = normalize_or(cross3(tri.p1 - tri.p0, tri.p2 - tri.p0), -r.d);
+    let front = dot3(r.d, ng) < 0.0;
     let geometric = select(-ng, ng, front);
     var shading = geometric;
 //#if SMOOTH
@@ -261,13 +296,10 @@ fn surface_at(r: Ray, h: HitRec) -> Surface {
         let n0 = vertex_normal(normal_indices[ni]);
         let n1 = vertex_normal(normal_indices[ni + 1u]);
         let n2 = vertex_normal(normal_indices[ni + 2u]);
-        let interp = (1.0 - h.u - h.v) * n0 + h.u * n1 + h.v * n2;
-        let il = length(interp);
-        if il > 0.0 && il <= F32_MAX {
-            shading = interp / il;
-            if dot(shading, geometric) < 0.0 {
-                shading = -shading;
-            }
+        let interp = n0 * (1.0 - h.u - h.v) + n1 * h.u + n2 * h.v;
+        let s = normalize_or(interp, vec3<f32>(0.0));
+        if any(s != vec3<f32>(0.0)) {
+            shading = select(s, -s, dot3(s, geometric) < 0.0);
         }
     }
 //#endif
@@ -279,20 +311,87 @@ fn material_of(tri: u32) -> Material {
 }
 
 fn reflect_dir(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
-    return d - 2.0 * dot(d, n) * n;
+    return d - n * (2.0 * dot3(d, n));
+}
+
+// Refraction of the unit d through a surface with unit normal n facing the incoming ray, for the
+// ratio eta of the indices (incoming side over far side); w = 0 on total internal reflection.
+fn refract_dir(d: vec3<f32>, n: vec3<f32>, eta: f32) -> vec4<f32> {
+    let cos_i = -dot3(d, n);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if k < 0.0 {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(unit(eta * d + (eta * cos_i - sqrt(k)) * n), 1.0);
+}
+
+// render_spec::power::phong_pow, operation for operation (see there why pow() is not used).
+fn phong_pow(x_in: f32, n: f32) -> f32 {
+    if !(x_in > 0.0) {
+        return 0.0;
+    }
+    var x = x_in;
+    var e = 0i;
+    if x < 1.17549435e-38f {
+        x *= 18446744073709551616.0f;
+        e = -64i;
+    }
+    let bits = bitcast<u32>(x);
+    e += i32(bits >> 23u) - 127i;
+    var m = bitcast<f32>((bits & 0x007fffffu) | 0x3f800000u);
+    if m > 1.4142135f {
+        m *= 0.5;
+        e += 1i;
+    }
+    let t = m - 1.0;
+    var p = POW_LOG2_8;
+    p = p * t + POW_LOG2_7;
+    p = p * t + POW_LOG2_6;
+    p = p * t + POW_LOG2_5;
+    p = p * t + POW_LOG2_4;
+    p = p * t + POW_LOG2_3;
+    p = p * t + POW_LOG2_2;
+    p = p * t + POW_LOG2_1;
+    p = p * t + POW_LOG2_0;
+    let y = n * (t * p + f32(e));
+    if y == 0.0 {
+        return 1.0;
+    }
+    if y < -150.0 {
+        return 0.0;
+    }
+    if y > 128.0 {
+        return bitcast<f32>(0x7f800000u);
+    }
+    let fi = floor(y + 0.5);
+    let f = y - fi;
+    var q = POW_EXP2_6;
+    q = q * f + POW_EXP2_5;
+    q = q * f + POW_EXP2_4;
+    q = q * f + POW_EXP2_3;
+    q = q * f + POW_EXP2_2;
+    q = q * f + POW_EXP2_1;
+    q = q * f + POW_EXP2_0;
+    var a = i32(fi);
+    var b = 0i;
+    if a < -126i {
+        a += 64i;
+        b = -64i;
+    }
+    return q * bitcast<f32>(u32(a + 127i) << 23u) * bitcast<f32>(u32(b + 127i) << 23u);
 }
 
 // kd cos(theta) + ks cos(phi)^n for a light in direction l; zero when the light is behind.
 fn phong(m: Material, s: Surface, d: vec3<f32>, l: vec3<f32>) -> vec3<f32> {
-    let cos_t = dot(s.shading, l);
+    let cos_t = dot3(s.shading, l);
     if cos_t <= 0.0 {
         return vec3<f32>(0.0);
     }
     let r = reflect_dir(-l, s.shading);
-    let cos_p = max(dot(r, -d), 0.0);
+    let cos_p = max(dot3(r, -d), 0.0);
     var spec = 1.0;
     if m.kd_n.w > 0.0 {
-        spec = pow(cos_p, m.kd_n.w);
+        spec = phong_pow(cos_p, m.kd_n.w);
     }
     return m.kd_n.xyz * cos_t + m.ks_kr.xyz * spec;
 }
@@ -316,5 +415,5 @@ fn to_rgba8(c: vec3<f32>) -> u32 {
 }
 
 fn primary_dir(x: u32, y: u32) -> vec3<f32> {
-    return normalize(frame.top_left.xyz + (f32(x) + 0.5) * frame.h_step.xyz + (f32(y) + 0.5) * frame.v_step.xyz);
+    return unit(frame.top_left.xyz + (f32(x) + 0.5) * frame.h_step.xyz + (f32(y) + 0.5) * frame.v_step.xyz);
 }

@@ -41,7 +41,7 @@ fn stage_cast(x: u32, y: u32, valid: bool) {
     var c = frame.background.xyz;
     if record_primary(p, r, h) {
         let s = surface_at(r, h);
-        c = material_of(h.tri).kd_n.xyz * max(dot(s.shading, -r.d), 0.0);
+        c = material_of(h.tri).kd_n.xyz * max(dot3(s.shading, -r.d), 0.0);
     }
     image[p] = to_rgba8(c);
     count(SLOT_FINISHED);
@@ -58,7 +58,7 @@ fn stage_primary(x: u32, y: u32, valid: bool) {
     hits[p] = h;
     let alive = record_primary(p, r, h);
     paths[p] = PathRay(vec4<f32>(r.o, 1.0), vec4<f32>(r.d, select(0.0, 1.0, alive)));
-    accum[p] = select(vec4<f32>(frame.background.xyz, 0.0), vec4<f32>(0.0), alive);
+    accum[p].colour = select(vec4<f32>(frame.background.xyz, 0.0), vec4<f32>(0.0), alive);
     count(SLOT_FINISHED);
 }
 
@@ -82,22 +82,19 @@ fn stage_shade(x: u32, y: u32, valid: bool) {
         let m = material_of(h.tri);
         if pass_info.light == 0u {
             add = frame.ambient.xyz * m.kd_n.xyz;
+        } else {
+            add = accum[p].local.xyz;
         }
         if pass_info.light < frame.size.z {
             let light = lights[pass_info.light];
             colour = light.colour.xyz;
-            let to = light.position.xyz - s.point;
-            let tl = length(to);
-            var l = vec3<f32>(0.0);
-            if tl > 0.0 {
-                l = to / tl;
-            }
+            let l = normalize_or(light.position.xyz - s.point, vec3<f32>(0.0));
             term = phong(m, s, r.d, l);
             if any(term != vec3<f32>(0.0)) {
-                let side = select(-s.geometric, s.geometric, dot(s.geometric, l) >= 0.0);
+                let side = select(-s.geometric, s.geometric, dot3(s.geometric, l) >= 0.0);
                 let o = offset_origin(s.point, side);
                 shadow = make_ray(o, l);
-                shadow_t = length(light.position.xyz - o);
+                shadow_t = length3(light.position.xyz - o);
                 wants_shadow = true;
             }
         }
@@ -115,7 +112,12 @@ fn stage_shade(x: u32, y: u32, valid: bool) {
             add += colour * term;
         }
     }
-    accum[p] += vec4<f32>(path.origin.w * add, 0.0);
+    // The hit's local term is complete after the last light (one pass when there is none).
+    if pass_info.light + 1u >= max(frame.size.z, 1u) {
+        accum[p].colour += vec4<f32>(add * path.origin.w, 0.0);
+    } else {
+        accum[p].local = vec4<f32>(add, 0.0);
+    }
     aovs[p].nodes += cost_nodes;
     aovs[p].tris += cost_tris;
 }
@@ -146,10 +148,9 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
 //#if REFRACTION
         if m.kt_ior.x > 0.0 {
             let eta = select(m.kt_ior.y, 1.0 / m.kt_ior.y, s.front);
-            let cos_i = -dot(r.d, s.shading);
-            let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
-            if k >= 0.0 {
-                dir = normalize(eta * r.d + (eta * cos_i - sqrt(k)) * s.shading);
+            let refracted = refract_dir(r.d, s.shading, eta);
+            if refracted.w != 0.0 {
+                dir = refracted.xyz;
                 same_side = false;
             } else {
                 // Total internal reflection.
@@ -179,7 +180,7 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
     aovs[p].nodes += cost_nodes;
     aovs[p].tris += cost_tris;
     if nh.tri == NO_TRIANGLE {
-        accum[p] += vec4<f32>(w * frame.background.xyz, 0.0);
+        accum[p].colour += vec4<f32>(frame.background.xyz * w, 0.0);
         paths[p].dir.w = 0.0;
         return;
     }
@@ -194,6 +195,6 @@ fn stage_convert(x: u32, y: u32, valid: bool) {
         return;
     }
     let p = pixel_index(x, y);
-    image[p] = to_rgba8(accum[p].xyz);
+    image[p] = to_rgba8(accum[p].colour.xyz);
     count(SLOT_FINISHED);
 }

@@ -81,6 +81,8 @@ pub struct Specialisation {
     pub refraction: bool,
     /// Some triangle has vertex normals (the others are shaded with their geometric normal).
     pub smooth: bool,
+    /// No float operation may be contracted with another (`--exact`, [`crate::no_contraction`]).
+    pub exact: bool,
 }
 
 /// Drops the lines between `//#if NAME` and `//#endif` when NAME is not enabled (no nesting).
@@ -176,19 +178,28 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
          \x20   {}(x, y, x < frame.tile.x + frame.tile.z && y < frame.tile.y + frame.tile.w);\n}}\n",
         stage.entry()
     );
+    format!(
+        "{}\n{}\n{}\n{}",
+        prelude(spec),
+        strip_features(traversal, &features),
+        strip_features(STAGES, &features),
+        entry
+    )
+}
+
+/// What every kernel starts with: the contract's constants, the counter slots, the per-scene
+/// constants, then common.wgsl (records, bindings, intersection and shading functions). Public so
+/// that a test can append its own entry point and call one shared function at a time.
+pub fn prelude(spec: &Specialisation) -> String {
     let counters: String = counters::WGSL.iter().map(|(name, v)| format!("const {name}: u32 = {v}u;\n")).collect();
     format!(
-        "{}{counters}const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n\
-         {}\n{}\n{}\n{}",
+        "{}{counters}const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n{}",
         render_spec::constants::wgsl_header(),
         spec.stack_size.max(1),
         spec.leaf_size.max(1),
         spec.workgroup.0,
         spec.workgroup.1,
         COMMON,
-        strip_features(traversal, &features),
-        strip_features(STAGES, &features),
-        entry
     )
 }
 
@@ -202,11 +213,12 @@ pub fn sst_shared_bytes(spec: &Specialisation) -> u64 {
 /// Translates one kernel to SPIR-V.
 pub fn compile(stage: Stage, spec: &Specialisation) -> Result<Vec<u32>, VkError> {
     let label = format!("{} {:?} kernel", spec.method.name(), stage);
-    if spec.method == Method::SstSubgroup {
-        shader::translate_with_subgroups(&source(stage, spec), &label, &[])
+    let words = if spec.method == Method::SstSubgroup {
+        shader::translate_with_subgroups(&source(stage, spec), &label, &[])?
     } else {
-        shader::translate(&source(stage, spec), &label, &[])
-    }
+        shader::translate(&source(stage, spec), &label, &[])?
+    };
+    if spec.exact { crate::no_contraction::forbid_contraction(&words, &label) } else { Ok(words) }
 }
 
 #[cfg(test)]
@@ -216,7 +228,7 @@ mod tests {
     fn spec(method: Method, reflection: bool, refraction: bool) -> Specialisation {
         // Smooth normals with reflection, so that both settings of each feature translate.
         let smooth = reflection;
-        Specialisation { method, stack_size: 23, leaf_size: 8, workgroup: (8, 8), reflection, refraction, smooth }
+        Specialisation { method, stack_size: 23, leaf_size: 8, workgroup: (8, 8), reflection, refraction, smooth, exact: false }
     }
 
     #[test]

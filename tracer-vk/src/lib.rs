@@ -3,6 +3,7 @@
 //! - [`device`]: the Vulkan device layer (ash): devices, buffers, compute pipelines, recording
 //!   dispatches and reading back GPU timestamps.
 //! - [`shader`]: WGSL kernels to SPIR-V with naga, overrides resolved in the program.
+//! - [`no_contraction`]: the `--exact` pass, SPIR-V whose float operations may not be fused.
 //! - [`error`]: [`VkError`], one sentence per failure.
 //!
 //! The kernels and the traversals are built on top of these.
@@ -10,6 +11,7 @@
 pub mod device;
 pub mod error;
 pub mod kernels;
+pub mod no_contraction;
 pub mod render;
 pub mod shader;
 pub mod tiles;

@@ -162,13 +162,13 @@ const BINDING_NAMES: [&str; 14] = [
     "counters",
 ];
 
-const BINDINGS: u32 = BINDING_NAMES.len() as u32;
+pub(crate) const BINDINGS: u32 = BINDING_NAMES.len() as u32;
 
-/// Bytes per pixel of the per-pixel buffers: `PathRay`, `HitRec`, the accumulated colour, `Aov`
+/// Bytes per pixel of the per-pixel buffers: `PathRay`, `HitRec`, `Accum`, `Aov`
 /// and the packed RGBA8 image of common.wgsl (a test holds them to naga's layout).
 const PATH_BYTES: u64 = 32;
 const HIT_BYTES: u64 = 16;
-const ACCUM_BYTES: u64 = 16;
+const ACCUM_BYTES: u64 = 32;
 const AOV_BYTES: u64 = 32;
 const IMAGE_BYTES: u64 = 4;
 
@@ -264,6 +264,7 @@ impl<'g> Renderer<'g> {
             reflection: scene.materials.iter().any(|m| m.kr > 0.0),
             refraction: scene.materials.iter().any(|m| m.kt > 0.0),
             smooth: !scene.normals.is_empty(),
+            exact: false,
         };
         let info = gpu.info();
         let (wx, wy) = workgroup;
@@ -312,6 +313,15 @@ impl<'g> Renderer<'g> {
 
     pub fn specialisation(&self) -> &Specialisation {
         &self.spec
+    }
+
+    /// Builds the kernels without contracting any float operations (`--exact`): on a GPU whose
+    /// compiler fuses multiply-adds, the images then equal the CPU tracer's.
+    pub fn set_exact(&mut self, exact: bool) {
+        if self.spec.exact != exact {
+            self.spec.exact = exact;
+            self.pipelines.clear();
+        }
     }
 
     /// Renders in tiles of at most `pixels` pixels (at least one workgroup's), below what the
@@ -670,6 +680,7 @@ mod tests {
             reflection: false,
             refraction: false,
             smooth: true,
+            exact: false,
         }
     }
 
@@ -735,6 +746,7 @@ mod layout_contract {
             reflection: true,
             refraction: true,
             smooth: true,
+            exact: false,
         };
         naga::front::wgsl::parse_str(&kernels::source(Stage::Bounce, &spec)).expect("the kernel parses")
     }

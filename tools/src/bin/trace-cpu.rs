@@ -171,6 +171,7 @@ impl Bench for CpuBench {
             lights: f.lights.clone(),
             max_indirections: f.max_indirections,
             aovs: false,
+            accuracy: render_spec::Accuracy::default(),
         };
         let t0 = Instant::now();
         let image = self.pool.install(|| tracer_cpu::render(tracer, &settings, *method)).map_err(|e| e.to_string())?;

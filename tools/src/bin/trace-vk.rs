@@ -61,6 +61,9 @@ struct BenchArgs {
     /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
     #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
     workgroup: (u32, u32),
+    /// Time the bit-exact kernels (`render --exact`: no fused multiply-adds).
+    #[arg(long)]
+    exact: bool,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -130,6 +133,7 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let method = method_of(method);
     let gpu = open(device)?;
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
+    renderer.set_exact(args.exact);
     let pixels = u64::from(settings.width) * u64::from(settings.height);
     let bar = Progress::new(pixels, "rendering {bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
     let out = bar
@@ -142,11 +146,12 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let written = outputs.write(image, args.heatmap_max)?;
     let r = image.rays;
     let lines = vec![format!(
-        "{}x{} {:?} with {} on {}: {} GPU{}, rays: {} primary, {} shadow, {} secondary ({}) -> {}",
+        "{}x{} {:?} with {}{} on {}: {} GPU{}, rays: {} primary, {} shadow, {} secondary ({}) -> {}",
         image.width,
         image.height,
         settings.mode,
         method.name(),
+        if args.exact { " (exact)" } else { "" },
         gpu.info().name,
         duration(out.gpu_ms / 1e3),
         loaded.timing_note(),
@@ -175,6 +180,7 @@ fn method_of(m: MethodArg) -> Method {
 struct VkBench {
     gpu: Gpu,
     workgroup: (u32, u32),
+    exact: bool,
 }
 
 impl Bench for VkBench {
@@ -191,14 +197,18 @@ impl Bench for VkBench {
 
     fn timing(&self) -> String {
         format!(
-            "a frame's time is the GPU time of its passes from timestamp queries (workgroup {}x{})",
-            self.workgroup.0, self.workgroup.1
+            "a frame's time is the GPU time of its passes from timestamp queries (workgroup {}x{}{})",
+            self.workgroup.0,
+            self.workgroup.1,
+            if self.exact { ", exact kernels: no fused multiply-adds" } else { "" }
         )
     }
 
     fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<Renderer<'a>, String> {
         let method = MethodArg::from_str(method, false).map_err(|e| format!("{method:?}: {e}"))?;
-        Renderer::new(&self.gpu, scene, method_of(method), self.workgroup).map_err(|e| e.to_string())
+        let mut r = Renderer::new(&self.gpu, scene, method_of(method), self.workgroup).map_err(|e| e.to_string())?;
+        r.set_exact(self.exact);
+        Ok(r)
     }
 
     fn frame(&self, r: &mut Renderer<'_>, f: &FrameSpec) -> Result<Timed, String> {
@@ -210,6 +220,7 @@ impl Bench for VkBench {
             lights: f.lights.clone(),
             max_indirections: f.max_indirections,
             aovs: false,
+            accuracy: render_spec::Accuracy::default(),
         };
         let out = r.render_frame(&settings, false).map_err(|e| e.to_string())?;
         let rays = out.image.rays;
@@ -223,7 +234,7 @@ impl Bench for VkBench {
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
     let methods: Vec<&str> = b.methods.iter().map(|&m| method_of(m).name()).collect();
-    let bench = VkBench { gpu: open(&b.device)?, workgroup: b.workgroup };
+    let bench = VkBench { gpu: open(&b.device)?, workgroup: b.workgroup, exact: b.exact };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;
     Ok(())
 }
