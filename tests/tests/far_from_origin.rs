@@ -31,6 +31,7 @@ fn settings(scene: &SceneFile) -> Settings {
         lights: scene.lights.clone(),
         max_indirections: scene.settings.max_indirections,
         aovs: true,
+        accuracy: Default::default(),
     }
 }
 

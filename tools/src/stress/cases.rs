@@ -49,6 +49,7 @@ pub fn shot(scene: &SceneFile, cam: CameraSpec, w: u32, h: u32) -> Settings {
         lights: scene.lights.clone(),
         max_indirections: scene.settings.max_indirections,
         aovs: true,
+        accuracy: Default::default(),
     }
 }
 
