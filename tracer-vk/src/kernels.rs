@@ -228,7 +228,16 @@ mod tests {
     fn spec(method: Method, reflection: bool, refraction: bool) -> Specialisation {
         // Smooth normals with reflection, so that both settings of each feature translate.
         let smooth = reflection;
-        Specialisation { method, stack_size: 23, leaf_size: 8, workgroup: (8, 8), reflection, refraction, smooth, exact: false }
+        Specialisation {
+            method,
+            stack_size: 23,
+            leaf_size: 8,
+            workgroup: (8, 8),
+            reflection,
+            refraction,
+            smooth,
+            exact: false,
+        }
     }
 
     #[test]

@@ -71,7 +71,9 @@ pub fn forbid_contraction(spirv: &[u32], label: &str) -> Result<Vec<u32>, VkErro
     let mut done: HashSet<Word> = module
         .annotations
         .iter()
-        .filter(|i| i.class.opcode == Op::Decorate && i.operands.get(1) == Some(&Operand::Decoration(Decoration::NoContraction)))
+        .filter(|i| {
+            i.class.opcode == Op::Decorate && i.operands.get(1) == Some(&Operand::Decoration(Decoration::NoContraction))
+        })
         .filter_map(|i| i.operands.first().and_then(Operand::id_ref_any))
         .collect();
     let mut added = Vec::new();
@@ -85,13 +87,20 @@ pub fn forbid_contraction(spirv: &[u32], label: &str) -> Result<Vec<u32>, VkErro
                 inst.result_id.unwrap_or(0)
             )));
         }
-        if float && op == Op::ExtInst && let Some(gl) = compound_gl(inst, &glsl) {
+        if float
+            && op == Op::ExtInst
+            && let Some(gl) = compound_gl(inst, &glsl)
+        {
             return Err(fail(format!(
                 "error: GLSL.std.450 {gl:?} (%{}) rounds inside the driver, so --exact cannot hold it to the CPU's; spell it out in common.wgsl's helpers",
                 inst.result_id.unwrap_or(0)
             )));
         }
-        if float && is_decorated_arithmetic(op) && let Some(id) = inst.result_id && done.insert(id) {
+        if float
+            && is_decorated_arithmetic(op)
+            && let Some(id) = inst.result_id
+            && done.insert(id)
+        {
             added.push(Instruction::new(
                 Op::Decorate,
                 None,
@@ -125,7 +134,8 @@ fn float_types(globals: &[Instruction]) -> HashSet<Word> {
 
 /// The GLSL.std.450 instruction of an `OpExtInst`, where it is one made of several roundings.
 fn compound_gl(inst: &Instruction, glsl: &HashSet<Word>) -> Option<GlslStd450Op> {
-    let (Some(Operand::IdRef(set)), Some(Operand::LiteralExtInstInteger(n))) = (inst.operands.first(), inst.operands.get(1))
+    let (Some(Operand::IdRef(set)), Some(Operand::LiteralExtInstInteger(n))) =
+        (inst.operands.first(), inst.operands.get(1))
     else {
         return None;
     };
@@ -270,7 +280,8 @@ mod tests {
             gpu.run(|rec| rec.dispatch(&p, &[&buf], &[0; kernels::PASS_BYTES as usize], [(N / 64) as u32, 1, 1]))
                 .unwrap();
             let out: Vec<[f32; 4]> = gpu.download_as(&buf).unwrap();
-            differ[k] = out.iter().zip(&input).filter(|(o, x)| o[3].to_bits() != (x[0] * x[1] + x[2]).to_bits()).count();
+            differ[k] =
+                out.iter().zip(&input).filter(|(o, x)| o[3].to_bits() != (x[0] * x[1] + x[2]).to_bits()).count();
         }
         println!(
             "{}: a * b + c differs from the CPU's on {} of {N} inputs without NoContraction, {} with (a fused multiply-add would differ on {fused})",

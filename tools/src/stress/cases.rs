@@ -212,7 +212,9 @@ pub fn all(extent: Extent) -> Vec<Case> {
     let mut coplanar = scenes::grid(4);
     coplanar.extend(scenes::grid(4).into_iter().map(|t| t.map(|p| p + Vec3::new(0.5, 0.25, 0.0))));
     let needle_counts: &[u32] = if quick { &[1000] } else { &[1000, 10000] };
-    let mut geometry: Vec<(String, Vec<[Vec3; 3]>, [f32; 3], f32)> = vec![
+    // Name, triangles, the point the camera looks down at, and its height above it.
+    type Shape = (String, Vec<[Vec3; 3]>, [f32; 3], f32);
+    let mut geometry: Vec<Shape> = vec![
         ("zero-area triangles".to_owned(), zero_area, [3.0, 3.0, 0.0], 6.0),
         ("duplicates x8".to_owned(), duplicates, [2.0, 2.0, 0.0], 4.0),
         ("coplanar overlap".to_owned(), coplanar, [2.2, 2.1, 0.0], 4.0),

@@ -146,7 +146,8 @@ pub fn closed_box(n: u32) -> Vec<[Vec3; 3]> {
     let s = n as f32;
     let mut out = Vec::new();
     // Each face as the grid mapped by (u, v) -> point, with the winding facing inward.
-    let faces: [(fn(f32, f32, f32) -> Vec3, bool); 6] = [
+    type Face = fn(f32, f32, f32) -> Vec3;
+    let faces: [(Face, bool); 6] = [
         (|u, v, _| Vec3::new(u, v, 0.0), false),
         (|u, v, s| Vec3::new(u, v, s), true),
         (|u, v, _| Vec3::new(0.0, u, v), false),
