@@ -42,11 +42,13 @@ pub const R2_STEP_X: u32 = 0xC13F_A9A9;
 pub const R2_STEP_Y: u32 = 0x91E1_0DA6;
 
 /// Coefficients of the log2 of a mantissa in [sqrt(1/2), sqrt(2)): `log2(1 + t) = t * P(t)` with
-/// `P(t) = sum POW_LOG2[k] t^k` (see [`crate::power`]).
-#[allow(clippy::excessive_precision)]
+/// `P(t) = sum POW_LOG2[k] t^k` (see [`crate::power`]). Fitted values: the leading ones are near
+/// log2(e) and ln(2) but not equal to them, so clippy's suggestion of the constants would be wrong.
+#[allow(clippy::excessive_precision, clippy::approx_constant)]
 pub const POW_LOG2: [f32; 9] =
     [1.442695, -0.72134745, 0.48091075, -0.36069328, 0.28790325, -0.23916988, 0.21607822, -0.20586188, 0.12310968];
 /// Coefficients of `2^f = sum POW_EXP2[k] f^k` for `|f| <= 1/2` (see [`crate::power`]).
+#[allow(clippy::approx_constant)]
 pub const POW_EXP2: [f32; 7] = [1.0, 0.6931472, 0.2402265, 0.05550327, 0.009618057, 0.0013400428, 0.00015461445];
 
 /// A constant's value, typed as the kernels declare it.

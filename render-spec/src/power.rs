@@ -13,9 +13,10 @@
 use crate::constants::{POW_EXP2, POW_LOG2};
 
 /// `x^n` for a clamped cosine `x` (0 where `x` is 0, negative or NaN) and an exponent `n > 0`.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
 pub fn phong_pow(x: f32, n: f32) -> f32 {
-    // `!(x > 0)` also sends NaN to 0.
-    if !(x > 0.0) {
+    // Written so that NaN also gives 0.
+    if x.is_nan() || x <= 0.0 {
         return 0.0;
     }
     let y = n * log2(x);

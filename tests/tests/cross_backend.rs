@@ -8,7 +8,7 @@ mod common;
 
 use bvh_format::SceneFile;
 use common::{compile, gpu};
-use render_spec::{CameraSpec, Mode, Settings};
+use render_spec::{Accuracy, CameraSpec, Intersect, Mode, Offset, Settings};
 use tracer_cpu::{Method, Tracer};
 use tracer_vk::Gpu;
 use tracer_vk::kernels::Method as VkMethod;
@@ -187,6 +187,7 @@ fn exact_kernels_equal_the_cpu_bit_for_bit() {
             lights: scene.lights.clone(),
             max_indirections: scene.settings.max_indirections,
             aovs: false,
+            accuracy: Accuracy::default(),
         };
         let cpu = tracer_cpu::render(&Tracer::new(&scene), &settings, Method::Ordered).expect("the CPU renders");
         let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the scene uploads");
@@ -198,6 +199,83 @@ fn exact_kernels_equal_the_cpu_bit_for_bit() {
         println!("{what}: {differ} pixels differ from the CPU's under --exact");
         assert_eq!(exact.rays, cpu.rays, "{what}: ray counts");
         assert_eq!(differ, 0, "{what}: pixels differ under --exact");
+    }
+    let messages = gpu.validation_messages();
+    assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
+}
+
+/// The accuracy settings on the GPU give the CPU's image bit for bit (exact kernels; every AOV
+/// too): Möller-Trumbore, a fixed origin offset, 4 samples per pixel, a cutoff of 0 (every
+/// bounce up to the limit) and of 100, and all four at once. Each setting must also change the image or its
+/// ray counts from the default's somewhere, so that a GPU ignoring it cannot pass.
+#[test]
+fn accuracy_settings_equal_the_cpu_bit_for_bit() {
+    let gpu = gpu();
+    let scene = compile("room.toml");
+    let cam = CameraSpec::from(scene.camera("close-up").expect("the camera exists"));
+    let tracer = Tracer::new(&scene);
+    let settings = |accuracy: Accuracy| Settings {
+        width: 96,
+        height: 72,
+        camera: cam,
+        mode: Mode::Whitted,
+        lights: scene.lights.clone(),
+        max_indirections: scene.settings.max_indirections,
+        aovs: true,
+        accuracy,
+    };
+    let default =
+        tracer_cpu::render(&tracer, &settings(Accuracy::default()), Method::Ordered).expect("the CPU renders");
+    let mt = Accuracy { intersect: Intersect::MollerTrumbore, ..Default::default() };
+    let offset = Accuracy { offset: Offset::Fixed(1e-2), ..Default::default() };
+    let spp = Accuracy { spp: 4, ..Default::default() };
+    let cutoff = Accuracy { cutoff: 0.0, ..Default::default() };
+    let high_cutoff = Accuracy { cutoff: 100.0, ..Default::default() };
+    let all = Accuracy { intersect: Intersect::MollerTrumbore, offset: Offset::Fixed(1e-3), spp: 9, cutoff: 0.0 };
+    for (name, a, method) in [
+        ("Möller-Trumbore", mt, VkMethod::Lst),
+        ("fixed offset 1e-2", offset, VkMethod::Stackless),
+        ("4 spp", spp, VkMethod::Sst),
+        ("cutoff 0", cutoff, VkMethod::Lst),
+        ("cutoff 100", high_cutoff, VkMethod::Lst),
+        ("all four", all, VkMethod::SstSubgroup),
+    ] {
+        let s = settings(a);
+        // The CPU traversal that counts nodes as the GPU's does.
+        let cpu_method = if method == VkMethod::Stackless { Method::Stackless } else { Method::Ordered };
+        let cpu = tracer_cpu::render(&tracer, &s, cpu_method).expect("the CPU renders");
+        let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the scene uploads");
+        r.set_exact(true);
+        let out = r.render(&s).expect("the GPU renders").image;
+        let changed = differing_pixels(&cpu, &default);
+        let t_bits = |i: &render_spec::Image| -> Vec<u32> {
+            i.aov.as_ref().expect("AOVs").t.iter().map(|t| t.to_bits()).collect()
+        };
+        let moved = t_bits(&cpu) != t_bits(&default);
+        let what = format!("{name} ({})", method.name());
+        println!(
+            "{what}: {} pixels differ from the CPU's; the setting changes {changed} pixels, distances: {moved}, rays {:?} -> {:?}",
+            differing_pixels(&out, &cpu),
+            default.rays,
+            cpu.rays
+        );
+        // Here every chain of the default stop is worth tracing: a cutoff of 0 changes nothing
+        // (a cutoff of 100, which stops every secondary ray, shows the cutoff reaches the kernels).
+        assert!(
+            name == "cutoff 0" || changed > 0 || cpu.rays != default.rays || moved,
+            "{what}: the setting must change the image, the rays or the distances"
+        );
+        assert_eq!(out.rays, cpu.rays, "{what}: ray counts");
+        assert_eq!(differing_pixels(&out, &cpu), 0, "{what}: pixels differ");
+        let (g, c) = (out.aov.as_ref().expect("AOVs"), cpu.aov.as_ref().expect("AOVs"));
+        assert!(g.t.iter().zip(&c.t).all(|(a, b)| a.to_bits() == b.to_bits()), "{what}: distances");
+        assert_eq!(g.prim, c.prim, "{what}: triangles");
+        // SST walks one path for its whole workgroup, so its cost is its own.
+        if matches!(method, VkMethod::Lst | VkMethod::Stackless) {
+            let off = |a: &[u32], b: &[u32]| a.iter().zip(b).filter(|(x, y)| x != y).count();
+            assert_eq!(off(&g.nodes, &c.nodes), 0, "{what}: pixels whose nodes visited differ");
+            assert_eq!(off(&g.tris, &c.tris), 0, "{what}: pixels whose triangles tested differ");
+        }
     }
     let messages = gpu.validation_messages();
     assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");

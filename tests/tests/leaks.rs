@@ -10,6 +10,9 @@
 //! - Closed meshes (sphere, torus) and a grid at the origin, seen from eyes at distances 1 to
 //!   100: rays from the eye aimed at the midpoint of every shared edge and at every shared
 //!   vertex, traced through the CPU tracer's traversals.
+//! - Issue 8's `--intersect`: closed meshes (sphere, torus, the toy car's glass) from eyes all
+//!   around, over a million rays through the CPU tracer with the watertight test and with
+//!   Möller-Trumbore, counting the leaks of each.
 //!
 //! Asserted: 0 leaks at edges with the default test on every path; leaks at vertices counted and
 //! bounded; the same rays through the pair (or fan) of triangles at the target with the old
@@ -199,7 +202,10 @@ fn camera_grids_aimed_at_shared_edges_and_vertices_leak_nowhere_on_either_tracer
     const N: u32 = 96;
     let gpu = gpu();
     let (mut mt_edges, mut mt_vertices) = (0, 0);
-    println!("distance | aim | pixels | leaks: default (CPU and GPU) | Moller-Trumbore");
+    let mut gpu_mt_total = [0; 2];
+    println!(
+        "distance | aim | pixels | leaks: default (CPU and GPU) | Moller-Trumbore (local CPU, GPU --intersect mt)"
+    );
     for aim in [Aim::Edges, Aim::Vertices] {
         for distance in DISTANCES {
             let (scene, cam, aimed) = camera_grid(N, distance, aim);
@@ -229,8 +235,25 @@ fn camera_grids_aimed_at_shared_edges_and_vertices_leak_nowhere_on_either_tracer
                 }
             }
             let mt = local_leaks(&scene, cam, N, &fans, intersect_moller_trumbore);
+            // The same rays on the GPU with its Möller-Trumbore kernel (`--intersect mt`).
+            let mut r = Renderer::new(&gpu, &scene, VkMethod::Lst, (8, 8)).expect("the grid uploads");
+            let mt_settings = Settings {
+                accuracy: render_spec::Accuracy {
+                    intersect: render_spec::Intersect::MollerTrumbore,
+                    ..Default::default()
+                },
+                ..cast_settings(cam, N)
+            };
+            let out = r.render(&mt_settings).expect("the GPU renders with Moller-Trumbore").image;
+            let gpu_mt = misses(&out.aov.expect("AOVs were asked for").prim);
+            gpu_mt_total[usize::from(aim == Aim::Vertices)] += gpu_mt;
             let ours_local = local_leaks(&scene, cam, N, &fans, intersect);
-            println!("{distance} | {aim:?} | {} | CPU {leaks} GPU {gpu_leaks:?} (local {ours_local}) | {mt}", N * N);
+            println!(
+                "{distance} | {aim:?} | {} | CPU {leaks} GPU {gpu_leaks:?} (local {ours_local}) | {mt}, GPU {gpu_mt}",
+                N * N
+            );
+            // Not equal to the local count: a Möller-Trumbore distance off the plane can fall
+            // outside the leaf's box (beyond its slack), and the traversal then never tests it.
             assert!(ours_local >= leaks, "the local count misses leaks the tracer has");
             match aim {
                 Aim::Edges => {
@@ -249,6 +272,10 @@ fn camera_grids_aimed_at_shared_edges_and_vertices_leak_nowhere_on_either_tracer
     }
     assert!(mt_edges > 0, "Moller-Trumbore leaked at no shared edge: these rays do not test edges");
     assert!(mt_vertices > 0, "Moller-Trumbore leaked at no shared vertex: these rays do not test vertices");
+    assert!(
+        gpu_mt_total[0] > 0 && gpu_mt_total[1] > 0,
+        "the GPU's Moller-Trumbore kernel leaked at no shared edge or vertex ({gpu_mt_total:?}): is it the default test?"
+    );
     let messages = gpu.validation_messages();
     assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
 }
@@ -433,4 +460,201 @@ fn rays_aimed_at_shared_edges_and_vertices_of_closed_meshes_do_not_leak() {
     }
     assert!(mt_edges > 0, "Moller-Trumbore leaked at no shared edge: these rays do not test edges");
     assert!(mt_vertices > 0, "Moller-Trumbore leaked at no shared vertex: these rays do not test vertices");
+}
+
+/// Leaks of one triangle test through the whole CPU tracer, by kind of target.
+#[derive(Default, Debug, Clone, Copy)]
+struct TestLeaks {
+    edges: usize,
+    vertices: usize,
+    /// Rays on which the packet and the ordered traversal found different ones of two nearly
+    /// equally near hits.
+    near_ties: usize,
+}
+
+/// Rays from one eye aimed at each target of `t` that it sees from the front, traced through the
+/// ordered traversal and the AVX2 packets (which must agree bit for bit) with both triangle
+/// tests. Returns (edge rays, vertex rays, watertight leaks, Möller-Trumbore leaks). A ray
+/// counts only where the f64 test says it meets one of its target's triangles; it leaks when its
+/// closest hit is missing, or on another triangle farther than that (a grazing ray's distance to
+/// the right triangle may be off by more than rounding).
+fn leaks_from(scene: &SceneFile, tracer: &Tracer<'_>, t: &Targets, eye: Vec3) -> (usize, usize, TestLeaks, TestLeaks) {
+    use render_spec::Intersect;
+    let tris = tracer.triangles();
+    let nodes = scene.child_pair.as_deref().expect("the child-pair layout");
+    let (mut stack, mut pstack, mut cost) = (Stack::default(), Vec::new(), Cost::default());
+    let (mut n_edges, mut n_vertices) = (0, 0);
+    let (mut wt, mut mt) = (TestLeaks::default(), TestLeaks::default());
+    let edges = t.edges.iter().map(|(p, k)| (*p, &k[..], true));
+    let vertices = t.vertices.iter().map(|(p, k)| (*p, &k[..], false));
+    let mut batch: Vec<(Ray, f32, bool, &[usize])> = Vec::with_capacity(tracer_cpu::packet::LANES);
+    let mut flush = |batch: &mut Vec<(Ray, f32, bool, &[usize])>, stack: &mut Stack, pstack: &mut Vec<_>| {
+        for (test, leaks) in [(Intersect::Watertight, &mut wt), (Intersect::MollerTrumbore, &mut mt)] {
+            let mut p = tracer_cpu::packet::Rays::default();
+            let mut scalar = Vec::with_capacity(batch.len());
+            for (i, (ray, expected, edge, fan)) in batch.iter().enumerate() {
+                p.set(i, ray, f32::INFINITY);
+                let hit = tracer.closest_with(test, Method::Ordered, ray, 0.0, f32::INFINITY, stack, &mut cost);
+                scalar.push(hit);
+                if hit.is_none_or(|h| !fan.contains(&(h.tri as usize)) && h.t > expected * 1.001) {
+                    *(if *edge { &mut leaks.edges } else { &mut leaks.vertices }) += 1;
+                }
+            }
+            if tracer_cpu::packet::available() {
+                let res = match test {
+                    Intersect::Watertight => {
+                        tracer_cpu::packet::trace::<false, tracer_cpu::geometry::Watertight>(nodes, tris, &p, pstack)
+                    }
+                    Intersect::MollerTrumbore => {
+                        tracer_cpu::packet::trace::<false, tracer_cpu::geometry::MollerTrumbore>(
+                            nodes, tris, &p, pstack,
+                        )
+                    }
+                };
+                for (i, hit) in scalar.iter().enumerate() {
+                    // A triangle met at a grazing angle has a distance far less accurate than
+                    // its box's, which can then lie behind it by more than the traversal's
+                    // slack: which of two nearly equal hits at a shared vertex a traversal
+                    // finds can depend on its order (docs/shading.md promises the same
+                    // triangle; counted here, not hidden).
+                    if res.get(i) != *hit {
+                        let (a, b) = (res.get(i).map_or(f32::INFINITY, |h| h.t), hit.map_or(f32::INFINITY, |h| h.t));
+                        assert!((a - b).abs() <= 1e-5 * a.min(b), "{test:?}: not a near tie: packet {a}, ordered {b}");
+                        leaks.near_ties += 1;
+                    }
+                }
+            }
+        }
+        batch.clear();
+    };
+    for (target, fan, edge) in edges.chain(vertices) {
+        if !seen_from_one_side(tris, fan, eye.as_dvec3()) {
+            continue;
+        }
+        let ray = Ray::new(eye, (target - eye).normalize());
+        let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+        // The exact ray (as rounded to f32) must meet the target's own triangles: near a
+        // silhouette the rounding can carry it just past the target onto a neighbour behind.
+        let Some(expected) = fan.iter().filter_map(|&k| intersect64(&tris[k], o, d, 0.0)).map(|h| h.0).reduce(f64::min)
+        else {
+            continue;
+        };
+        *(if edge { &mut n_edges } else { &mut n_vertices }) += 1;
+        batch.push((ray, expected as f32, edge, fan));
+        if batch.len() == tracer_cpu::packet::LANES {
+            flush(&mut batch, &mut stack, &mut pstack);
+        }
+    }
+    flush(&mut batch, &mut stack, &mut pstack);
+    (n_edges, n_vertices, wt, mt)
+}
+
+/// `n` directions spread evenly over the sphere (a Fibonacci lattice).
+fn directions(n: usize) -> Vec<Vec3> {
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - (2.0 * i as f32 + 1.0) / n as f32;
+            let r = (1.0 - z * z).sqrt();
+            let a = golden * i as f32;
+            Vec3::new(r * a.cos(), z, r * a.sin())
+        })
+        .collect()
+}
+
+/// Issue 8, `--intersect`: over a million rays aimed exactly at the shared edges and vertices of
+/// closed meshes (a generated sphere and torus, and the glass of scenes/toycar.glb), from eyes
+/// all around them, traced through the whole CPU tracer (ordered traversal, and AVX2 packets that
+/// must find the same hits up to counted near ties) with each triangle test: the watertight test
+/// leaks at no edge and at under 1% of the vertices, Möller-Trumbore leaks at edges on the same
+/// rays, and at more vertices.
+#[test]
+fn moller_trumbore_leaks_through_the_tracer_where_the_watertight_test_does_not() {
+    // The toy car's glass is a closed shell (the bunny and the dragon have holes, through which a
+    // ray can see the inside of the surface at a grazing angle and pass out of it).
+    let glass = {
+        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/toycar.glb");
+        let car = bvh_build::import::load(&p, &Default::default()).expect("the toy car imports");
+        let glass = car.material_names.iter().position(|n| n == "Glass").expect("the toy car has glass") as u32;
+        let tris = (0..car.positions.len()).filter(|&k| car.material_ids[k] == glass).map(|k| car.positions[k]);
+        scene_of(tris.collect(), None)
+    };
+    let meshes = [
+        ("sphere", scene_of(shapes::sphere(Vec3::ZERO, 0.4, 96, 48).positions, None), 12),
+        ("torus", scene_of(shapes::torus(Vec3::ZERO, 0.3, 0.12, 128, 48).positions, None), 12),
+        ("toycar.glb glass", glass, 48),
+    ];
+    let workers = std::thread::available_parallelism().map_or(2, |n| n.get());
+    let (mut total, mut all_wt, mut all_mt) = (0, TestLeaks::default(), TestLeaks::default());
+    println!(
+        "mesh | open edges | eye distance | edge rays | vertex rays | leaks at edges, vertices: watertight | Möller-Trumbore"
+    );
+    for (name, scene, n_eyes) in &meshes {
+        let tracer = Tracer::new(scene);
+        let t = targets(tracer.triangles());
+        let open = {
+            let mut count: HashMap<([u32; 3], [u32; 3]), usize> = HashMap::new();
+            for tri in tracer.triangles() {
+                let v = tri.vertices().map(|p| p.map(f32::to_bits));
+                for e in 0..3 {
+                    let (a, b) = (v[e], v[(e + 1) % 3]);
+                    *count.entry((a.min(b), a.max(b))).or_default() += 1;
+                }
+            }
+            count.values().filter(|&&c| c != 2).count()
+        };
+        let (lo, hi) = scene.bounds();
+        let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+        let (centre, radius) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
+        for distance in [1.5, 4.0] {
+            let eyes: Vec<Vec3> = directions(*n_eyes).into_iter().map(|d| centre + d * radius * distance).collect();
+            let per_eye: Vec<(usize, usize, TestLeaks, TestLeaks)> = std::thread::scope(|s| {
+                let chunks: Vec<_> = eyes
+                    .chunks(eyes.len().div_ceil(workers))
+                    .map(|eyes| {
+                        let (scene, tracer, t) = (&scene, &tracer, &t);
+                        s.spawn(move || eyes.iter().map(|&eye| leaks_from(scene, tracer, t, eye)).collect::<Vec<_>>())
+                    })
+                    .collect();
+                chunks.into_iter().flat_map(|h| h.join().expect("a worker panicked")).collect()
+            });
+            let (mut e, mut v, mut wt, mut mt) = (0, 0, TestLeaks::default(), TestLeaks::default());
+            for (pe, pv, pw, pm) in per_eye {
+                (e, v) = (e + pe, v + pv);
+                (wt.edges, wt.vertices, mt.edges, mt.vertices) =
+                    (wt.edges + pw.edges, wt.vertices + pw.vertices, mt.edges + pm.edges, mt.vertices + pm.vertices);
+                (wt.near_ties, mt.near_ties) = (wt.near_ties + pw.near_ties, mt.near_ties + pm.near_ties);
+            }
+            println!(
+                "{name} | {open} | {distance} x radius | {e} | {v} | {}, {} ({} near ties) | {}, {} ({} near ties)",
+                wt.edges, wt.vertices, wt.near_ties, mt.edges, mt.vertices, mt.near_ties
+            );
+            assert!(e > t.edges.len() && v > t.vertices.len(), "{name}: too few targets in view ({e}, {v})");
+            assert_eq!(open, 0, "{name} is not closed");
+            // Rounded edge functions around a vertex need not meet on one line (docs/shading.md).
+            assert!(wt.vertices * 100 <= v, "{name} at {distance} x radius: {} of {v} vertex rays leaked", wt.vertices);
+            assert_eq!(
+                wt.edges, 0,
+                "{name} at {distance} x radius: {} edge rays leaked with the watertight test",
+                wt.edges
+            );
+            total += e + v;
+            (all_wt.edges, all_wt.vertices, all_mt.edges, all_mt.vertices) = (
+                all_wt.edges + wt.edges,
+                all_wt.vertices + wt.vertices,
+                all_mt.edges + mt.edges,
+                all_mt.vertices + mt.vertices,
+            );
+            (all_wt.near_ties, all_mt.near_ties) = (all_wt.near_ties + wt.near_ties, all_mt.near_ties + mt.near_ties);
+        }
+    }
+    println!("all: {total} rays; leaks at edges, vertices: watertight {all_wt:?}, Möller-Trumbore {all_mt:?}");
+    assert!(total >= 1_000_000, "only {total} rays");
+    assert!(all_mt.edges > 0, "Möller-Trumbore leaked at no shared edge: these rays do not test edges");
+    assert!(
+        all_mt.vertices > all_wt.vertices,
+        "at vertices Möller-Trumbore leaked {} times, the watertight test {}",
+        all_mt.vertices,
+        all_wt.vertices
+    );
 }

@@ -11,7 +11,8 @@ mod common;
 
 use bvh_format::{Material, Node, Triangle};
 use glam::Vec3;
-use render_spec::{BounceStop, CameraSpec, Frame};
+use render_spec::constants::STOP_CONTRIBUTION;
+use render_spec::{BounceStop, CameraSpec, Frame, Intersect};
 use tests::Rng;
 use tracer_cpu::geometry::{self, Ray};
 use tracer_cpu::shade::{self, Surface};
@@ -198,12 +199,17 @@ fn slab_cases(rng: &mut Rng) -> Cases {
     c
 }
 
-fn intersect_cases(rng: &mut Rng) -> Cases {
+/// Cases of the kernels' `intersect`, whose twin is the triangle test `test` of the kernel variant.
+fn intersect_cases(rng: &mut Rng, test: Intersect) -> Cases {
     let mut c = Cases::new("intersect", 1);
+    let reference = match test {
+        Intersect::Watertight => geometry::intersect,
+        Intersect::MollerTrumbore => geometry::intersect_moller_trumbore,
+    };
     let mut add = |p: [Vec3; 3], o: Vec3, d: Vec3, t_min: f32, t_max: f32| {
         let tri = Triangle::from_vertices(p[0].into(), p[1].into(), p[2].into());
-        let r = geometry::intersect(&tri, &Ray::new(o, d), t_min, t_max)
-            .map_or([-1.0, 0.0, 0.0, 0.0], |(t, u, v)| [t, u, v, 0.0]);
+        let r =
+            reference(&tri, &Ray::new(o, d), t_min, t_max).map_or([-1.0, 0.0, 0.0, 0.0], |(t, u, v)| [t, u, v, 0.0]);
         c.push(
             &[v4(p[0], 0.0), v4(p[1], 0.0), v4(p[2], 0.0), v4(o, 0.0), v4(d, 0.0), [t_min, t_max, 0.0, 0.0]],
             r,
@@ -335,12 +341,12 @@ fn phong_cases(rng: &mut Rng) -> Cases {
 
 fn worth_cases(stop: BounceStop, rng: &mut Rng) -> Cases {
     let mut c = Cases::new("worth_tracing", 6);
-    let edge = render_spec::constants::STOP_CONTRIBUTION;
+    let edge = stop.cutoff;
     for k in 0..200 {
         let remaining = [0u32, 1, 2, 5, 64, 1024][k % 6];
         let w = match k % 4 {
             0 => edge / stop.bound,
-            1 => f32::from_bits((edge / stop.bound).to_bits() - 1),
+            1 => f32::from_bits((edge / stop.bound).to_bits().saturating_sub(1)),
             2 => rng.unit(),
             _ => rng.unit() * 1e-3,
         };
@@ -418,7 +424,7 @@ fn run(gpu: &Gpu, pipeline: &tracer_vk::Pipeline, cases: &Cases, frame: &[u8], t
 /// top_left, h_step and v_step are its first four vec4s, `stop` sits after six vec4s and `size`
 /// (FrameData in tracer-vk/src/render.rs, whose layout test pins these offsets against naga).
 fn frame_record(camera: &Frame, stop: BounceStop) -> Vec<u8> {
-    let mut words = [0u32; 36];
+    let mut words = [0u32; 44];
     for (k, v) in [camera.eye, camera.top_left, camera.h_step, camera.v_step].into_iter().enumerate() {
         for (c, x) in v.to_array().into_iter().enumerate() {
             words[4 * k + c] = x.to_bits();
@@ -426,6 +432,12 @@ fn frame_record(camera: &Frame, stop: BounceStop) -> Vec<u8> {
     }
     words[28] = stop.bound.to_bits();
     words[29] = stop.k_max.to_bits();
+    words[30] = stop.cutoff.to_bits();
+    // One sample at the pixel centre: (0.5, 0.5), 1 / spp = 1, of 1.
+    words[36] = 0.5f32.to_bits();
+    words[37] = 0.5f32.to_bits();
+    words[38] = 1.0f32.to_bits();
+    words[41] = 1;
     bytemuck::cast_slice(&words).to_vec()
 }
 
@@ -448,16 +460,18 @@ fn primary_cases(frame: &Frame, width: u32, height: u32) -> Cases {
 
 #[test]
 fn every_shared_wgsl_function_equals_its_rust_twin_bit_for_bit() {
-    functions_equal_their_rust_twins(false);
+    functions_equal_their_rust_twins(false, Intersect::Watertight);
 }
 
-/// The same with the `--exact` pass applied (NoContraction on every float operation).
+/// The same with the `--exact` pass applied (NoContraction on every float operation), and the
+/// Möller-Trumbore kernel variant (`--intersect mt`) against tracer-cpu's.
 #[test]
 fn every_shared_wgsl_function_equals_its_rust_twin_under_exact() {
-    functions_equal_their_rust_twins(true);
+    functions_equal_their_rust_twins(true, Intersect::Watertight);
+    functions_equal_their_rust_twins(true, Intersect::MollerTrumbore);
 }
 
-fn functions_equal_their_rust_twins(exact: bool) {
+fn functions_equal_their_rust_twins(exact: bool, intersect: Intersect) {
     let gpu = common::gpu();
     let spec = Specialisation {
         method: Method::Lst,
@@ -468,6 +482,8 @@ fn functions_equal_their_rust_twins(exact: bool) {
         refraction: true,
         smooth: true,
         exact,
+        intersect,
+        fixed_offset: false,
     };
     let source = format!("{}\n{HARNESS}", kernels::prelude(&spec));
     let mut spirv = tracer_vk::translate(&source, "function harness", &[]).expect("the harness compiles");
@@ -480,14 +496,14 @@ fn functions_equal_their_rust_twins(exact: bool) {
     let camera =
         CameraSpec { eye: Vec3::new(0.3, 1.7, -4.0), at: Vec3::new(0.1, 0.2, 0.5), up: Vec3::Y, fov_deg: 53.0 };
     let view = camera.frame(37, 23).expect("a valid camera");
-    let plain = frame_record(&view, BounceStop { bound: 1.0, k_max: 0.5 });
+    let plain = frame_record(&view, BounceStop { bound: 1.0, k_max: 0.5, cutoff: STOP_CONTRIBUTION });
     let (refl, refr) = reflect_refract_cases(&mut rng);
     let mut failures = Vec::new();
     let mut total = 0;
     let primary = primary_cases(&view, 37, 23);
     for cases in [
         slab_cases(&mut rng),
-        intersect_cases(&mut rng),
+        intersect_cases(&mut rng, intersect),
         offset_cases(&mut rng),
         refl,
         refr,
@@ -498,9 +514,11 @@ fn functions_equal_their_rust_twins(exact: bool) {
         failures.extend(run(&gpu, &pipeline, &cases, &plain, &[]));
     }
     for stop in [
-        BounceStop { bound: 1.0, k_max: 0.5 },
-        BounceStop { bound: 3.7, k_max: 0.0 },
-        BounceStop { bound: 0.2, k_max: 1.0 },
+        BounceStop { bound: 1.0, k_max: 0.5, cutoff: STOP_CONTRIBUTION },
+        BounceStop { bound: 3.7, k_max: 0.0, cutoff: STOP_CONTRIBUTION },
+        BounceStop { bound: 0.2, k_max: 1.0, cutoff: STOP_CONTRIBUTION },
+        BounceStop { bound: 1.0, k_max: 0.5, cutoff: 0.0 },
+        BounceStop { bound: 0.7, k_max: 0.9, cutoff: 0.05 },
     ] {
         let cases = worth_cases(stop, &mut rng);
         total += cases.len();
@@ -520,7 +538,7 @@ fn functions_equal_their_rust_twins(exact: bool) {
     failures.extend(run(&gpu, &pipeline, &cases, &plain, &tris));
 
     assert!(gpu.validation_messages().is_empty(), "validation: {:?}", gpu.validation_messages());
-    println!("{total} cases (exact: {exact}), {} differ", failures.len());
+    println!("{total} cases (exact: {exact}, {intersect:?}), {} differ", failures.len());
     // The count per function, then the first few cases of each.
     let mut by_name: Vec<(&str, Vec<&String>)> = Vec::new();
     for f in &failures {

@@ -5,8 +5,8 @@
 
 use crate::output::{self, Kind, Output};
 use crate::render_args::{MAX_LIGHTS, lights_n, parse_count, parse_res, stored_camera};
-use bvh_format::{Light, SceneFile};
-use render_spec::{CameraSpec, Mode};
+use bvh_format::SceneFile;
+use render_spec::{CameraSpec, Image, Mode, Settings};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -36,11 +36,11 @@ pub struct MatrixArgs {
     pub csv: PathBuf,
 }
 
-fn parse_frames(s: &str) -> Result<usize, String> {
+pub fn parse_frames(s: &str) -> Result<usize, String> {
     parse_count(s, 1, 100_000, "the number of frames").map(|n| n as usize)
 }
 
-fn parse_warmup(s: &str) -> Result<usize, String> {
+pub fn parse_warmup(s: &str) -> Result<usize, String> {
     parse_count(s, 0, 100_000, "the number of warm-up frames").map(|n| n as usize)
 }
 
@@ -73,17 +73,6 @@ pub fn parse_mode(s: &str) -> Result<BenchMode, String> {
     }
 }
 
-/// One frame to render: what both tracers' settings hold.
-#[derive(Clone, Debug)]
-pub struct FrameSpec {
-    pub width: u32,
-    pub height: u32,
-    pub camera: CameraSpec,
-    pub mode: Mode,
-    pub lights: Vec<Light>,
-    pub max_indirections: u32,
-}
-
 /// What one frame cost: milliseconds (whatever the tracer's [`Bench::timing`] says they cover) and
 /// primary, shadow and secondary rays.
 #[derive(Clone, Copy, Debug)]
@@ -105,7 +94,15 @@ pub trait Bench {
     /// What the time of a frame covers, for the Markdown preface.
     fn timing(&self) -> String;
     fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<Self::Renderer<'a>, String>;
-    fn frame(&self, r: &mut Self::Renderer<'_>, f: &FrameSpec) -> Result<Timed, String>;
+    /// Whether the tracer implements these accuracy settings (the evaluation leaves out those it
+    /// does not, rather than report an image rendered without them).
+    fn honours(&self, _accuracy: &render_spec::Accuracy) -> bool {
+        true
+    }
+    /// One timed frame; the tracer may leave out reading back the pixels and AOVs.
+    fn frame(&self, r: &mut Self::Renderer<'_>, s: &Settings) -> Result<Timed, String>;
+    /// One untimed frame with its pixels, and its AOVs when the settings ask for them.
+    fn image(&self, r: &mut Self::Renderer<'_>, s: &Settings) -> Result<Image, String>;
     /// Checked once after the last frame (the Vulkan tracer's validation messages).
     fn finish(&self) -> Result<(), String> {
         Ok(())
@@ -182,7 +179,7 @@ impl Row {
 }
 
 /// Commas would split a field: names keep their words, joined by semicolons instead.
-fn field(s: &str) -> String {
+pub fn field(s: &str) -> String {
     s.replace(',', ";")
 }
 
@@ -289,6 +286,36 @@ pub fn write_tables(csv: &Path, preface: &str, rows: &[Row]) -> Result<PathBuf, 
     Ok(md.path)
 }
 
+/// The times of one setting: the median and the fastest of the timed frames, and the rays of the
+/// last one.
+#[derive(Clone, Copy, Debug)]
+pub struct Measured {
+    pub median_ms: f64,
+    pub min_ms: f64,
+    pub rays: [u64; 3],
+}
+
+/// Renders `warmup` untimed and then `frames` timed frames of `settings` (`frames` at least 1).
+pub fn measure<B: Bench>(
+    bench: &B,
+    renderer: &mut B::Renderer<'_>,
+    settings: &Settings,
+    warmup: usize,
+    frames: usize,
+) -> Result<Measured, String> {
+    let mut times = Vec::with_capacity(frames);
+    let mut rays = [0u64; 3];
+    for i in 0..warmup + frames.max(1) {
+        let t = bench.frame(renderer, settings)?;
+        if i >= warmup {
+            times.push(t.ms);
+            rays = t.rays;
+        }
+    }
+    let min_ms = times.iter().copied().fold(f64::INFINITY, f64::min);
+    Ok(Measured { median_ms: median(&mut times), min_ms, rays })
+}
+
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     let n = v.len();
@@ -334,24 +361,17 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
                 for &(width, height) in &m.res {
                     for mode in &m.modes {
                         bar.set_message(format!("{name} {cam} {width}x{height} {} {method}", mode.name()));
-                        let spec = FrameSpec {
+                        let settings = Settings {
                             width,
                             height,
                             camera,
                             mode: mode.mode,
                             lights: lights_n(&scene, mode.lights, &camera),
                             max_indirections: scene.settings.max_indirections,
+                            aovs: false,
+                            accuracy: Default::default(),
                         };
-                        let mut times = Vec::with_capacity(frames);
-                        let mut rays = [0u64; 3];
-                        for i in 0..warmup + frames {
-                            let t = bench.frame(&mut renderer, &spec)?;
-                            if i >= warmup {
-                                times.push(t.ms);
-                                rays = t.rays;
-                            }
-                        }
-                        let min_ms = times.iter().copied().fold(f64::INFINITY, f64::min);
+                        let m = measure(bench, &mut renderer, &settings, warmup, frames)?;
                         rows.push(Row {
                             scene: name.clone(),
                             triangles: scene.triangles.len() as u64,
@@ -361,9 +381,9 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
                             mode: mode.name(),
                             lights: mode.lights,
                             method: method.to_owned(),
-                            median_ms: median(&mut times),
-                            min_ms,
-                            rays,
+                            median_ms: m.median_ms,
+                            min_ms: m.min_ms,
+                            rays: m.rays,
                             tracer: bench.tracer().to_owned(),
                             device: device.clone(),
                         });

@@ -1,12 +1,16 @@
 //! What the command-line programs share: command-line handling ([`cli`]), loading scenes (the
-//! built-in bunny included), the render options every tracer takes ([`render_args`]), and
-//! writing every output safely ([`output`]).
+//! built-in bunny included), the render options every tracer takes ([`render_args`]), writing
+//! every output safely ([`output`]), the benchmark matrix ([`bench`], with the CPU tracer in
+//! [`cpu_bench`], the Vulkan tracer in [`vk_bench`]) and the evaluation of speed against accuracy ([`eval`]).
 
 pub mod bench;
 pub mod cli;
+pub mod cpu_bench;
+pub mod eval;
 pub mod output;
 pub mod render_args;
 pub mod stress;
+pub mod vk_bench;
 
 use bvh_format::SceneFile;
 use std::path::Path;

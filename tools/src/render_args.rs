@@ -6,7 +6,7 @@ use crate::output::{self, Kind, Output};
 use bvh_format::{Light, SceneFile};
 use clap::{Args, ValueEnum};
 use glam::{DVec3, Vec3};
-use render_spec::{CameraSpec, Image, Mode, Settings};
+use render_spec::{Accuracy, CameraSpec, Image, Intersect, Mode, Offset, Settings};
 use std::path::PathBuf;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -15,6 +15,26 @@ pub enum ModeArg {
     Cast,
     /// Whitted ray tracing: lights with shadows, Phong, reflection and refraction.
     Whitted,
+}
+
+/// The triangle test (`--intersect`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum IntersectArg {
+    /// The watertight test: docs/shading.md's edge-consistent test, where two triangles sharing
+    /// an edge compute it with exactly opposite signs, so no ray passes between them.
+    Watertight,
+    /// Möller-Trumbore: fewer operations, but each triangle rounds a shared edge its own way, so
+    /// a ray aimed exactly at one can pass between both triangles (a leak).
+    Mt,
+}
+
+impl IntersectArg {
+    pub fn intersect(self) -> Intersect {
+        match self {
+            IntersectArg::Watertight => Intersect::Watertight,
+            IntersectArg::Mt => Intersect::MollerTrumbore,
+        }
+    }
 }
 
 /// The most lights a render takes (`--light` repeated, or `--lights N`).
@@ -72,13 +92,33 @@ pub struct RenderArgs {
     /// makes two heatmaps comparable.
     #[arg(long, value_parser = parse_positive, requires = "heatmap", allow_hyphen_values = true)]
     pub heatmap_max: Option<u32>,
-    /// Also write per-pixel outputs as OpenEXR (.exr): t, N.X, N.Y, N.Z, prim, nodes, tris.
+    /// Also write per-pixel outputs as OpenEXR (.exr): t, N.X, N.Y, N.Z, prim, nodes, tris (with
+    /// --spp above 1: t, N and prim of each pixel's first sample, nodes and tris over all).
     #[arg(long, allow_hyphen_values = true)]
     pub aov: Option<PathBuf>,
+    /// Triangle test: watertight (no ray passes between two triangles sharing an edge) or mt
+    /// (Möller-Trumbore: fewer operations, but leaks at shared edges).
+    #[arg(long, value_enum, default_value = "watertight", help_heading = "Accuracy")]
+    pub intersect: IntersectArg,
+    /// How far shadow and secondary rays start from the surface they leave: `scale` (a few units
+    /// in the last place of the coordinates, right for any scene size) or a fixed distance in
+    /// scene units along the normal, such as 1e-4, 1e-3 or 1e-2 (too small gives shadow acne, too
+    /// large loses contact shadows).
+    #[arg(long, value_parser = parse_offset, default_value = "scale", allow_hyphen_values = true, help_heading = "Accuracy")]
+    pub offset: Offset,
+    /// Samples per pixel: a square, 1, 4, 9, 16, ... up to 1024, on the centres of an n x n grid
+    /// in each pixel; the pixel is their mean linear colour, quantised once.
+    #[arg(long, value_parser = parse_spp, default_value = "1", allow_hyphen_values = true, help_heading = "Accuracy")]
+    pub spp: u32,
+    /// The adaptive bounce stop: a secondary ray whose whole chain could add less than this to a
+    /// colour channel (1 = white) is not traced; 0 traces every bounce up to --indirections
+    /// [default: half an 8-bit step, 1/510, which cannot change an 8-bit pixel].
+    #[arg(long, value_parser = parse_cutoff, allow_hyphen_values = true, help_heading = "Accuracy")]
+    pub cutoff: Option<f32>,
     /// Bit-exact arithmetic: trace-vk builds kernels whose float operations the GPU's compiler
     /// may not fuse into multiply-adds, so that its images equal trace-cpu's bit for bit (at some
     /// cost in speed). The CPU tracer never fuses them, so trace-cpu is always exact.
-    #[arg(long)]
+    #[arg(long, help_heading = "Accuracy")]
     pub exact: bool,
 }
 
@@ -221,6 +261,35 @@ fn parse_indirections(s: &str) -> Result<u32, String> {
     parse_count(s, 0, MAX_INDIRECTIONS, "the number of indirections").map(|n| n as u32)
 }
 
+/// `--offset`: `scale`, or a finite distance of at least 0.
+pub fn parse_offset(s: &str) -> Result<Offset, String> {
+    let s = s.trim();
+    if s.eq_ignore_ascii_case("scale") {
+        return Ok(Offset::ScaleAware);
+    }
+    let d: f32 = s.parse().map_err(|_| format!("{s:?} is not an offset: give `scale` or a distance such as 1e-4"))?;
+    let offset = Offset::Fixed(d);
+    Accuracy { offset, ..Accuracy::default() }.check().map_err(|e| e.to_string())?;
+    Ok(offset)
+}
+
+/// `--spp`: a square from 1 to [`render_spec::accuracy::MAX_SPP`], refused with the renderer's
+/// sentence.
+pub fn parse_spp(s: &str) -> Result<u32, String> {
+    let max = render_spec::accuracy::MAX_SPP;
+    let n = parse_count(s, 1, u64::from(max), "the samples per pixel")? as u32;
+    Accuracy { spp: n, ..Accuracy::default() }.check().map_err(|e| e.to_string())?;
+    Ok(n)
+}
+
+/// `--cutoff`: a finite number of at least 0, refused with the renderer's sentence.
+pub fn parse_cutoff(s: &str) -> Result<f32, String> {
+    let cutoff: f32 =
+        s.trim().parse().map_err(|_| format!("{s:?} is not a number; the bounce cutoff is one, such as 0.002 or 0"))?;
+    Accuracy { cutoff, ..Accuracy::default() }.check().map_err(|e| e.to_string())?;
+    Ok(cutoff)
+}
+
 pub fn parse_light(s: &str) -> Result<WorldLight, String> {
     let v = parse_f64s(s, &[3, 6], "a light is X,Y,Z (3 numbers) or X,Y,Z,R,G,B (6 numbers)")?;
     let colour = if v.len() == 6 { [v[3], v[4], v[5]].map(|c| c as f32) } else { [1.0, 1.0, 1.0] };
@@ -242,8 +311,19 @@ impl RenderArgs {
             lights: self.lights(scene, &camera),
             max_indirections: self.indirections(scene),
             aovs: self.aov.is_some() || self.heatmap.is_some(),
-            accuracy: render_spec::Accuracy::default(),
+            accuracy: self.accuracy(),
         })
+    }
+
+    /// The accuracy settings; what is not given is today's contract ([`Accuracy::default`]).
+    pub fn accuracy(&self) -> Accuracy {
+        let default = Accuracy::default();
+        Accuracy {
+            intersect: self.intersect.intersect(),
+            offset: self.offset,
+            spp: self.spp,
+            cutoff: self.cutoff.unwrap_or(default.cutoff),
+        }
     }
 
     pub fn mode(&self) -> Mode {
@@ -359,6 +439,26 @@ pub fn lights_n(scene: &SceneFile, n: usize, camera: &CameraSpec) -> Vec<Light> 
         bvh_build::import::defaults::lights_around(camera.eye, camera.at, camera.up, lo.into(), hi.into(), added);
     lights.extend(placed.into_iter().map(|p| Light::new(p.to_array(), [c, c, c])));
     lights
+}
+
+/// The accuracy settings that differ from the default, for the report line both tracers print
+/// (empty for the default).
+pub fn accuracy_note(a: &Accuracy) -> String {
+    let d = Accuracy::default();
+    let mut parts = Vec::new();
+    if a.intersect != d.intersect {
+        parts.push("Möller-Trumbore triangle test".to_owned());
+    }
+    if let Offset::Fixed(x) = a.offset {
+        parts.push(format!("fixed offset {x:e}"));
+    }
+    if a.spp != d.spp {
+        parts.push(format!("{} samples per pixel", a.spp));
+    }
+    if a.cutoff != d.cutoff {
+        parts.push(if a.cutoff == 0.0 { "no bounce cutoff".to_owned() } else { format!("bounce cutoff {}", a.cutoff) });
+    }
+    if parts.is_empty() { String::new() } else { format!(" ({})", parts.join(", ")) }
 }
 
 /// The line both tracers print for a heatmap: its scale, and how many pixels lie above a fixed one.

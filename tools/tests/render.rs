@@ -172,6 +172,15 @@ fn both_tracers_explain_a_mistake_in_the_same_words() {
         &["--camera", "nope"],
         &["--eye", "3e38,0,0", "--at", "-3e38,0,0"],
         &["--heatmap-max", "0", "--heatmap", "h.png"],
+        &["--intersect", "exact"],
+        &["--offset", "-1e-4"],
+        &["--offset", "tiny"],
+        &["--offset", "inf"],
+        &["--spp", "2"],
+        &["--spp", "0"],
+        &["--spp", "2048"],
+        &["--cutoff", "-0.1"],
+        &["--cutoff", "nan"],
     ];
     for args in cases {
         let mut all = vec!["render", room.as_str(), "--res", "8x8", "-o", "x.png"];
@@ -184,6 +193,68 @@ fn both_tracers_explain_a_mistake_in_the_same_words() {
     // A workgroup shape is not an image size.
     let line = assert_one_sentence_error(&run(&dir, "trace-vk", &["render", &room, "--workgroup", "0x0"]), "workgroup");
     assert!(!line.contains("image"), "{line}");
+}
+
+/// Each accuracy flag's refusal says what is wrong with the value in one sentence.
+#[test]
+fn accuracy_flags_explain_a_bad_value() {
+    let dir = scratch("accuracy-words");
+    let room = room(&dir);
+    let cases: &[(&[&str], &str)] = &[
+        (&["--spp", "8"], "not a square"),
+        (&["--spp", "0"], "between 1 and 1024"),
+        (&["--spp", "4096"], "between 1 and 1024"),
+        (&["--cutoff", "-1"], "at least 0"),
+        (&["--cutoff", "x"], "not a number"),
+        (&["--offset", "-0.01"], "at least 0"),
+        (&["--offset", "big"], "scale"),
+        (&["--intersect", "fast"], "--intersect"),
+    ];
+    for (args, words) in cases {
+        let mut all = vec!["render", room.as_str(), "--res", "8x8", "-o", "x.png"];
+        all.extend_from_slice(args);
+        assert_one_sentence_error(&run(&dir, "trace-cpu", &all), words);
+    }
+}
+
+/// trace-cpu renders with every accuracy flag and names the non-default ones in its report;
+/// trace-vk, whose kernels do not implement them yet, refuses each with a sentence instead of
+/// ignoring it.
+#[test]
+fn accuracy_flags_are_honoured_or_refused() {
+    let dir = scratch("accuracy-flags");
+    let room = room(&dir);
+    let cases: &[(&[&str], &str)] = &[
+        (&["--intersect", "mt"], "--intersect mt"),
+        (&["--offset", "1e-3"], "fixed --offset"),
+        (&["--spp", "4"], "--spp"),
+        (&["--cutoff", "0"], "--cutoff"),
+    ];
+    for (args, refused) in cases {
+        let mut all = vec!["render", room.as_str(), "--res", "8x8", "-o", "x.png"];
+        all.extend_from_slice(args);
+        let out = assert_ok(&run(&dir, "trace-cpu", &all), "trace-cpu");
+        assert!(out.lines().next().unwrap_or("").contains(" ("), "the report names the setting: {out}");
+        assert_one_sentence_error(&run(&dir, "trace-vk", &all), refused);
+    }
+    // The defaults spelled out are the defaults: both tracers render.
+    let all = [
+        "render",
+        &room,
+        "--res",
+        "8x8",
+        "-o",
+        "d.png",
+        "--intersect",
+        "watertight",
+        "--offset",
+        "scale",
+        "--spp",
+        "1",
+    ];
+    for tracer in ["trace-cpu", "trace-vk"] {
+        assert_ok(&run(&dir, tracer, &all), tracer);
+    }
 }
 
 /// `trace-cpu render ... | head -1`: the reader goes away, the program ends quietly.

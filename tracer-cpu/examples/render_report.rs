@@ -29,7 +29,7 @@ mod rayset;
 
 use bvh_format::SceneFile;
 use rayon::prelude::*;
-use render_spec::{CameraSpec, Mode, Settings};
+use render_spec::{CameraSpec, Intersect, Mode, Settings};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -137,6 +137,7 @@ fn parse_args() -> Result<Options, String> {
 struct Call {
     any: bool,
     rays: Rays,
+    test: Intersect,
 }
 
 /// Traces through `inner` and keeps every call; hands its calls to `sink` when dropped.
@@ -147,13 +148,13 @@ struct Recorder<'s, T> {
 }
 
 impl<T: TraceLanes> TraceLanes for Recorder<'_, T> {
-    fn closest(&mut self, rays: &Rays) -> Results {
-        self.calls.push(Call { any: false, rays: *rays });
-        self.inner.closest(rays)
+    fn closest(&mut self, rays: &Rays, test: Intersect) -> Results {
+        self.calls.push(Call { any: false, rays: *rays, test });
+        self.inner.closest(rays, test)
     }
-    fn occluded(&mut self, rays: &Rays) -> Results {
-        self.calls.push(Call { any: true, rays: *rays });
-        self.inner.occluded(rays)
+    fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results {
+        self.calls.push(Call { any: true, rays: *rays, test });
+        self.inner.occluded(rays, test)
     }
 }
 
@@ -177,16 +178,16 @@ enum Either<A, B> {
 }
 
 impl<A: TraceLanes, B: TraceLanes> TraceLanes for Either<A, B> {
-    fn closest(&mut self, rays: &Rays) -> Results {
+    fn closest(&mut self, rays: &Rays, test: Intersect) -> Results {
         match self {
-            Either::A(a) => a.closest(rays),
-            Either::B(b) => b.closest(rays),
+            Either::A(a) => a.closest(rays, test),
+            Either::B(b) => b.closest(rays, test),
         }
     }
-    fn occluded(&mut self, rays: &Rays) -> Results {
+    fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results {
         match self {
-            Either::A(a) => a.occluded(rays),
-            Either::B(b) => b.occluded(rays),
+            Either::A(a) => a.occluded(rays, test),
+            Either::B(b) => b.occluded(rays, test),
         }
     }
 }
@@ -195,7 +196,7 @@ impl<A: TraceLanes, B: TraceLanes> TraceLanes for Either<A, B> {
 fn replay<T: TraceLanes>(lanes: impl Fn() -> T + Sync + Send, calls: &[Call]) {
     calls.par_chunks(1024).for_each_init(lanes, |lanes, chunk| {
         for c in chunk {
-            let r = if c.any { lanes.occluded(&c.rays) } else { lanes.closest(&c.rays) };
+            let r = if c.any { lanes.occluded(&c.rays, c.test) } else { lanes.closest(&c.rays, c.test) };
             std::hint::black_box(r);
         }
     });

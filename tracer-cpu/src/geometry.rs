@@ -1,9 +1,10 @@
-//! Rays, the slab test and the edge-consistent triangle test, in f32: the arithmetic every fast
-//! path shares.
+//! Rays, the slab test, the edge-consistent and Möller-Trumbore triangle tests and the origin
+//! offsets, in f32: the arithmetic every fast path shares.
 
 use bvh_format::{Node, Triangle};
 use glam::Vec3;
 use render_spec::constants::{OFFSET_FLOAT_SCALE, OFFSET_INT_SCALE, OFFSET_ORIGIN, T_SLACK};
+use render_spec::{Intersect, Offset};
 
 /// A ray with its precomputed inverse direction (components may be infinite).
 #[derive(Clone, Copy, Debug)]
@@ -143,9 +144,11 @@ pub fn intersect(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f
 }
 
 /// Möller-Trumbore (thesis 4.2.4) on vertex 0 and the two edges from it, as every path tested
-/// before format version 2: kept to show, by test, the leaks at shared edges that the default
-/// test removes (each triangle decides a shared edge after its own roundings), and for a future
-/// `--intersect mt`. Same contract as [`intersect`].
+/// before format version 2, and `--intersect mt` now: each triangle decides a shared edge after
+/// its own roundings, so a ray aimed exactly at the edge can pass between both (tests count
+/// those leaks). Fewer operations than [`intersect`]. Same contract as [`intersect`]; the packet
+/// path repeats its operations in the same order.
+#[inline(always)]
 pub fn intersect_moller_trumbore(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
     let (o, d) = (ray.origin, ray.dir);
     let v0 = tri.p0;
@@ -171,6 +174,35 @@ pub fn intersect_moller_trumbore(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f
     (t > t_min && t <= t_max).then_some((t, u, v))
 }
 
+/// A triangle test as a type, so that a traversal is compiled for one test (chosen once per frame
+/// or per call, never per triangle).
+pub trait TriangleTest {
+    /// The setting this test implements.
+    const KIND: Intersect;
+    fn intersect(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)>;
+}
+
+/// [`intersect`], the default.
+pub struct Watertight;
+/// [`intersect_moller_trumbore`].
+pub struct MollerTrumbore;
+
+impl TriangleTest for Watertight {
+    const KIND: Intersect = Intersect::Watertight;
+    #[inline(always)]
+    fn intersect(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
+        intersect(tri, ray, t_min, t_max)
+    }
+}
+
+impl TriangleTest for MollerTrumbore {
+    const KIND: Intersect = Intersect::MollerTrumbore;
+    #[inline(always)]
+    fn intersect(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
+        intersect_moller_trumbore(tri, ray, t_min, t_max)
+    }
+}
+
 /// Moves a ray origin off the surface it lies on, along the geometric normal `n` (pointing to the
 /// side the new ray leaves into), by a few units in the last place of the coordinates: scale-free,
 /// so it works for the tiny Stanford models and for huge scenes alike. After Wächter and Binder,
@@ -187,6 +219,23 @@ pub fn offset_origin(p: Vec3, n: Vec3) -> Vec3 {
     let p_i = Vec3::new(step(p.x, of_i.x), step(p.y, of_i.y), step(p.z, of_i.z));
     let pick = |p: f32, n: f32, pi: f32| if p.abs() < OFFSET_ORIGIN { p + OFFSET_FLOAT_SCALE * n } else { pi };
     Vec3::new(pick(p.x, n.x, p_i.x), pick(p.y, n.y, p_i.y), pick(p.z, n.z, p_i.z))
+}
+
+/// Moves a ray origin by the distance `d` along the unit normal `n` (`--offset D`): `p + n * d`,
+/// a multiply and an add per coordinate, each rounded (the kernels must not fuse them).
+#[inline(always)]
+pub fn offset_fixed(p: Vec3, n: Vec3, d: f32) -> Vec3 {
+    p + n * d
+}
+
+/// The origin of a ray leaving the surface at `p` into the side the unit geometric normal `n`
+/// points to, moved as the frame's [`Offset`] says.
+#[inline]
+pub fn leave(p: Vec3, n: Vec3, offset: Offset) -> Vec3 {
+    match offset {
+        Offset::ScaleAware => offset_origin(p, n),
+        Offset::Fixed(d) => offset_fixed(p, n, d),
+    }
 }
 
 #[cfg(test)]

@@ -4,16 +4,18 @@
 //! Every way finds the same hits (bit for bit), so the choice changes speed and the cost AOV only.
 
 use crate::Method;
+use crate::geometry::{MollerTrumbore, TriangleTest, Watertight};
 use crate::packet::{self, Entry, LANES, Rays, Results};
 use crate::render::Tracer;
 use crate::traverse::Stack;
+use render_spec::Intersect;
 
-/// Traces the valid lanes of `rays`; a lane's hit is its closest hit in `(0, t_max]`, or for
-/// [`TraceLanes::occluded`] any hit (Some means blocked). Lanes that are not valid get no hit and
-/// no cost.
+/// Traces the valid lanes of `rays` with the triangle test `test` (the frame's); a lane's hit is
+/// its closest hit in `(0, t_max]`, or for [`TraceLanes::occluded`] any hit (Some means blocked).
+/// Lanes that are not valid get no hit and no cost.
 pub trait TraceLanes {
-    fn closest(&mut self, rays: &Rays) -> Results;
-    fn occluded(&mut self, rays: &Rays) -> Results;
+    fn closest(&mut self, rays: &Rays, test: Intersect) -> Results;
+    fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results;
 }
 
 /// One ray at a time with a scalar traversal ([`Method::Ordered`] or [`Method::Stackless`]).
@@ -28,7 +30,7 @@ impl<'a> OneByOne<'a> {
         Self { tracer, method, stack: Stack::default() }
     }
 
-    fn trace<const ANY: bool>(&mut self, rays: &Rays) -> Results {
+    fn trace<const ANY: bool, T: TriangleTest>(&mut self, rays: &Rays) -> Results {
         let mut out = Results::default();
         for i in 0..LANES {
             if !rays.valid[i] {
@@ -36,19 +38,26 @@ impl<'a> OneByOne<'a> {
             }
             let ray = rays.ray(i);
             let hit =
-                self.tracer.trace::<ANY>(self.method, &ray, 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
+                self.tracer.trace::<ANY, T>(self.method, &ray, 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
             out.set(i, hit);
         }
         out
     }
+
+    fn trace_with<const ANY: bool>(&mut self, rays: &Rays, test: Intersect) -> Results {
+        match test {
+            Intersect::Watertight => self.trace::<ANY, Watertight>(rays),
+            Intersect::MollerTrumbore => self.trace::<ANY, MollerTrumbore>(rays),
+        }
+    }
 }
 
 impl TraceLanes for OneByOne<'_> {
-    fn closest(&mut self, rays: &Rays) -> Results {
-        self.trace::<false>(rays)
+    fn closest(&mut self, rays: &Rays, test: Intersect) -> Results {
+        self.trace_with::<false>(rays, test)
     }
-    fn occluded(&mut self, rays: &Rays) -> Results {
-        self.trace::<true>(rays)
+    fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results {
+        self.trace_with::<true>(rays, test)
     }
 }
 
@@ -70,20 +79,27 @@ impl<'a> Packets<'a> {
         Self { tracer, stack: Vec::with_capacity(128), single: OneByOne::new(tracer, Method::Ordered) }
     }
 
-    fn trace<const ANY: bool>(&mut self, rays: &Rays) -> Results {
+    fn trace<const ANY: bool, T: TriangleTest>(&mut self, rays: &Rays) -> Results {
         if rays.count() <= SPARSE {
-            return self.single.trace::<ANY>(rays);
+            return self.single.trace::<ANY, T>(rays);
         }
         let nodes = self.tracer.scene.child_pair.as_deref().expect("the renderer checked the layout");
-        packet::trace::<ANY>(nodes, self.tracer.triangles(), rays, &mut self.stack)
+        packet::trace::<ANY, T>(nodes, self.tracer.triangles(), rays, &mut self.stack)
+    }
+
+    fn trace_with<const ANY: bool>(&mut self, rays: &Rays, test: Intersect) -> Results {
+        match test {
+            Intersect::Watertight => self.trace::<ANY, Watertight>(rays),
+            Intersect::MollerTrumbore => self.trace::<ANY, MollerTrumbore>(rays),
+        }
     }
 }
 
 impl TraceLanes for Packets<'_> {
-    fn closest(&mut self, rays: &Rays) -> Results {
-        self.trace::<false>(rays)
+    fn closest(&mut self, rays: &Rays, test: Intersect) -> Results {
+        self.trace_with::<false>(rays, test)
     }
-    fn occluded(&mut self, rays: &Rays) -> Results {
-        self.trace::<true>(rays)
+    fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results {
+        self.trace_with::<true>(rays, test)
     }
 }

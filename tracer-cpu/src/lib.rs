@@ -4,7 +4,7 @@
 //! - [`geometry`]: rays, the slab test, Möller-Trumbore, self-intersection offsets.
 //! - [`traverse`]: scalar ordered child-pair traversal and stackless escape-pointer traversal.
 //! - [`packet`]: 8-wide AVX2 packets for coherent primary and shadow rays.
-//! - [`reference`]: the exact f64 brute-force closest hit tests compare against.
+//! - [`reference`]: the exact f64 reference: brute-force and traversed closest hits, and images.
 //! - [`lanes`]: the rays of one stage of a 4 x 2 pixel block, traced as a packet or one by one.
 //! - [`shade`]: the shading formulas; [`whitted`]: the stages of ray casting and Whitted ray
 //!   tracing for a block of pixels.

@@ -6,7 +6,7 @@
 //! Every lane computes exactly what the scalar path computes, in the same order and without fused
 //! multiply-adds, so a packet finds bit-identical hits (a test holds it to that).
 
-use crate::geometry::{Cost, Hit, Ray};
+use crate::geometry::{Cost, Hit, Ray, TriangleTest};
 use bvh_format::{Node, Triangle};
 use glam::Vec3;
 
@@ -98,14 +98,19 @@ impl Results {
     }
 }
 
-/// Closest hits (`ANY == false`, `t_min` 0) or occlusion (`ANY == true`) for a packet. Only call
-/// when [`available`] is true.
-pub fn trace<const ANY: bool>(nodes: &[Node], tris: &[Triangle], rays: &Rays, stack: &mut Vec<Entry>) -> Results {
+/// Closest hits (`ANY == false`, `t_min` 0) or occlusion (`ANY == true`) for a packet, with the
+/// triangle test `T` in every lane. Only call when [`available`] is true.
+pub fn trace<const ANY: bool, T: TriangleTest>(
+    nodes: &[Node],
+    tris: &[Triangle],
+    rays: &Rays,
+    stack: &mut Vec<Entry>,
+) -> Results {
     #[cfg(target_arch = "x86_64")]
     {
         assert!(available(), "the packet path needs AVX2; callers check `available()` first");
         // SAFETY: AVX2 is present (checked above).
-        unsafe { avx2::trace::<ANY>(nodes, tris, rays, stack) }
+        unsafe { avx2::trace::<ANY, T>(nodes, tris, rays, stack) }
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -127,8 +132,9 @@ pub struct Entry {
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{Entry, LANES, Rays, Results};
-    use crate::geometry::Cost;
+    use crate::geometry::{Cost, TriangleTest};
     use bvh_format::{Node, Triangle};
+    use render_spec::Intersect;
     use render_spec::constants::T_SLACK;
     use std::arch::x86_64::*;
 
@@ -269,6 +275,49 @@ mod avx2 {
         [m, t, w1, w2, sum]
     }
 
+    /// [`geometry::intersect_moller_trumbore`](crate::geometry::intersect_moller_trumbore) with
+    /// the scalar path's operations; returns (hit mask, t, u, v, 1) in the form of [`intersect`]
+    /// (`u * (1 / 1)` is `u`, bit for bit).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn intersect_moller_trumbore(tri: &Triangle, pk: &Packet, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+        let (o, d) = (&pk.o, &pk.d);
+        let v0 = tri.p0;
+        // The edges are the triangle's alone: scalar, as the scalar path computes them.
+        let e1 = [tri.p1[0] - v0[0], tri.p1[1] - v0[1], tri.p1[2] - v0[2]];
+        let e2 = [tri.p2[0] - v0[0], tri.p2[1] - v0[1], tri.p2[2] - v0[2]];
+        let (e1, e2) = ([splat(e1[0]), splat(e1[1]), splat(e1[2])], [splat(e2[0]), splat(e2[1]), splat(e2[2])]);
+        let p = [
+            sub(mul(d[1], e2[2]), mul(e2[1], d[2])),
+            sub(mul(d[2], e2[0]), mul(e2[2], d[0])),
+            sub(mul(d[0], e2[1]), mul(e2[0], d[1])),
+        ];
+        let det = add(add(mul(e1[0], p[0]), mul(e1[1], p[1])), mul(e1[2], p[2]));
+        let one = splat(1.0);
+        let inv = _mm256_div_ps(one, det);
+        let s = [sub(o[0], splat(v0[0])), sub(o[1], splat(v0[1])), sub(o[2], splat(v0[2]))];
+        let u = mul(add(add(mul(s[0], p[0]), mul(s[1], p[1])), mul(s[2], p[2])), inv);
+        let q = [
+            sub(mul(s[1], e1[2]), mul(e1[1], s[2])),
+            sub(mul(s[2], e1[0]), mul(e1[2], s[0])),
+            sub(mul(s[0], e1[1]), mul(e1[0], s[1])),
+        ];
+        let v = mul(add(add(mul(d[0], q[0]), mul(d[1], q[1])), mul(d[2], q[2])), inv);
+        let t = mul(add(add(mul(e2[0], q[0]), mul(e2[1], q[1])), mul(e2[2], q[2])), inv);
+        let zero = _mm256_setzero_ps();
+        // The scalar conditions exactly, NaN included: `det != 0`, `0 <= u <= 1` (ordered),
+        // `!(v < 0)` and `!(u + v > 1)` (unordered: a NaN passes them, as in the scalar test),
+        // then `t_min < t <= t_max`.
+        let mut m = _mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero);
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GE_OQ>(u, zero));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(u, one));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NLT_UQ>(v, zero));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NGT_UQ>(add(u, v), one));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, t_min));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
+        [m, t, u, v, one]
+    }
+
     /// Adds 1 to the counters of the lanes in `mask`.
     #[target_feature(enable = "avx2")]
     #[inline]
@@ -284,7 +333,12 @@ mod avx2 {
     }
 
     #[target_feature(enable = "avx2")]
-    pub fn trace<const ANY: bool>(nodes: &[Node], tris: &[Triangle], rays: &Rays, stack: &mut Vec<Entry>) -> Results {
+    pub fn trace<const ANY: bool, T: TriangleTest>(
+        nodes: &[Node],
+        tris: &[Triangle],
+        rays: &Rays,
+        stack: &mut Vec<Entry>,
+    ) -> Results {
         let load = |a: &[f32; LANES]| {
             // SAFETY: `a` holds 8 floats.
             unsafe { _mm256_loadu_ps(a.as_ptr()) }
@@ -299,7 +353,8 @@ mod avx2 {
         let mut alive = lanes(|i| if rays.valid[i] { f32::from_bits(u32::MAX) } else { 0.0 });
         let mut best_t = load(&rays.t_max);
         let mut best_tri = _mm256_set1_epi32(-1);
-        // The closest hit's edge functions w1, w2 and their sum (one for lanes without a hit).
+        // The closest hit's edge functions w1, w2 and their sum (one for lanes without a hit;
+        // Möller-Trumbore's u, v and 1).
         let mut best_w1 = _mm256_setzero_ps();
         let mut best_w2 = _mm256_setzero_ps();
         let mut best_sum = splat(1.0);
@@ -321,7 +376,11 @@ mod avx2 {
             if node.is_leaf() {
                 for i in node.index..node.index + node.count {
                     n_tris = count(n_tris, cur_mask);
-                    let [m, t, w1, w2, sum] = intersect(&tris[i as usize], &pk, zero, best_t);
+                    // A constant per instance: the other test is compiled out.
+                    let [m, t, w1, w2, sum] = match T::KIND {
+                        Intersect::Watertight => intersect(&tris[i as usize], &pk, zero, best_t),
+                        Intersect::MollerTrumbore => intersect_moller_trumbore(&tris[i as usize], &pk, zero, best_t),
+                    };
                     // Hit::beats: nearer, or equally near with a lower index (unsigned compare
                     // through a sign flip).
                     let idx = _mm256_set1_epi32(i as i32);

@@ -2,7 +2,7 @@
 //! driver and written straight into the 8-bit image and, when asked for, the AOVs.
 
 use crate::Method;
-use crate::geometry::{Cost, Hit, Ray};
+use crate::geometry::{Cost, Hit, MollerTrumbore, Ray, TriangleTest, Watertight};
 use crate::lanes::{OneByOne, Packets, TraceLanes};
 use crate::packet::{LANES, Rays};
 use crate::shade;
@@ -11,7 +11,7 @@ use crate::whitted::Shading;
 use crate::wide::{F8, Lanes, V3};
 use bvh_format::{Node, SceneFile, Triangle};
 use rayon::prelude::*;
-use render_spec::{Aovs, Frame, Image, RayCounts, RenderError, Settings};
+use render_spec::{Aovs, Frame, Image, Intersect, RayCounts, RenderError, Settings};
 
 /// The scene prepared for tracing: layouts, and the bounds behind the adaptive bounce stop.
 pub struct Tracer<'a> {
@@ -49,7 +49,8 @@ impl<'a> Tracer<'a> {
         }
     }
 
-    /// Closest hit in `(t_min, t_max]`; adds the work done to `cost`.
+    /// Closest hit in `(t_min, t_max]` with the default (watertight) triangle test; adds the work
+    /// done to `cost`.
     pub fn closest(
         &self,
         method: Method,
@@ -59,16 +60,52 @@ impl<'a> Tracer<'a> {
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Hit> {
-        self.trace::<false>(method, ray, t_min, t_max, stack, cost)
+        self.closest_with(Intersect::Watertight, method, ray, t_min, t_max, stack, cost)
     }
 
-    /// Whether anything lies in `(0, t_max]` along the ray.
+    /// [`Self::closest`] with the triangle test `test`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn closest_with(
+        &self,
+        test: Intersect,
+        method: Method,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Hit> {
+        match test {
+            Intersect::Watertight => self.trace::<false, Watertight>(method, ray, t_min, t_max, stack, cost),
+            Intersect::MollerTrumbore => self.trace::<false, MollerTrumbore>(method, ray, t_min, t_max, stack, cost),
+        }
+    }
+
+    /// Whether anything lies in `(0, t_max]` along the ray, with the default (watertight) test.
     pub fn occluded(&self, method: Method, ray: &Ray, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> bool {
-        self.trace::<true>(method, ray, 0.0, t_max, stack, cost).is_some()
+        self.occluded_with(Intersect::Watertight, method, ray, t_max, stack, cost)
     }
 
-    /// The scalar traversal `method` names, on the layout it reads (or whichever is present).
-    pub(crate) fn trace<const ANY: bool>(
+    /// [`Self::occluded`] with the triangle test `test`.
+    pub fn occluded_with(
+        &self,
+        test: Intersect,
+        method: Method,
+        ray: &Ray,
+        t_max: f32,
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> bool {
+        match test {
+            Intersect::Watertight => self.trace::<true, Watertight>(method, ray, 0.0, t_max, stack, cost),
+            Intersect::MollerTrumbore => self.trace::<true, MollerTrumbore>(method, ray, 0.0, t_max, stack, cost),
+        }
+        .is_some()
+    }
+
+    /// The scalar traversal `method` names, on the layout it reads (or whichever is present), with
+    /// the triangle test `T`.
+    pub(crate) fn trace<const ANY: bool, T: TriangleTest>(
         &self,
         method: Method,
         ray: &Ray,
@@ -80,9 +117,9 @@ impl<'a> Tracer<'a> {
         let tris = &self.tris;
         match (method, self.child_pair, self.escape) {
             (Method::Stackless, _, Some(esc)) | (_, None, Some(esc)) => {
-                traverse::escape::<ANY>(esc, tris, ray, t_min, t_max, cost)
+                traverse::escape::<ANY, T>(esc, tris, ray, t_min, t_max, cost)
             }
-            (_, Some(cp), _) => traverse::child_pair::<ANY>(cp, tris, ray, t_min, t_max, stack, cost),
+            (_, Some(cp), _) => traverse::child_pair::<ANY, T>(cp, tris, ray, t_min, t_max, stack, cost),
             (_, None, None) => None,
         }
     }
@@ -198,6 +235,7 @@ fn render_in<T: TraceLanes>(
     tracer.layout_for(method.resolve(tracer.scene))?;
     let (w, h) = (settings.width as usize, settings.height as usize);
     let sh = Shading::new(tracer.scene, settings);
+    let samples: Vec<(f32, f32)> = render_spec::accuracy::sample_positions(settings.accuracy.spp).collect();
     let mut rgb = vec![[0u8; 3]; w * h];
     let mut aov = settings.aovs.then(|| Aovs {
         t: vec![0.0; w * h],
@@ -209,7 +247,7 @@ fn render_in<T: TraceLanes>(
     let rays = bands(w, tiles.rows, &mut rgb, aov.as_mut())
         .into_par_iter()
         .map_init(&lanes, |lanes, mut band| {
-            let rays = render_band(&sh, &frame, lanes, &mut band, w, tiles.columns, avx);
+            let rays = render_band(&sh, &frame, &samples, lanes, &mut band, w, tiles.columns, avx);
             progress((band.rgb.len() / w) as u32);
             rays
         })
@@ -218,9 +256,11 @@ fn render_in<T: TraceLanes>(
 }
 
 /// Renders a band: with AVX lanes when asked and the CPU has AVX2, else with plain arrays.
+#[allow(clippy::too_many_arguments)]
 fn render_band<T: TraceLanes>(
     sh: &Shading<'_>,
     frame: &Frame,
+    samples: &[(f32, f32)],
     lanes: &mut T,
     band: &mut Band<'_>,
     w: usize,
@@ -230,9 +270,9 @@ fn render_band<T: TraceLanes>(
     #[cfg(target_arch = "x86_64")]
     if avx && crate::packet::available() {
         // SAFETY: the CPU has AVX2 (checked just above).
-        return unsafe { render_band_avx2(sh, frame, lanes, band, w, columns) };
+        return unsafe { render_band_avx2(sh, frame, samples, lanes, band, w, columns) };
     }
-    render_band_in::<F8, T>(sh, frame, lanes, band, w, columns)
+    render_band_in::<F8, T>(sh, frame, samples, lanes, band, w, columns)
 }
 
 /// [`render_band`] compiled for AVX2, so that every lane operation of the shading is one
@@ -242,12 +282,13 @@ fn render_band<T: TraceLanes>(
 fn render_band_avx2<T: TraceLanes>(
     sh: &Shading<'_>,
     frame: &Frame,
+    samples: &[(f32, f32)],
     lanes: &mut T,
     band: &mut Band<'_>,
     w: usize,
     columns: usize,
 ) -> RayCounts {
-    render_band_in::<crate::wide::Avx8, T>(sh, frame, lanes, band, w, columns)
+    render_band_in::<crate::wide::Avx8, T>(sh, frame, samples, lanes, band, w, columns)
 }
 
 /// The band tile by tile, and each tile in 4 x 2 blocks.
@@ -255,6 +296,7 @@ fn render_band_avx2<T: TraceLanes>(
 fn render_band_in<L: Lanes, T: TraceLanes>(
     sh: &Shading<'_>,
     frame: &Frame,
+    samples: &[(f32, f32)],
     lanes: &mut T,
     band: &mut Band<'_>,
     w: usize,
@@ -265,27 +307,34 @@ fn render_band_in<L: Lanes, T: TraceLanes>(
     for x0 in (0..w).step_by(columns) {
         for dy in (0..rows).step_by(2) {
             for bx in (x0..(x0 + columns).min(w)).step_by(4) {
-                rays = rays + block::<L, T>(sh, frame, lanes, band, w, rows, bx, dy);
+                rays = rays + block::<L, T>(sh, frame, samples, lanes, band, w, rows, bx, dy);
             }
         }
     }
     rays
 }
 
-/// `Frame::direction` for the pixels (`x`, `y`) of the lanes, operation by operation.
+/// `Frame::sample_direction` for the pixels (`x`, `y`) of the lanes at the sub-pixel point
+/// `(sx, sy)`, operation by operation.
 #[inline(always)]
-fn directions<L: Lanes>(frame: &Frame, x: L, y: L) -> V3<L> {
-    let half = L::splat(0.5);
-    (V3::splat(frame.top_left) + V3::splat(frame.h_step) * (x + half) + V3::splat(frame.v_step) * (y + half))
-        .normalize()
+fn directions<L: Lanes>(frame: &Frame, x: L, y: L, (sx, sy): (f32, f32)) -> V3<L> {
+    (V3::splat(frame.top_left)
+        + V3::splat(frame.h_step) * (x + L::splat(sx))
+        + V3::splat(frame.v_step) * (y + L::splat(sy)))
+    .normalize()
 }
-/// Traces and shades the 4 x 2 block whose top-left pixel is (`bx`, `dy`) in the band, writing
-/// its pixels; returns its rays.
+
+/// Traces and shades the 4 x 2 block whose top-left pixel is (`bx`, `dy`) in the band at every
+/// sample position, writing its pixels: the colour is the sum of the samples' linear colours in
+/// their order times the f32 reciprocal of their number (a GPU multiplies exactly, where its
+/// division may be off by ulps), then quantised; the distance, normal and triangle AOVs
+/// are the first sample's, the cost AOVs the sum over all. Returns its rays.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn block<L: Lanes, T: TraceLanes>(
     sh: &Shading<'_>,
     frame: &Frame,
+    samples: &[(f32, f32)],
     lanes: &mut T,
     band: &mut Band<'_>,
     w: usize,
@@ -301,10 +350,23 @@ fn block<L: Lanes, T: TraceLanes>(
     }
     primary.origin = V3::<L>::splat(frame.eye).to_arrays();
     let (x, y) = (L::from_fn(|i| lane_xy(i).0 as f32), L::from_fn(|i| (band.y0 + lane_xy(i).1) as f32));
-    primary.dir = directions(frame, x, y).to_arrays();
     primary.t_max = [f32::INFINITY; LANES];
-    let out = sh.block::<L, T>(&primary, lanes);
-    let rgb = shade::to_u8_lanes(V3::<L>::from_arrays(&out.colour));
+    primary.dir = directions(frame, x, y, samples[0]).to_arrays();
+    let mut out = sh.block::<L, T>(&primary, lanes);
+    let mut colour = V3::<L>::from_arrays(&out.colour);
+    for &sample in &samples[1..] {
+        primary.dir = directions(frame, x, y, sample).to_arrays();
+        let more = sh.block::<L, T>(&primary, lanes);
+        colour = colour + V3::from_arrays(&more.colour);
+        for i in 0..LANES {
+            out.cost[i] += more.cost[i];
+        }
+        out.rays = out.rays + more.rays;
+    }
+    if samples.len() > 1 {
+        colour = colour * (L::splat(1.0) / L::splat(samples.len() as f32));
+    }
+    let rgb = shade::to_u8_lanes(colour);
     for i in 0..LANES {
         if !primary.valid[i] {
             continue;
@@ -342,11 +404,17 @@ mod tests {
                 for (bx, by) in [(0, 0), (w.saturating_sub(4), h.saturating_sub(2)), (w / 2, h / 3)] {
                     let x = L::from_fn(|i| (bx + i as u32 % 4) as f32);
                     let y = L::from_fn(|i| (by + i as u32 / 4) as f32);
-                    let d = directions(&frame, x, y).to_arrays();
-                    let got: [[f32; 3]; LANES] = std::array::from_fn(|i| [d[0][i], d[1][i], d[2][i]]);
-                    for (i, got) in got.iter().enumerate() {
-                        let want = frame.direction(bx + i as u32 % 4, by + i as u32 / 4);
-                        assert_eq!(got.map(f32::to_bits), want.to_array().map(f32::to_bits));
+                    for sample in render_spec::accuracy::sample_positions(9).chain([(0.5, 0.5)]) {
+                        let d = directions(&frame, x, y, sample).to_arrays();
+                        let got: [[f32; 3]; LANES] = std::array::from_fn(|i| [d[0][i], d[1][i], d[2][i]]);
+                        for (i, got) in got.iter().enumerate() {
+                            let (px, py) = (bx + i as u32 % 4, by + i as u32 / 4);
+                            let want = frame.sample_direction(px, py, sample);
+                            assert_eq!(got.map(f32::to_bits), want.to_array().map(f32::to_bits));
+                            if sample == (0.5, 0.5) {
+                                assert_eq!(got.map(f32::to_bits), frame.direction(px, py).to_array().map(f32::to_bits));
+                            }
+                        }
                     }
                 }
             }
@@ -404,5 +472,92 @@ mod tests {
         same_directions::<F8>();
         #[cfg(target_arch = "x86_64")]
         same_directions::<crate::wide::Avx8>();
+    }
+
+    /// A pixel of an image with several samples per pixel is its samples' mean linear colour
+    /// quantised once: each sample traced on its own (one ray, scalar lanes, the camera's own
+    /// `sample_direction`), summed in order, times 1 / spp. Every method, both lane types, and
+    /// whole images that differ from one sample per pixel.
+    #[test]
+    fn several_samples_per_pixel_are_the_mean_of_single_samples() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/room.toml");
+        let scene = bvh_build::import::load(&path, &Default::default()).unwrap();
+        let scene = bvh_build::compile(&scene, &Default::default(), Default::default()).unwrap();
+        let tracer = Tracer::new(&scene);
+        let (w, h) = (23, 14);
+        for spp in [4, 9] {
+            let settings = Settings {
+                width: w,
+                height: h,
+                camera: CameraSpec::from(scene.camera("medium").unwrap()),
+                mode: Mode::Whitted,
+                lights: scene.lights.clone(),
+                max_indirections: scene.settings.max_indirections,
+                aovs: true,
+                accuracy: render_spec::Accuracy { spp, ..Default::default() },
+            };
+            let one = Settings { accuracy: Default::default(), ..settings.clone() };
+            let frame = settings.frame().unwrap();
+            let sh = Shading::new(&scene, &settings);
+            let mut lanes = OneByOne::new(&tracer, Method::Ordered);
+            let mut want = Vec::new();
+            for y in 0..h {
+                for x in 0..w {
+                    let mut sum = Vec3::ZERO;
+                    for sample in render_spec::accuracy::sample_positions(spp) {
+                        let mut rays = Rays::default();
+                        rays.set(0, &Ray::new(frame.eye, frame.sample_direction(x, y, sample)), f32::INFINITY);
+                        let c = sh.block::<F8, _>(&rays, &mut lanes).colour;
+                        sum += Vec3::new(c[0][0], c[1][0], c[2][0]);
+                    }
+                    want.push(shade::to_u8(sum * (1.0 / spp as f32)));
+                }
+            }
+            for method in [Method::Packet, Method::Ordered, Method::Stackless] {
+                for avx in [true, false] {
+                    let image = match method.resolve(&scene) {
+                        Method::Packet => render_in(
+                            &tracer,
+                            &settings,
+                            Method::Packet,
+                            || Packets::new(&tracer),
+                            Tiles::default(),
+                            &|_| {},
+                            avx,
+                        ),
+                        m => render_in(
+                            &tracer,
+                            &settings,
+                            m,
+                            || OneByOne::new(&tracer, m),
+                            Tiles::default(),
+                            &|_| {},
+                            avx,
+                        ),
+                    }
+                    .unwrap();
+                    assert_eq!(image.rgb, want, "{spp} spp, {method:?}, avx {avx}");
+                    let single = render(&tracer, &one, method).unwrap();
+                    assert_eq!(image.rays.primary, single.rays.primary * spp as u64);
+                    let differ = image.rgb.iter().zip(&single.rgb).filter(|(a, b)| a != b).count();
+                    assert!(differ > (w * h) as usize / 10, "{spp} spp: only {differ} pixels differ from 1 spp");
+                    // The first sample's distance, and the cost of all samples.
+                    let (a, b) = (image.aov.unwrap(), single.aov.unwrap());
+                    let first =
+                        frame.sample_direction(0, 0, render_spec::accuracy::sample_positions(spp).next().unwrap());
+                    let mut stack = Stack::default();
+                    let hit = tracer.closest(
+                        method,
+                        &Ray::new(frame.eye, first),
+                        0.0,
+                        f32::INFINITY,
+                        &mut stack,
+                        &mut Cost::default(),
+                    );
+                    assert_eq!(a.t[0], hit.map_or(f32::INFINITY, |h| h.t));
+                    assert!(a.nodes.iter().sum::<u32>() > b.nodes.iter().sum::<u32>() * (spp - 1));
+                }
+            }
+        }
     }
 }

@@ -1,7 +1,8 @@
 //! Scalar traversals: ordered child-pair traversal with a stack (the CPU analogue of LST) and the
-//! stackless walk of the escape-pointer layout. Both exist in a closest-hit and an any-hit form.
+//! stackless walk of the escape-pointer layout. Both exist in a closest-hit and an any-hit form,
+//! each compiled for one [`TriangleTest`].
 
-use crate::geometry::{Cost, Hit, Ray, intersect, may_hold, slab};
+use crate::geometry::{Cost, Hit, Ray, TriangleTest, may_hold, slab};
 use bvh_format::{Node, Triangle};
 
 /// A traversal stack of (node, entry distance) pairs: a fixed array that covers every tree our
@@ -45,7 +46,7 @@ impl Stack {
 
 /// Tests the leaf's triangles; returns true when `ANY` and something was hit.
 #[inline(always)]
-fn leaf<const ANY: bool>(
+fn leaf<const ANY: bool, T: TriangleTest>(
     tris: &[Triangle],
     node: &Node,
     ray: &Ray,
@@ -55,7 +56,7 @@ fn leaf<const ANY: bool>(
 ) -> bool {
     for i in node.index..node.index + node.count {
         cost.tris += 1;
-        if let Some((t, u, v)) = intersect(&tris[i as usize], ray, t_min, best.t)
+        if let Some((t, u, v)) = T::intersect(&tris[i as usize], ray, t_min, best.t)
             && Hit::beats(t, i, best.t, best.tri)
         {
             *best = Hit { t, tri: i, u, v };
@@ -74,7 +75,7 @@ fn no_hit(t_max: f32) -> Hit {
 /// Ordered traversal of the child-pair layout: both children are tested, the nearer is entered
 /// and the farther pushed with its entry distance, so that a pop can skip it once a nearer hit
 /// was found.
-pub fn child_pair<const ANY: bool>(
+pub fn child_pair<const ANY: bool, T: TriangleTest>(
     nodes: &[Node],
     tris: &[Triangle],
     ray: &Ray,
@@ -91,7 +92,7 @@ pub fn child_pair<const ANY: bool>(
     loop {
         let node = &nodes[current as usize];
         if node.is_leaf() {
-            if leaf::<ANY>(tris, node, ray, t_min, &mut best, cost) {
+            if leaf::<ANY, T>(tris, node, ray, t_min, &mut best, cost) {
                 return Some(best);
             }
         } else {
@@ -132,7 +133,7 @@ pub fn child_pair<const ANY: bool>(
 
 /// Stackless traversal of the escape-pointer layout (Smits 1998; thesis 4.3.4): walk the array
 /// front to back, jumping to the escape index past every inner node whose box is missed.
-pub fn escape<const ANY: bool>(
+pub fn escape<const ANY: bool, T: TriangleTest>(
     nodes: &[Node],
     tris: &[Triangle],
     ray: &Ray,
@@ -146,7 +147,7 @@ pub fn escape<const ANY: bool>(
         let node = &nodes[i];
         cost.nodes += 1;
         if slab(node, ray, best.t).is_some() {
-            if node.is_leaf() && leaf::<ANY>(tris, node, ray, t_min, &mut best, cost) {
+            if node.is_leaf() && leaf::<ANY, T>(tris, node, ray, t_min, &mut best, cost) {
                 return Some(best);
             }
             i += 1;

@@ -14,7 +14,7 @@ use crate::shade;
 use crate::wide::{Lanes, Mask, V3};
 use bvh_format::{Light, Material, SceneFile};
 use glam::Vec3;
-use render_spec::{BounceStop, Mode, NO_TRIANGLE, RayCounts, Settings};
+use render_spec::{BounceStop, Intersect, Mode, NO_TRIANGLE, Offset, RayCounts, Settings};
 
 /// Per-frame constants of the pipeline.
 pub struct Shading<'a> {
@@ -26,6 +26,10 @@ pub struct Shading<'a> {
     background: Vec3,
     /// The adaptive bounce stop, computed once per frame.
     stop: BounceStop,
+    /// The triangle test every ray is traced with.
+    intersect: Intersect,
+    /// How shadow and secondary rays leave the surface.
+    offset: Offset,
     /// Whether to fill [`Block::t`], [`Block::normal`] and [`Block::prim`].
     aovs: bool,
 }
@@ -91,6 +95,8 @@ impl<'a> Shading<'a> {
             ambient: Vec3::from(scene.settings.ambient),
             background: Vec3::from(scene.settings.background),
             stop: BounceStop::new(scene, &s.lights).with_cutoff(s.accuracy.cutoff),
+            intersect: s.accuracy.intersect,
+            offset: s.accuracy.offset,
             aovs: s.aovs,
         }
     }
@@ -106,7 +112,7 @@ impl<'a> Shading<'a> {
         let mut out = Block::default();
         let mut colour = V3::<L>::zero();
         let mut rays = *primary;
-        let mut hits = lanes.closest(&rays);
+        let mut hits = lanes.closest(&rays, self.intersect);
         out.rays.primary = rays.count() as u64;
         let mut weight = L::splat(1.0);
         for depth in 0u32.. {
@@ -177,7 +183,7 @@ impl<'a> Shading<'a> {
                 }
                 // The shadow ray leaves from the side of the surface the light is on.
                 let side = V3::select(s.geometric.dot(l).ge(zero), s.geometric, -s.geometric);
-                let from = L::offset_origin(s.point, side);
+                let from = self.leave(s.point, side);
                 let shadow = Rays {
                     origin: from.to_arrays(),
                     dir: l.to_arrays(),
@@ -185,7 +191,7 @@ impl<'a> Shading<'a> {
                     valid: L::bools(asks),
                 };
                 out.rays.shadow += L::count(asks) as u64;
-                let blocked = lanes.occluded(&shadow);
+                let blocked = lanes.occluded(&shadow, self.intersect);
                 add_cost(&mut out.cost, &shadow.valid, &blocked);
                 let lit = asks & !L::mask(blocked.hit);
                 local = V3::select(lit, local + term.mul_each(V3::splat(Vec3::from(light.colour))), local);
@@ -204,7 +210,7 @@ impl<'a> Shading<'a> {
             }
             weight = L::select(go, weight * sec.factor, weight);
             let side = V3::select(sec.same_side, s.geometric, -s.geometric);
-            let from = L::offset_origin(s.point, side);
+            let from = self.leave(s.point, side);
             rays = Rays {
                 origin: from.to_arrays(),
                 dir: sec.dir.to_arrays(),
@@ -212,10 +218,22 @@ impl<'a> Shading<'a> {
                 valid: L::bools(go),
             };
             out.rays.secondary += L::count(go) as u64;
-            hits = lanes.closest(&rays);
+            hits = lanes.closest(&rays, self.intersect);
         }
         out.colour = colour.to_arrays();
         out
+    }
+}
+
+impl Shading<'_> {
+    /// The origins of rays leaving the surface at `p` into the side of the unit geometric normal
+    /// `n`: [`crate::geometry::leave`] lane by lane.
+    #[inline(always)]
+    fn leave<L: Lanes>(&self, p: V3<L>, n: V3<L>) -> V3<L> {
+        match self.offset {
+            Offset::ScaleAware => L::offset_origin(p, n),
+            Offset::Fixed(d) => p + n * L::splat(d),
+        }
     }
 }
 

@@ -6,6 +6,7 @@ mod common;
 use bvh_format::SceneFile;
 use glam::Vec3;
 use rayon::prelude::*;
+use tracer_cpu::geometry::{MollerTrumbore, TriangleTest, Watertight};
 use tracer_cpu::reference::{self, RefHit};
 use tracer_cpu::traverse::Stack;
 use tracer_cpu::{Cost, Hit, Method, Ray, Tracer, packet};
@@ -57,65 +58,87 @@ fn classify(scene: &SceneFile, o: Vec3, d: Vec3, fast: Option<Hit>, exact: Optio
     }
 }
 
+/// Closest hits of a chunk of rays with the triangle test `T` on every path (ordered, stackless
+/// and, with AVX2, packets), checked to be identical bit for bit.
+fn fast_hits<T: TriangleTest>(
+    name: &str,
+    scene: &SceneFile,
+    tracer: &Tracer<'_>,
+    chunk: &[(Vec3, Vec3)],
+    stack: &mut Stack,
+    pstack: &mut Vec<packet::Entry>,
+) -> Vec<Option<Hit>> {
+    let mut ordered = Vec::with_capacity(chunk.len());
+    for &(o, d) in chunk {
+        let ray = Ray::new(o, d);
+        let mut c = Cost::default();
+        let a = tracer.closest_with(T::KIND, Method::Ordered, &ray, 0.0, f32::INFINITY, stack, &mut c);
+        let b = tracer.closest_with(T::KIND, Method::Stackless, &ray, 0.0, f32::INFINITY, stack, &mut c);
+        assert_eq!(a, b, "{name}: ordered and stackless disagree on origin {o:?} dir {d:?}");
+        ordered.push(a);
+    }
+    if packet::available() {
+        let mut p = packet::Rays::default();
+        for (i, &(o, d)) in chunk.iter().enumerate() {
+            p.set(i, &Ray::new(o, d), f32::INFINITY);
+        }
+        let nodes = scene.child_pair.as_deref().unwrap();
+        let res = packet::trace::<false, T>(nodes, tracer.triangles(), &p, pstack);
+        for (i, a) in ordered.iter().enumerate() {
+            assert_eq!(res.get(i), *a, "{name}: packet and ordered disagree on lane {i}");
+        }
+    }
+    ordered
+}
+
+/// Both triangle tests: on each, every path agrees with the others bit for bit and with the f64
+/// reference up to edges and ties.
 fn check_scene(name: &str, scene: &SceneFile, n: usize, seed: u64) {
     let tris = scene.leaf_triangles();
     let tracer = Tracer::new(scene);
     let rays = common::random_rays(scene, n, seed);
-    let chunks: Vec<Tally> = rays
+    let names = [name.to_owned(), format!("{name} (Möller-Trumbore)")];
+    let chunks: Vec<[Tally; 2]> = rays
         .par_chunks(packet::LANES)
         .map_init(
             || (Stack::default(), Vec::new()),
             |(stack, pstack), chunk| {
-                let mut tally = Tally::default();
-                let mut ordered = Vec::with_capacity(chunk.len());
-                for &(o, d) in chunk {
-                    let ray = Ray::new(o, d);
-                    let mut c = Cost::default();
-                    let a = tracer.closest(Method::Ordered, &ray, 0.0, f32::INFINITY, stack, &mut c);
-                    let b = tracer.closest(Method::Stackless, &ray, 0.0, f32::INFINITY, stack, &mut c);
-                    assert_eq!(a, b, "{name}: ordered and stackless disagree on origin {o:?} dir {d:?}");
-                    ordered.push(a);
-                }
-                if packet::available() {
-                    let mut p = packet::Rays::default();
-                    for (i, &(o, d)) in chunk.iter().enumerate() {
-                        p.set(i, &Ray::new(o, d), f32::INFINITY);
-                    }
-                    let nodes = scene.child_pair.as_deref().unwrap();
-                    let res = packet::trace::<false>(nodes, &tris, &p, pstack);
-                    for (i, a) in ordered.iter().enumerate() {
-                        assert_eq!(res.get(i), *a, "{name}: packet and ordered disagree on lane {i}");
-                    }
-                }
-                for (&(o, d), fast) in chunk.iter().zip(ordered) {
+                let mut tally = [Tally::default(), Tally::default()];
+                let watertight = fast_hits::<Watertight>(&names[0], scene, &tracer, chunk, stack, pstack);
+                let mt = fast_hits::<MollerTrumbore>(&names[1], scene, &tracer, chunk, stack, pstack);
+                for (k, &(o, d)) in chunk.iter().enumerate() {
                     let exact = reference::closest_hit(&tris, o.as_dvec3(), d.as_dvec3(), 0.0);
-                    classify(scene, o, d, fast, exact, &mut tally);
+                    classify(scene, o, d, watertight[k], exact, &mut tally[0]);
+                    classify(scene, o, d, mt[k], exact, &mut tally[1]);
                 }
                 tally
             },
         )
         .collect();
-    let mut total = Tally::default();
-    for c in chunks {
-        total.rays += c.rays;
-        total.agree += c.agree;
-        total.ties += c.ties;
-        total.edges += c.edges;
-        total.unexplained.extend(c.unexplained);
+    for (which, name) in names.iter().enumerate() {
+        let mut total = Tally::default();
+        for c in &chunks {
+            let c = &c[which];
+            total.rays += c.rays;
+            total.agree += c.agree;
+            total.ties += c.ties;
+            total.edges += c.edges;
+            total.unexplained.extend(c.unexplained.iter().cloned());
+        }
+        println!(
+            "{name}: {} rays, {} agree with the f64 reference, {} exact ties, {} within {EDGE} of an edge, {} unexplained{}",
+            total.rays,
+            total.agree,
+            total.ties,
+            total.edges,
+            total.unexplained.len(),
+            if packet::available() { " (ordered, stackless and AVX2 packets identical)" } else { " (no AVX2 here)" }
+        );
+        let examples: Vec<&String> = total.unexplained.iter().filter(|s| !s.is_empty()).collect();
+        assert!(total.unexplained.is_empty(), "{name}: unexplained disagreements, e.g. {examples:#?}");
+        assert!(total.edges + total.ties <= total.rays / 200, "{name}: too many edge cases to be edges");
+        assert!(total.agree > total.rays * 9 / 10);
     }
-    println!(
-        "{name}: {} rays, {} agree with the f64 reference, {} exact ties, {} within {EDGE} of an edge, {} unexplained{}",
-        total.rays,
-        total.agree,
-        total.ties,
-        total.edges,
-        total.unexplained.len(),
-        if packet::available() { " (ordered, stackless and AVX2 packets identical)" } else { " (no AVX2 here)" }
-    );
-    let examples: Vec<&String> = total.unexplained.iter().filter(|s| !s.is_empty()).collect();
-    assert!(total.unexplained.is_empty(), "{name}: unexplained disagreements, e.g. {examples:#?}");
-    assert!(total.edges + total.ties <= total.rays / 200, "{name}: too many edge cases to be edges");
-    assert!(total.agree > total.rays * 9 / 10);
 }
 
 #[test]

@@ -43,11 +43,17 @@ struct Frame {
     background: vec4<f32>,
     // width, height, light count, max indirections
     size: vec4<u32>,
-    // bounce-stop bound B, largest kr/kt, -, -
+    // bounce-stop bound B, largest kr/kt, the cutoff (Accuracy::cutoff), -
     stop: vec4<f32>,
     // The tile this dispatch renders: first column, first row, width, height. The per-pixel
     // buffers hold the tile's pixels only, row by row.
     tile: vec4<u32>,
+    // This sample's point in the pixel (x, y from the top-left corner, render_spec's
+    // sample_positions), 1 / samples per pixel (from the host: WGSL's division need not be
+    // correctly rounded), the fixed origin offset (feature FIXED_OFFSET).
+    sample: vec4<f32>,
+    // This sample's index, samples per pixel, -, -.
+    samples: vec4<u32>,
 }
 
 // The current ray of a pixel: origin (w: path weight), direction (w: 1 while the path is alive).
@@ -63,11 +69,13 @@ struct HitRec {
     v: f32,
 }
 
-// A pixel's colour so far, and the local term of its current hit summed over the lights shaded
-// so far: added to the colour, times the path weight, after the last light, as the CPU does.
+// A pixel's colour so far, the local term of its current hit summed over the lights shaded so far
+// (added to the colour, times the path weight, after the last light, as the CPU does), and the
+// sum of the colours of the pixel's finished samples.
 struct Accum {
     colour: vec4<f32>,
     local: vec4<f32>,
+    sum: vec4<f32>,
 }
 
 struct Aov {
@@ -210,8 +218,51 @@ fn edge_function(a: vec3<f32>, b: vec3<f32>, d: vec3<f32>) -> f32 {
     return d.x * c.x + d.y * c.y + d.z * c.z;
 }
 
-// The edge-consistent triangle test of docs/shading.md; returns (t, u, v) or t = -1 for a miss.
+// The frame's triangle test (render_spec::Intersect): the edge-consistent test by default,
+// Möller-Trumbore with feature MOLLER_TRUMBORE. Returns (t, u, v) or t = -1 for a miss.
 fn intersect(tri: Tri, r: Ray, t_min: f32, t_max: f32) -> vec3<f32> {
+//#if WATERTIGHT
+    return intersect_watertight(tri, r, t_min, t_max);
+//#endif
+//#if MOLLER_TRUMBORE
+    return intersect_moller_trumbore(tri, r, t_min, t_max);
+//#endif
+}
+
+//#if MOLLER_TRUMBORE
+// Möller-Trumbore on vertex 0 and its two edges, in the operation order of tracer-cpu's
+// geometry::intersect_moller_trumbore: each triangle decides a shared edge after its own
+// roundings, so a ray aimed exactly at the edge can pass between both.
+fn intersect_moller_trumbore(tri: Tri, r: Ray, t_min: f32, t_max: f32) -> vec3<f32> {
+    let d = r.d;
+    let e1 = tri.p1 - tri.p0;
+    let e2 = tri.p2 - tri.p0;
+    let p = vec3<f32>(d.y * e2.z - e2.y * d.z, d.z * e2.x - e2.z * d.x, d.x * e2.y - e2.x * d.y);
+    let det = e1.x * p.x + e1.y * p.y + e1.z * p.z;
+    if det == 0.0 {
+        return vec3<f32>(-1.0, 0.0, 0.0);
+    }
+    let inv = 1.0 / det;
+    let s = r.o - tri.p0;
+    let u = (s.x * p.x + s.y * p.y + s.z * p.z) * inv;
+    if !(u >= 0.0 && u <= 1.0) {
+        return vec3<f32>(-1.0, 0.0, 0.0);
+    }
+    let q = vec3<f32>(s.y * e1.z - e1.y * s.z, s.z * e1.x - e1.z * s.x, s.x * e1.y - e1.x * s.y);
+    let v = (d.x * q.x + d.y * q.y + d.z * q.z) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return vec3<f32>(-1.0, 0.0, 0.0);
+    }
+    let t = (e2.x * q.x + e2.y * q.y + e2.z * q.z) * inv;
+    if t > t_min && t <= t_max {
+        return vec3<f32>(t, u, v);
+    }
+    return vec3<f32>(-1.0, 0.0, 0.0);
+}
+//#endif
+
+// The edge-consistent triangle test of docs/shading.md.
+fn intersect_watertight(tri: Tri, r: Ray, t_min: f32, t_max: f32) -> vec3<f32> {
     let d = r.d;
     let a0 = tri.p0 - r.o;
     let a1 = tri.p1 - r.o;
@@ -252,6 +303,18 @@ fn intersect_leaf(n: Node, r: Ray, t_min: f32, best: ptr<function, HitRec>, any_
         }
     }
     return false;
+}
+
+// The origin of a ray leaving the surface at p into the side the unit geometric normal n points
+// to, moved as the frame's render_spec::Offset says: p + n * d with feature FIXED_OFFSET, else
+// offset_origin().
+fn leave(p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+//#if FIXED_OFFSET
+    return p + n * frame.sample.w;
+//#endif
+//#if SCALE_AWARE_OFFSET
+    return offset_origin(p, n);
+//#endif
 }
 
 // Moves a point off a surface along the unit normal n (Wächter and Binder 2019).
@@ -406,7 +469,8 @@ fn worth_tracing(w: f32, remaining: u32) -> bool {
             break;
         }
     }
-    return w * frame.stop.x * chain >= STOP_CONTRIBUTION;
+    // No indirection left stops the chain also at a cutoff of 0 (BounceStop::worth_tracing).
+    return remaining > 0u && w * frame.stop.x * chain >= frame.stop.z;
 }
 
 fn to_rgba8(c: vec3<f32>) -> u32 {
@@ -415,5 +479,5 @@ fn to_rgba8(c: vec3<f32>) -> u32 {
 }
 
 fn primary_dir(x: u32, y: u32) -> vec3<f32> {
-    return unit(frame.top_left.xyz + (f32(x) + 0.5) * frame.h_step.xyz + (f32(y) + 0.5) * frame.v_step.xyz);
+    return unit(frame.top_left.xyz + (f32(x) + frame.sample.x) * frame.h_step.xyz + (f32(y) + frame.sample.y) * frame.v_step.xyz);
 }

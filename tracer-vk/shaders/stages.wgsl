@@ -13,6 +13,12 @@ fn pixel_index(x: u32, y: u32) -> u32 {
 }
 
 fn record_primary(p: u32, r: Ray, h: HitRec) -> bool {
+    // Later samples add their cost; the distance, normal and triangle are the first sample's.
+    if frame.samples.x > 0u {
+        aovs[p].nodes += cost_nodes;
+        aovs[p].tris += cost_tris;
+        return h.tri != NO_TRIANGLE;
+    }
     var a: Aov;
     a.nodes = cost_nodes;
     a.tris = cost_tris;
@@ -30,6 +36,18 @@ fn record_primary(p: u32, r: Ray, h: HitRec) -> bool {
     return true;
 }
 
+// The pixel's colour over its samples so far, this one's colour c included: the CPU's sum in
+// sample order (the first sample alone is c).
+fn with_earlier_samples(p: u32, c: vec3<f32>) -> vec3<f32> {
+    return select(accum[p].sum.xyz + c, c, frame.samples.x == 0u);
+}
+
+// The pixel's 8-bit colour from the sum of all its samples' colours: their mean, as the CPU
+// computes it (times the host's f32 1 / spp), quantised once.
+fn samples_to_rgba8(total: vec3<f32>) -> u32 {
+    return to_rgba8(select(total, total * frame.sample.z, frame.samples.y > 1u));
+}
+
 fn stage_cast(x: u32, y: u32, valid: bool) {
     let p = pixel_index(x, y);
     let r = make_ray(frame.eye.xyz, primary_dir(x, y));
@@ -43,7 +61,12 @@ fn stage_cast(x: u32, y: u32, valid: bool) {
         let s = surface_at(r, h);
         c = material_of(h.tri).kd_n.xyz * max(dot3(s.shading, -r.d), 0.0);
     }
-    image[p] = to_rgba8(c);
+    let total = with_earlier_samples(p, c);
+    if frame.samples.x + 1u < frame.samples.y {
+        accum[p].sum = vec4<f32>(total, 0.0);
+    } else {
+        image[p] = samples_to_rgba8(total);
+    }
     count(SLOT_FINISHED);
 }
 
@@ -55,6 +78,10 @@ fn stage_primary(x: u32, y: u32, valid: bool) {
         return;
     }
     count(SLOT_PRIMARY);
+    if frame.samples.x > 0u {
+        // The previous sample is complete: its colour joins the sum before this one starts.
+        accum[p].sum = vec4<f32>(select(accum[p].sum.xyz + accum[p].colour.xyz, accum[p].colour.xyz, frame.samples.x == 1u), 0.0);
+    }
     hits[p] = h;
     let alive = record_primary(p, r, h);
     paths[p] = PathRay(vec4<f32>(r.o, 1.0), vec4<f32>(r.d, select(0.0, 1.0, alive)));
@@ -92,7 +119,7 @@ fn stage_shade(x: u32, y: u32, valid: bool) {
             term = phong(m, s, r.d, l);
             if any(term != vec3<f32>(0.0)) {
                 let side = select(-s.geometric, s.geometric, dot3(s.geometric, l) >= 0.0);
-                let o = offset_origin(s.point, side);
+                let o = leave(s.point, side);
                 shadow = make_ray(o, l);
                 shadow_t = length3(light.position.xyz - o);
                 wants_shadow = true;
@@ -162,7 +189,7 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
         let remaining = frame.size.w - pass_info.depth;
         w = path.origin.w * factor;
         go = factor > 0.0 && remaining > 0u && worth_tracing(w, remaining);
-        o = offset_origin(s.point, select(-s.geometric, s.geometric, same_side));
+        o = leave(s.point, select(-s.geometric, s.geometric, same_side));
     }
     let nr = make_ray(o, dir);
     let nh = trace(nr, 0.0, F32_MAX, false, go);
@@ -195,6 +222,6 @@ fn stage_convert(x: u32, y: u32, valid: bool) {
         return;
     }
     let p = pixel_index(x, y);
-    image[p] = to_rgba8(accum[p].colour.xyz);
+    image[p] = samples_to_rgba8(with_earlier_samples(p, accum[p].colour.xyz));
     count(SLOT_FINISHED);
 }

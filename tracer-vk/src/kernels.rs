@@ -8,6 +8,7 @@
 
 use crate::error::VkError;
 use crate::shader;
+use render_spec::Intersect;
 
 const COMMON: &str = include_str!("../shaders/common.wgsl");
 const LST: &str = include_str!("../shaders/lst.wgsl");
@@ -83,6 +84,33 @@ pub struct Specialisation {
     pub smooth: bool,
     /// No float operation may be contracted with another (`--exact`, [`crate::no_contraction`]).
     pub exact: bool,
+    /// The triangle test (`--intersect`): each its own kernel, so the default one is unchanged.
+    pub intersect: Intersect,
+    /// Origins move by the frame's fixed distance (`--offset D`) instead of the scale-aware offset.
+    pub fixed_offset: bool,
+}
+
+impl Specialisation {
+    /// The `//#if` blocks of the kernel files this specialisation keeps.
+    fn features(&self) -> Vec<&'static str> {
+        let mut features = Vec::new();
+        if self.reflection {
+            features.push("REFLECTION");
+        }
+        if self.refraction {
+            features.push("REFRACTION");
+        }
+        if self.smooth {
+            features.push("SMOOTH");
+        }
+        features.push(if self.method == Method::SstSubgroup { "VOTE_SUBGROUP" } else { "VOTE_REDUCTION" });
+        features.push(match self.intersect {
+            Intersect::Watertight => "WATERTIGHT",
+            Intersect::MollerTrumbore => "MOLLER_TRUMBORE",
+        });
+        features.push(if self.fixed_offset { "FIXED_OFFSET" } else { "SCALE_AWARE_OFFSET" });
+        features
+    }
 }
 
 /// Drops the lines between `//#if NAME` and `//#endif` when NAME is not enabled (no nesting).
@@ -142,17 +170,7 @@ pub const PASS_BYTES: u32 = 16;
 
 /// The complete WGSL source of one kernel.
 pub fn source(stage: Stage, spec: &Specialisation) -> String {
-    let mut features = Vec::new();
-    if spec.reflection {
-        features.push("REFLECTION");
-    }
-    if spec.refraction {
-        features.push("REFRACTION");
-    }
-    if spec.smooth {
-        features.push("SMOOTH");
-    }
-    features.push(if spec.method == Method::SstSubgroup { "VOTE_SUBGROUP" } else { "VOTE_REDUCTION" });
+    let features = spec.features();
     let traversal = match spec.method {
         Method::Lst => LST,
         Method::Stackless => STACKLESS,
@@ -199,7 +217,7 @@ pub fn prelude(spec: &Specialisation) -> String {
         spec.leaf_size.max(1),
         spec.workgroup.0,
         spec.workgroup.1,
-        COMMON,
+        strip_features(COMMON, &spec.features()),
     )
 }
 
@@ -237,6 +255,8 @@ mod tests {
             refraction,
             smooth,
             exact: false,
+            intersect: Intersect::Watertight,
+            fixed_offset: false,
         }
     }
 
@@ -251,7 +271,37 @@ mod tests {
                     }
                 }
             }
+            // The accuracy variants, exact or not.
+            for (intersect, fixed_offset, exact) in [
+                (Intersect::MollerTrumbore, false, false),
+                (Intersect::Watertight, true, false),
+                (Intersect::MollerTrumbore, true, true),
+            ] {
+                for stage in [Stage::Cast, Stage::Bounce] {
+                    let s = Specialisation { intersect, fixed_offset, exact, ..spec(method, true, true) };
+                    if let Err(e) = compile(stage, &s) {
+                        panic!("{method:?} {stage:?} {intersect:?} fixed offset {fixed_offset} exact {exact}: {e:?}");
+                    }
+                }
+            }
         }
+    }
+
+    #[test]
+    fn the_default_kernel_has_no_code_of_the_other_accuracy_variants() {
+        let plain = source(Stage::Bounce, &spec(Method::Lst, true, true));
+        assert!(plain.contains("fn intersect_watertight") && !plain.contains("fn intersect_moller_trumbore"));
+        assert!(plain.contains("return offset_origin(p, n);") && !plain.contains("frame.sample.w;"));
+        let s = Specialisation {
+            intersect: Intersect::MollerTrumbore,
+            fixed_offset: true,
+            ..spec(Method::Lst, true, true)
+        };
+        let variant = source(Stage::Bounce, &s);
+        assert!(
+            variant.contains("return intersect_moller_trumbore(") && !variant.contains("return intersect_watertight(")
+        );
+        assert!(variant.contains("return p + n * frame.sample.w;") && !variant.contains("return offset_origin(p, n);"));
     }
 
     #[test]

@@ -198,6 +198,8 @@ mod tests {
                     refraction: true,
                     smooth: true,
                     exact: false,
+                    intersect: render_spec::Intersect::Watertight,
+                    fixed_offset: false,
                 };
                 let plain = kernels::compile(stage, &spec).expect("the kernel compiles");
                 let before = arithmetic(&plain);

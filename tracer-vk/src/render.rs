@@ -14,7 +14,7 @@ use crate::kernels::{self, Method, Specialisation, Stage, counters};
 use crate::tiles::{self, Tile};
 use bvh_format::{Light, SceneFile};
 use bytemuck::{Pod, Zeroable};
-use render_spec::{Aovs, BounceStop, Image, Mode, RayCounts, RenderError, Settings};
+use render_spec::{Accuracy, Aovs, BounceStop, Image, Intersect, Mode, Offset, RayCounts, RenderError, Settings};
 use std::collections::HashMap;
 
 /// The most invocations a workgroup may have on any device (Vulkan guarantees 128; every desktop
@@ -99,6 +99,8 @@ struct FrameData {
     size: [u32; 4],
     stop: [f32; 4],
     tile: [u32; 4],
+    sample: [f32; 4],
+    samples: [u32; 4],
 }
 
 /// The push constant of a pass (`Pass` in common.wgsl).
@@ -168,7 +170,7 @@ pub(crate) const BINDINGS: u32 = BINDING_NAMES.len() as u32;
 /// and the packed RGBA8 image of common.wgsl (a test holds them to naga's layout).
 const PATH_BYTES: u64 = 32;
 const HIT_BYTES: u64 = 16;
-const ACCUM_BYTES: u64 = 32;
+const ACCUM_BYTES: u64 = 48;
 const AOV_BYTES: u64 = 32;
 const IMAGE_BYTES: u64 = 4;
 
@@ -265,6 +267,8 @@ impl<'g> Renderer<'g> {
             refraction: scene.materials.iter().any(|m| m.kt > 0.0),
             smooth: !scene.normals.is_empty(),
             exact: false,
+            intersect: Intersect::Watertight,
+            fixed_offset: false,
         };
         let info = gpu.info();
         let (wx, wy) = workgroup;
@@ -318,8 +322,19 @@ impl<'g> Renderer<'g> {
     /// Builds the kernels without contracting any float operations (`--exact`): on a GPU whose
     /// compiler fuses multiply-adds, the images then equal the CPU tracer's.
     pub fn set_exact(&mut self, exact: bool) {
-        if self.spec.exact != exact {
-            self.spec.exact = exact;
+        self.specialise(Specialisation { exact, ..self.spec });
+    }
+
+    /// The kernels of the frame's accuracy settings: the triangle test and the kind of origin
+    /// offset are kernel variants, so the default kernels carry no code of the others.
+    fn specialise_for(&mut self, a: &Accuracy) {
+        let fixed_offset = matches!(a.offset, Offset::Fixed(_));
+        self.specialise(Specialisation { intersect: a.intersect, fixed_offset, ..self.spec });
+    }
+
+    fn specialise(&mut self, spec: Specialisation) {
+        if self.spec != spec {
+            self.spec = spec;
             self.pipelines.clear();
         }
     }
@@ -381,6 +396,7 @@ impl<'g> Renderer<'g> {
     ) -> Result<Output, VkRenderError> {
         let (image, aovs) = (readback, readback && s.aovs);
         let f = s.frame()?;
+        self.specialise_for(&s.accuracy);
         if s.lights.len() > u32::MAX as usize / 2 {
             return Err(VkRenderError::TooManyLights(s.lights.len()));
         }
@@ -414,7 +430,12 @@ impl<'g> Renderer<'g> {
             }
         };
 
-        let stop = BounceStop::new(self.scene, &s.lights);
+        let stop = BounceStop::new(self.scene, &s.lights).with_cutoff(s.accuracy.cutoff);
+        let samples: Vec<(f32, f32)> = render_spec::accuracy::sample_positions(s.accuracy.spp).collect();
+        let offset = match s.accuracy.offset {
+            Offset::Fixed(d) => d,
+            Offset::ScaleAware => 0.0,
+        };
         let v4 = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
         let a3 = |v: [f32; 3]| [v[0], v[1], v[2], 0.0];
         let mut frame = FrameData {
@@ -425,8 +446,10 @@ impl<'g> Renderer<'g> {
             ambient: a3(self.scene.settings.ambient),
             background: a3(self.scene.settings.background),
             size: [s.width, s.height, s.lights.len() as u32, indirections],
-            stop: [stop.bound, stop.k_max, 0.0, 0.0],
+            stop: [stop.bound, stop.k_max, stop.cutoff, 0.0],
             tile: [0; 4],
+            sample: [0.5, 0.5, 1.0 / samples.len() as f32, offset],
+            samples: [0, samples.len() as u32, 0, 0],
         };
         let g = self.gpu;
         let frame_buf = g.create_buffer(size_of::<FrameData>() as u64, "frame")?;
@@ -440,17 +463,24 @@ impl<'g> Renderer<'g> {
         let mut done = 0;
         for tile in &plan {
             frame.tile = [tile.x, tile.y, tile.width, tile.height];
-            g.upload(&frame_buf, bytemuck::bytes_of(&frame))?;
-            self.render_tile(
-                tile,
-                whitted,
-                s.lights.len() as u32,
-                indirections,
-                &frame_buf,
-                &lights_buf,
-                &counters,
-                &mut tally,
-            )?;
+            // Sample by sample (render_spec::accuracy::sample_positions): the kernels sum the
+            // colours in this order and the last sample's conversion writes their mean.
+            for (k, &(sx, sy)) in samples.iter().enumerate() {
+                frame.sample[0] = sx;
+                frame.sample[1] = sy;
+                frame.samples[0] = k as u32;
+                g.upload(&frame_buf, bytemuck::bytes_of(&frame))?;
+                self.render_tile(
+                    tile,
+                    whitted,
+                    s.lights.len() as u32,
+                    indirections,
+                    &frame_buf,
+                    &lights_buf,
+                    &counters,
+                    &mut tally,
+                )?;
+            }
             let t = self.targets.as_ref().expect("the targets were made above");
             let n = tile.pixels() as usize;
             if image {
@@ -681,6 +711,8 @@ mod tests {
             refraction: false,
             smooth: true,
             exact: false,
+            intersect: Intersect::Watertight,
+            fixed_offset: false,
         }
     }
 
@@ -747,6 +779,8 @@ mod layout_contract {
             refraction: true,
             smooth: true,
             exact: false,
+            intersect: Intersect::Watertight,
+            fixed_offset: false,
         };
         naga::front::wgsl::parse_str(&kernels::source(Stage::Bounce, &spec)).expect("the kernel parses")
     }
@@ -837,6 +871,8 @@ mod layout_contract {
                 ("size", offset_of!(FrameData, size)),
                 ("stop", offset_of!(FrameData, stop)),
                 ("tile", offset_of!(FrameData, tile)),
+                ("sample", offset_of!(FrameData, sample)),
+                ("samples", offset_of!(FrameData, samples)),
             ],
         );
         let pad = offset_of!(PassData, pad);

@@ -4,11 +4,11 @@
 
 use crate::device::DeviceInfo;
 
-/// Bytes of the largest per-pixel buffer element (a path ray, the colours and an AOV record are
-/// 32 bytes).
-pub const LARGEST_PIXEL_RECORD: u64 = 32;
-/// Bytes of all per-pixel state together: path 32, hit 16, colours 32, AOVs 32, image 4.
-pub const PIXEL_BYTES: u64 = 116;
+/// Bytes of the largest per-pixel buffer element (the colours: the path's, its hit's local term
+/// and the sum over samples).
+pub const LARGEST_PIXEL_RECORD: u64 = 48;
+/// Bytes of all per-pixel state together: path 32, hit 16, colours 48, AOVs 32, image 4.
+pub const PIXEL_BYTES: u64 = 132;
 /// The per-pixel state of a tile takes at most this share of the device's memory, leaving the
 /// rest to the scene and to other programs.
 const MEMORY_SHARE: u64 = 4;

@@ -1,12 +1,11 @@
 //! `trace-cpu`: renders a scene file on the CPU (the baseline tracer).
 
-use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
-use render_spec::Settings;
 use std::process::ExitCode;
 use std::time::Instant;
-use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed};
+use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
+use tools::cpu_bench::{CpuBench, thread_pool};
 use tools::render_args::{RenderArgs, parse_count};
 use tools::say;
 use tracer_cpu::{Method, Tracer};
@@ -29,6 +28,11 @@ enum Command {
         /// file compiled with only the escape-pointer layout.
         #[arg(long, value_enum, default_value = "auto")]
         method: MethodArg,
+        /// Render the exact reference instead: f64 arithmetic throughout, every bounce up to the
+        /// indirection limit (no adaptive stop); the ground truth other images are measured
+        /// against, several times slower than a fast render.
+        #[arg(long, conflicts_with = "method")]
+        reference: bool,
         /// Worker threads, 1 to 1024 [default: all cores].
         #[arg(long, value_parser = parse_threads, allow_hyphen_values = true)]
         threads: Option<usize>,
@@ -77,23 +81,29 @@ fn parse_threads(s: &str) -> Result<usize, String> {
 fn main() -> ExitCode {
     let command = tools::cli::parse::<Cli>().command;
     tools::cli::run(|| match command {
-        Command::Render { args, method, threads } => render(&args, method, threads),
+        Command::Render { args, method, reference, threads } => render(&args, method, reference, threads),
         Command::Bench(b) => bench(&b),
     })
 }
 
-fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Result<(), String> {
+fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option<usize>) -> Result<(), String> {
     let outputs = args.check()?;
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
     let method = method.method();
-    let pool = pool(threads)?;
-    let tracer = Tracer::new(scene);
+    let pool = thread_pool(threads)?;
     let bar = Progress::new(settings.height as u64, "{bar:40} {pos}/{len} rows ({elapsed}, {eta} left)", false);
     let t0 = Instant::now();
+    let progress = |rows: u32| bar.inc(rows as u64);
     let image = pool
-        .install(|| tracer_cpu::render_with_progress(&tracer, &settings, method, &|rows| bar.inc(rows as u64)))
+        .install(|| {
+            if reference {
+                tracer_cpu::reference::render_with_progress(scene, &settings, &progress).map(|r| r.image)
+            } else {
+                tracer_cpu::render_with_progress(&Tracer::new(scene), &settings, method, &progress)
+            }
+        })
         .map_err(|e| e.to_string())?;
     let seconds = t0.elapsed().as_secs_f64();
     bar.finish();
@@ -103,12 +113,13 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     let mut lines = Vec::new();
     let r = image.rays;
     lines.push(format!(
-        "{}x{} {:?} with {:?} on {} threads: {} to trace and shade into the 8-bit image{}{}, rays: {} primary, \
+        "{}x{} {:?}{} with {} on {} threads: {} to trace and shade into the 8-bit image{}{}, rays: {} primary, \
          {} shadow, {} secondary ({}) -> {}",
         image.width,
         image.height,
         settings.mode,
-        method.resolve(scene),
+        tools::render_args::accuracy_note(&settings.accuracy),
+        if reference { "the f64 reference".to_owned() } else { format!("{:?}", method.resolve(scene)) },
         pool.current_num_threads(),
         duration(seconds),
         if settings.aovs { " and the AOVs" } else { "" },
@@ -125,62 +136,6 @@ fn render(args: &RenderArgs, method: MethodArg, threads: Option<usize>) -> Resul
     Ok(())
 }
 
-fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool, String> {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads.unwrap_or(0))
-        .build()
-        .map_err(|e| format!("cannot start the worker threads: {e}"))
-}
-
-/// The CPU side of the benchmark matrix: wall-clock time of whole frames on a thread pool.
-struct CpuBench {
-    pool: rayon::ThreadPool,
-}
-
-impl Bench for CpuBench {
-    type Renderer<'a> = (Tracer<'a>, Method);
-
-    fn tracer(&self) -> &'static str {
-        "cpu"
-    }
-
-    fn device(&self) -> String {
-        format!("{}, {} threads", tools::cpu_model(), self.pool.current_num_threads())
-    }
-
-    fn timing(&self) -> String {
-        "a frame's time is the wall-clock time of `tracer_cpu::render`: primary rays, tracing and shading \
-         into the 8-bit image, no AOVs; the scene is loaded and prepared before"
-            .to_owned()
-    }
-
-    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<(Tracer<'a>, Method), String> {
-        let method = MethodArg::from_str(method, false).map_err(|e| format!("{method:?}: {e}"))?.method();
-        if method == Method::Packet && method.resolve(scene) != method {
-            return Err("this CPU cannot run the packet method: it needs AVX2".to_owned());
-        }
-        Ok((Tracer::new(scene), method))
-    }
-
-    fn frame(&self, (tracer, method): &mut (Tracer<'_>, Method), f: &FrameSpec) -> Result<Timed, String> {
-        let settings = Settings {
-            width: f.width,
-            height: f.height,
-            camera: f.camera,
-            mode: f.mode,
-            lights: f.lights.clone(),
-            max_indirections: f.max_indirections,
-            aovs: false,
-            accuracy: render_spec::Accuracy::default(),
-        };
-        let t0 = Instant::now();
-        let image = self.pool.install(|| tracer_cpu::render(tracer, &settings, *method)).map_err(|e| e.to_string())?;
-        let ms = t0.elapsed().as_secs_f64() * 1e3;
-        let r = image.rays;
-        Ok(Timed { ms, rays: [r.primary, r.shadow, r.secondary] })
-    }
-}
-
 fn bench(b: &BenchArgs) -> Result<(), String> {
     let names: Vec<String> = b
         .methods
@@ -188,7 +143,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
         .map(|m| m.to_possible_value().expect("every method has a name").get_name().to_owned())
         .collect();
     let methods: Vec<&str> = names.iter().map(String::as_str).collect();
-    let bench = CpuBench { pool: pool(b.threads)? };
+    let bench = CpuBench { pool: thread_pool(b.threads)? };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 10, warmup: 1 })?;
     Ok(())
 }

@@ -1,13 +1,12 @@
 //! `trace-vk`: renders a scene file with the Vulkan compute tracer on any Vulkan device.
 
-use bvh_format::SceneFile;
 use clap::{Parser, Subcommand, ValueEnum};
-use render_spec::Settings;
 use std::process::ExitCode;
-use tools::bench::{Bench, Defaults, FrameSpec, MatrixArgs, Timed};
+use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
 use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
+use tools::vk_bench::{VkBench, check_validation, unimplemented};
 use tracer_vk::kernels::Method;
 use tracer_vk::render::Renderer;
 use tracer_vk::{Gpu, list_devices};
@@ -118,13 +117,6 @@ fn open(device: &DeviceArgs) -> Result<Gpu, String> {
     Gpu::new(device.device, device.validate).map_err(|e| e.to_string())
 }
 
-fn check_validation(gpu: &Gpu) -> Result<(), String> {
-    match gpu.validation_messages().first() {
-        None => Ok(()),
-        Some(m) => Err(format!("the validation layer reported a problem: {}", m.lines().next().unwrap_or(""))),
-    }
-}
-
 fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &DeviceArgs) -> Result<(), String> {
     let outputs = args.check()?;
     let loaded = tools::load_scene(args.scene.as_deref())?;
@@ -146,10 +138,11 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let written = outputs.write(image, args.heatmap_max)?;
     let r = image.rays;
     let lines = vec![format!(
-        "{}x{} {:?} with {}{} on {}: {} GPU{}, rays: {} primary, {} shadow, {} secondary ({}) -> {}",
+        "{}x{} {:?}{} with {}{} on {}: {} GPU{}, rays: {} primary, {} shadow, {} secondary ({}) -> {}",
         image.width,
         image.height,
         settings.mode,
+        tools::render_args::accuracy_note(&settings.accuracy),
         method.name(),
         if args.exact { " (exact)" } else { "" },
         gpu.info().name,
@@ -173,62 +166,6 @@ fn method_of(m: MethodArg) -> Method {
         MethodArg::Stackless => Method::Stackless,
         MethodArg::Sst => Method::Sst,
         MethodArg::SstSubgroup => Method::SstSubgroup,
-    }
-}
-
-/// The GPU side of the benchmark matrix: one renderer per (scene, method), GPU time per frame.
-struct VkBench {
-    gpu: Gpu,
-    workgroup: (u32, u32),
-    exact: bool,
-}
-
-impl Bench for VkBench {
-    type Renderer<'a> = Renderer<'a>;
-
-    fn tracer(&self) -> &'static str {
-        "vk"
-    }
-
-    fn device(&self) -> String {
-        let i = self.gpu.info();
-        format!("{} ({:?}, {})", i.name, i.kind, i.driver)
-    }
-
-    fn timing(&self) -> String {
-        format!(
-            "a frame's time is the GPU time of its passes from timestamp queries (workgroup {}x{}{})",
-            self.workgroup.0,
-            self.workgroup.1,
-            if self.exact { ", exact kernels: no fused multiply-adds" } else { "" }
-        )
-    }
-
-    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<Renderer<'a>, String> {
-        let method = MethodArg::from_str(method, false).map_err(|e| format!("{method:?}: {e}"))?;
-        let mut r = Renderer::new(&self.gpu, scene, method_of(method), self.workgroup).map_err(|e| e.to_string())?;
-        r.set_exact(self.exact);
-        Ok(r)
-    }
-
-    fn frame(&self, r: &mut Renderer<'_>, f: &FrameSpec) -> Result<Timed, String> {
-        let settings = Settings {
-            width: f.width,
-            height: f.height,
-            camera: f.camera,
-            mode: f.mode,
-            lights: f.lights.clone(),
-            max_indirections: f.max_indirections,
-            aovs: false,
-            accuracy: render_spec::Accuracy::default(),
-        };
-        let out = r.render_frame(&settings, false).map_err(|e| e.to_string())?;
-        let rays = out.image.rays;
-        Ok(Timed { ms: out.gpu_ms, rays: [rays.primary, rays.shadow, rays.secondary] })
-    }
-
-    fn finish(&self) -> Result<(), String> {
-        check_validation(&self.gpu)
     }
 }
 

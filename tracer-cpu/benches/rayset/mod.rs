@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use render_spec::CameraSpec;
 use std::path::Path;
 use std::time::Instant;
-use tracer_cpu::geometry::{Cost, Ray, offset_origin};
+use tracer_cpu::geometry::{Cost, Ray, Watertight, offset_origin};
 use tracer_cpu::packet::{self, LANES, Rays};
 use tracer_cpu::traverse::Stack;
 use tracer_cpu::{Method, Tracer, shade};
@@ -144,9 +144,9 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
                 let tris = tracer.triangles();
                 blocks(rays, out, w, |p| {
                     let res = if any {
-                        packet::trace::<true>(nodes, tris, p, pstack)
+                        packet::trace::<true, Watertight>(nodes, tris, p, pstack)
                     } else {
-                        packet::trace::<false>(nodes, tris, p, pstack)
+                        packet::trace::<false, Watertight>(nodes, tris, p, pstack)
                     };
                     std::array::from_fn(|i| match res.get(i) {
                         Some(_) if any => 0.0,

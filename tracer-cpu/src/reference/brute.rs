@@ -1,4 +1,5 @@
-//! The exact reference: brute-force closest hit over every triangle in f64. Tests trust it.
+//! Brute force: the closest hit over every triangle, in f64. The f64 traversal ([`super::bvh`]) is
+//! tested against it, and tests of the fast paths compare with it directly.
 //!
 //! Ties: the nearest hit wins; at exactly equal f64 distance (a ray through an edge or vertex
 //! shared by triangles) the lower stored triangle index wins, the same rule as every fast path

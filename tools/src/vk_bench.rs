@@ -1,0 +1,83 @@
+//! The Vulkan tracer as a [`Bench`]: GPU time of whole frames from timestamp queries. `trace-vk
+//! bench` times it, and `trace-eval` sets it beside the CPU.
+
+use crate::bench::{Bench, Timed};
+use bvh_format::SceneFile;
+use render_spec::{Image, Settings};
+use tracer_vk::Gpu;
+use tracer_vk::kernels::Method;
+use tracer_vk::render::Renderer;
+
+/// Marks a method name for the exact kernels in [`VkBench::prepare`] (the evaluation's
+/// `--exact on`).
+pub const EXACT_SUFFIX: &str = "+exact";
+
+/// A traversal by the name `trace-vk --method` takes.
+pub fn method_of(name: &str) -> Result<Method, String> {
+    [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup]
+        .into_iter()
+        .find(|m| m.name() == name)
+        .ok_or_else(|| format!("{name:?} is not a GPU method (lst, stackless, sst, sst-subgroup)"))
+}
+
+/// Fails when the validation layer reported anything.
+pub fn check_validation(gpu: &Gpu) -> Result<(), String> {
+    match gpu.validation_messages().first() {
+        None => Ok(()),
+        Some(m) => Err(format!("the validation layer reported a problem: {}", m.lines().next().unwrap_or(""))),
+    }
+}
+
+pub struct VkBench {
+    pub gpu: Gpu,
+    pub workgroup: (u32, u32),
+    /// Exact kernels for every method (`trace-vk bench --exact`).
+    pub exact: bool,
+}
+
+impl Bench for VkBench {
+    type Renderer<'a> = Renderer<'a>;
+
+    fn tracer(&self) -> &'static str {
+        "vk"
+    }
+
+    fn device(&self) -> String {
+        let i = self.gpu.info();
+        format!("{} ({:?}, {})", i.name, i.kind, i.driver)
+    }
+
+    fn timing(&self) -> String {
+        format!(
+            "a frame's time is the GPU time of its passes from timestamp queries (workgroup {}x{}{})",
+            self.workgroup.0,
+            self.workgroup.1,
+            if self.exact { ", exact kernels: no fused multiply-adds" } else { "" }
+        )
+    }
+
+    /// `method` is a traversal's name, with [`EXACT_SUFFIX`] for its exact kernels.
+    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<Renderer<'a>, String> {
+        let (name, exact) = match method.strip_suffix(EXACT_SUFFIX) {
+            Some(name) => (name, true),
+            None => (method, self.exact),
+        };
+        let mut r = Renderer::new(&self.gpu, scene, method_of(name)?, self.workgroup).map_err(|e| e.to_string())?;
+        r.set_exact(exact);
+        Ok(r)
+    }
+
+    fn frame(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Timed, String> {
+        let out = r.render_frame(s, false).map_err(|e| e.to_string())?;
+        let rays = out.image.rays;
+        Ok(Timed { ms: out.gpu_ms, rays: [rays.primary, rays.shadow, rays.secondary] })
+    }
+
+    fn image(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Image, String> {
+        Ok(r.render(s).map_err(|e| e.to_string())?.image)
+    }
+
+    fn finish(&self) -> Result<(), String> {
+        check_validation(&self.gpu)
+    }
+}
