@@ -115,7 +115,7 @@ pub fn compile_with_progress(
     let file = SceneFile {
         build: *params,
         settings: scene.settings,
-        origin: [0.0; 3],
+        origin: scene.origin.to_array(),
         vertices: geometry.vertices,
         triangles: geometry.triangles,
         normals: geometry.normals,

@@ -1,13 +1,17 @@
 //! The in-memory scene that importers produce and the compiler consumes.
 
 use bvh_format::{Camera, Light, Material, SceneSettings};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 /// Triangles in input order (the order tracers report in their `prim` AOV), with everything the
 /// file keeps about them.
 #[derive(Clone, Debug, Default)]
 pub struct Scene {
-    /// Vertex positions of each triangle, world space.
+    /// World position of the local origin that positions, cameras and lights are relative to
+    /// (see [`bvh_format::SceneFile::origin`]); zero unless an importer moved a scene far from
+    /// the world origin to its centre.
+    pub origin: DVec3,
+    /// Vertex positions of each triangle, relative to `origin`.
     pub positions: Vec<[Vec3; 3]>,
     /// Shading normal at each vertex of each triangle, unit length, world space.
     pub normals: Vec<[Vec3; 3]>,

@@ -661,7 +661,7 @@ fn description_errors_are_clear() {
         ("[[object]]\ntype = \"torus\"\nmajor = 1\nminor = 2\n", "minor"),
         ("[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\nscale = 0\n", "scale"),
         ("[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\naxis = [0, 1, 0]\n", "angle"),
-        ("[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\ntranslate = [1e39, 0, 0]\n", "translation"),
+        ("[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\ntranslate = [inf, 0, 0]\n", "translation"),
         ("[[object]]\ntype = \"sphere\"\nradius = 1\nsegments = 100000\nrings = 100000\n", "triangles"),
         ("[material.m]\nkr = 0.5\nkt = 0.5\n", "not both"),
         ("[material.m]\nkt = 1.5\n", "between 0 and 1"),

@@ -47,8 +47,8 @@ pub struct Header {
     pub _pad2: u32,
     pub background: [f32; 3],
     pub _pad3: u32,
-    /// Offset of the scene's coordinates from the world origin, reserved for rebasing scenes far
-    /// from the origin; zero (the reader rejects anything else until a tracer uses it).
+    /// World position of the scene's local origin; every stored position is relative to it
+    /// (finite; see [`crate::SceneFile::origin`]).
     pub origin: [f64; 3],
     pub _reserved: u32,
     /// CRC-32 of the header (with this field zero) followed by the section table.

@@ -29,7 +29,11 @@ pub use write::{write, write_file};
 pub struct SceneFile {
     pub build: BuildParams,
     pub settings: SceneSettings,
-    /// Offset of every coordinate from the world origin (reserved; zero).
+    /// World position of the scene's local origin. Every stored position (vertices, node boxes,
+    /// cameras, lights) is relative to it: the compiler moves a scene far from the world origin
+    /// to its own centre, so that its f32 coordinates keep the precision they have at the origin.
+    /// Tracers work in these local coordinates throughout; only positions given in world
+    /// coordinates (a command line's camera or lights) pass through [`SceneFile::local`].
     pub origin: [f64; 3],
     /// Vertex positions, shared by the triangles that meet at them.
     pub vertices: Vec<[f32; 3]>,
@@ -91,6 +95,16 @@ impl SceneFile {
     /// Bounds of the whole scene (the root node's box).
     pub fn bounds(&self) -> ([f32; 3], [f32; 3]) {
         self.tree().nodes.first().map(|r| (r.min, r.max)).unwrap_or(([0.0; 3], [0.0; 3]))
+    }
+
+    /// A world position in the scene's local coordinates (rounded once, from f64).
+    pub fn local(&self, world: [f64; 3]) -> [f32; 3] {
+        [0, 1, 2].map(|a| (world[a] - self.origin[a]) as f32)
+    }
+
+    /// A local position in world coordinates.
+    pub fn world(&self, local: [f32; 3]) -> [f64; 3] {
+        [0, 1, 2].map(|a| self.origin[a] + f64::from(local[a]))
     }
 
     /// A camera by name.

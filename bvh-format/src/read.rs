@@ -242,8 +242,8 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     if s.vertices.len() as u64 > u32::MAX as u64 || s.normals.len() as u64 > u32::MAX as u64 {
         return Err(FormatError::BadHeader("it counts more vertices or normals than the format allows"));
     }
-    if s.origin != [0.0; 3] {
-        return Err(FormatError::BadHeader("it sets a scene origin offset, which this program does not support yet"));
+    if !s.origin.iter().all(|v| v.is_finite()) {
+        return Err(FormatError::BadHeader("its origin offset is not finite"));
     }
     check_finite(SectionKind::Vertices, &s.vertices)?;
     check_finite(SectionKind::Normals, &s.normals)?;

@@ -40,6 +40,7 @@ fn scene(triangles: usize, layouts: Layouts) -> SceneFile {
         settings: SceneSettings { max_indirections: 3, ..SceneSettings::default() },
         positions,
         warnings: Vec::new(),
+        origin: glam::DVec3::ZERO,
     };
     bvh_build::compile(&scene, &BuildParams { max_leaf_size: 4, ..BuildParams::default() }, layouts).unwrap()
 }
@@ -639,7 +640,14 @@ fn forged_vertex_and_normal_indices() {
 fn forged_origin_and_header_bounds() {
     let e = forge(|b| {
         edit_header(b, |mut h| {
-            h.origin[2] = 1e6;
+            h.origin[2] = f64::NAN;
+            h
+        })
+    });
+    assert!(matches!(e, FormatError::BadHeader(m) if m.contains("origin")), "{e:?}");
+    let e = forge(|b| {
+        edit_header(b, |mut h| {
+            h.origin[0] = f64::INFINITY;
             h
         })
     });

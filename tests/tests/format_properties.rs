@@ -142,6 +142,7 @@ fn scene_of(tris: &[Tri], materials: usize) -> Scene {
         lights: vec![Light::new([1.0, 2.0, 3.0], [1.0, 1.0, 1.0])],
         settings: SceneSettings::default(),
         warnings: Vec::new(),
+        origin: glam::DVec3::ZERO,
     }
 }
 

@@ -9,6 +9,7 @@ pub mod cpu_bench;
 pub mod eval;
 pub mod output;
 pub mod render_args;
+pub mod stress;
 pub mod vk_bench;
 
 use bvh_format::SceneFile;

@@ -5,7 +5,7 @@
 use crate::output::{self, Kind, Output};
 use bvh_format::{Light, SceneFile};
 use clap::{Args, ValueEnum};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use render_spec::{Accuracy, CameraSpec, Image, Intersect, Mode, Offset, Settings};
 use std::path::PathBuf;
 
@@ -52,12 +52,13 @@ pub struct RenderArgs {
     /// meshes have "medium" first, then "close-up" and "wide"; `bvhc info` lists them].
     #[arg(long, conflicts_with_all = ["eye", "at"])]
     pub camera: Option<String>,
-    /// Eye position X,Y,Z (with --at; replaces --camera). Negative numbers need no `=`.
-    #[arg(long, value_parser = parse_vec3, requires = "at", allow_hyphen_values = true)]
-    pub eye: Option<Vec3>,
-    /// Look-at point X,Y,Z.
-    #[arg(long, value_parser = parse_vec3, requires = "eye", allow_hyphen_values = true)]
-    pub at: Option<Vec3>,
+    /// Eye position X,Y,Z in world coordinates (with --at; replaces --camera). Negative numbers
+    /// need no `=`.
+    #[arg(long, value_parser = parse_point, requires = "at", allow_hyphen_values = true)]
+    pub eye: Option<DVec3>,
+    /// Look-at point X,Y,Z in world coordinates.
+    #[arg(long, value_parser = parse_point, requires = "eye", allow_hyphen_values = true)]
+    pub at: Option<DVec3>,
     /// Up vector X,Y,Z [default: with --eye 0,1,0; a stored camera keeps its own unless given].
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub up: Option<Vec3>,
@@ -68,9 +69,10 @@ pub struct RenderArgs {
     /// Image size, at most 2^28 pixels.
     #[arg(long, value_parser = parse_res, default_value = "640x480", allow_hyphen_values = true)]
     pub res: (u32, u32),
-    /// A point light X,Y,Z or X,Y,Z,R,G,B (repeatable, up to 256); replaces the scene's lights.
+    /// A point light X,Y,Z or X,Y,Z,R,G,B in world coordinates (repeatable, up to 256); replaces
+    /// the scene's lights.
     #[arg(long = "light", value_parser = parse_light, allow_hyphen_values = true)]
-    pub lights: Vec<Light>,
+    pub lights: Vec<WorldLight>,
     /// Use this many lights: the scene's first ones, completed by lights placed around the
     /// camera so that what it sees is lit (the thesis's 1-, 2- and 4-light modes); 0 to 256.
     #[arg(long = "lights", conflicts_with = "lights", value_parser = parse_light_count, allow_hyphen_values = true)]
@@ -150,19 +152,38 @@ impl RenderOutputs {
     }
 }
 
+/// A light given on the command line: its position in world coordinates (f64, so that a light
+/// far from the origin keeps its place relative to the scene, see [`SceneFile::local`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WorldLight {
+    pub position: DVec3,
+    pub colour: [f32; 3],
+}
+
 fn parse_floats(s: &str, counts: &[usize], what: &str) -> Result<Vec<f32>, String> {
+    Ok(parse_f64s(s, counts, what)?.into_iter().map(|x| x as f32).collect())
+}
+
+/// Numbers that are finite as f32 too, kept in f64.
+fn parse_f64s(s: &str, counts: &[usize], what: &str) -> Result<Vec<f64>, String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     if !counts.contains(&parts.len()) {
         return Err(format!("{s:?} has {} values; {what}", parts.len()));
     }
     parts
         .iter()
-        .map(|p| match p.parse::<f32>() {
-            Ok(x) if x.is_finite() => Ok(x),
+        .map(|p| match p.parse::<f64>() {
+            Ok(x) if (x as f32).is_finite() => Ok(x),
             Ok(_) => Err(format!("{p:?} is not a finite number (finite f32 values lie within ±3.4e38)")),
             Err(_) => Err(format!("{p:?} is not a number; {what}")),
         })
         .collect()
+}
+
+/// A point in world coordinates, X,Y,Z.
+pub fn parse_point(s: &str) -> Result<DVec3, String> {
+    let v = parse_f64s(s, &[3], "give 3 numbers X,Y,Z")?;
+    Ok(DVec3::new(v[0], v[1], v[2]))
 }
 
 pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
@@ -269,13 +290,13 @@ pub fn parse_cutoff(s: &str) -> Result<f32, String> {
     Ok(cutoff)
 }
 
-pub fn parse_light(s: &str) -> Result<Light, String> {
-    let v = parse_floats(s, &[3, 6], "a light is X,Y,Z (3 numbers) or X,Y,Z,R,G,B (6 numbers)")?;
-    let colour = if v.len() == 6 { [v[3], v[4], v[5]] } else { [1.0, 1.0, 1.0] };
+pub fn parse_light(s: &str) -> Result<WorldLight, String> {
+    let v = parse_f64s(s, &[3, 6], "a light is X,Y,Z (3 numbers) or X,Y,Z,R,G,B (6 numbers)")?;
+    let colour = if v.len() == 6 { [v[3], v[4], v[5]].map(|c| c as f32) } else { [1.0, 1.0, 1.0] };
     if colour.iter().any(|&c| c < 0.0) {
         return Err(format!("{s:?}: a light's colour must not be negative"));
     }
-    Ok(Light::new([v[0], v[1], v[2]], colour))
+    Ok(WorldLight { position: DVec3::new(v[0], v[1], v[2]), colour })
 }
 
 impl RenderArgs {
@@ -333,6 +354,7 @@ impl RenderArgs {
     /// checked here, so that both tracers refuse a bad camera with the same sentence.
     pub fn camera(&self, scene: &SceneFile) -> Result<CameraSpec, String> {
         let spec = if let (Some(eye), Some(at)) = (self.eye, self.at) {
+            let (eye, at) = (scene.local(eye.to_array()).into(), scene.local(at.to_array()).into());
             CameraSpec { eye, at, up: self.up.unwrap_or(Vec3::Y), fov_deg: self.fov.unwrap_or(45.0) }
         } else {
             let mut spec = match &self.camera {
@@ -354,7 +376,7 @@ impl RenderArgs {
     /// The lights: explicit ones, or the scene's, completed to `--lights N` when asked.
     pub fn lights(&self, scene: &SceneFile, camera: &CameraSpec) -> Vec<Light> {
         if !self.lights.is_empty() {
-            return self.lights.clone();
+            return self.lights.iter().map(|l| Light::new(scene.local(l.position.to_array()), l.colour)).collect();
         }
         match self.light_count {
             Some(n) => lights_n(scene, n, camera),
@@ -464,7 +486,8 @@ mod tests {
         assert_eq!(parse_res("640x480").unwrap(), (640, 480));
         assert!(parse_res("640").is_err() && parse_res("0x10").is_err() && parse_res("100000x100000").is_err());
         assert!(parse_res("-4x4").unwrap_err().contains("at least 1"));
-        assert_eq!(parse_light("1,2,3").unwrap(), Light::new([1.0, 2.0, 3.0], [1.0; 3]));
+        assert_eq!(parse_light("1,2,3").unwrap(), WorldLight { position: DVec3::new(1.0, 2.0, 3.0), colour: [1.0; 3] });
+        assert_eq!(parse_point("1e6,2.25,-1000000.125").unwrap(), DVec3::new(1e6, 2.25, -1000000.125));
         assert_eq!(parse_light("1,2,3,0.5,0.5,0").unwrap().colour, [0.5, 0.5, 0.0]);
         assert!(parse_light("1,2,3,-1,0,0").is_err());
         let e = parse_light("0,1,1,1").unwrap_err();

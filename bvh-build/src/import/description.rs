@@ -50,8 +50,10 @@ struct MaterialDesc {
 #[serde(deny_unknown_fields)]
 struct CameraDesc {
     name: String,
-    eye: [f32; 3],
-    at: [f32; 3],
+    /// World coordinates, read in f64 so that a camera far from the origin keeps its place
+    /// relative to the scene when both are moved to the scene's local origin.
+    eye: [f64; 3],
+    at: [f64; 3],
     up: Option<[f32; 3]>,
     fov: Option<f32>,
 }
@@ -59,7 +61,7 @@ struct CameraDesc {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct LightDesc {
-    position: [f32; 3],
+    position: [f64; 3],
     #[serde(alias = "color")]
     colour: Option<[f32; 3]>,
 }
@@ -75,7 +77,7 @@ enum Scale {
 /// order, then `axis`/`angle`), then translate.
 #[derive(Clone, Copy, Debug, Default)]
 struct Placement {
-    translate: Option<[f32; 3]>,
+    translate: Option<[f64; 3]>,
     rotate: Option<[f32; 3]>,
     axis: Option<[f32; 3]>,
     angle: Option<f32>,
@@ -91,7 +93,7 @@ macro_rules! object_kind {
         #[serde(deny_unknown_fields)]
         struct $name {
             $($(#[$fa])* $field: $ty,)*
-            translate: Option<[f32; 3]>,
+            translate: Option<[f64; 3]>,
             rotate: Option<[f32; 3]>,
             axis: Option<[f32; 3]>,
             angle: Option<f32>,
@@ -271,8 +273,19 @@ struct Builder<'a> {
     interned: HashMap<(String, [u32; 10]), u32>,
     /// Mesh files already read, with the smooth-normals choice they were read with.
     meshes: HashMap<(PathBuf, bool), Scene>,
-    /// Bounds of the objects that the default cameras frame.
-    framed: Option<(Vec3, Vec3)>,
+    /// Each object's triangles (still in the object's own coordinates) with its placement and
+    /// whether the default cameras frame it; placed in [`Builder::place`] once the scene's local
+    /// origin is known.
+    placed: Vec<Placed>,
+    /// World bounds of all objects, in f64.
+    world: Option<(DVec3, DVec3)>,
+}
+
+struct Placed {
+    triangles: std::ops::Range<usize>,
+    aff: Affine,
+    frame: bool,
+    label: String,
 }
 
 fn material_key(m: &Material) -> [u32; 10] {
@@ -294,7 +307,8 @@ impl<'a> Builder<'a> {
             defined: BTreeMap::new(),
             interned: HashMap::new(),
             meshes: HashMap::new(),
-            framed: None,
+            placed: Vec::new(),
+            world: None,
         };
         for (name, m) in &desc.material {
             let mat = material(m).map_err(|msg| b.err(format!("material '{name}': {msg}")))?;
@@ -334,14 +348,20 @@ impl<'a> Builder<'a> {
         for (k, obj) in objects.iter().enumerate() {
             self.object(k, obj)?;
         }
+        let Some((wlo, whi)) = self.world else {
+            return Err(ImportError::Empty { path: self.path.to_owned() });
+        };
+        let origin = geometry::local_origin(wlo, whi);
+        let framed = self.place(origin)?;
         let Some((lo, hi)) = self.scene.bounds() else {
             return Err(ImportError::Empty { path: self.path.to_owned() });
         };
-        let (flo, fhi) = self.framed.unwrap_or((lo, hi));
+        let (flo, fhi) = framed.unwrap_or((lo, hi));
+        let local = |p: [f64; 3]| (DVec3::from(p) - origin).as_vec3().to_array();
 
         let mut names = Vec::new();
         for c in &desc.camera {
-            let cam = camera(c).map_err(|m| self.err(format!("camera '{}': {m}", c.name)))?;
+            let cam = camera(c, origin).map_err(|m| self.err(format!("camera '{}': {m}", c.name)))?;
             if names.contains(&c.name) {
                 return Err(self.err(format!("camera '{}' is defined twice", c.name)));
             }
@@ -353,12 +373,13 @@ impl<'a> Builder<'a> {
         }
         for (k, l) in desc.light.iter().enumerate() {
             let colour = l.colour.unwrap_or([1.0; 3]);
-            if !finite(&l.position) || !finite(&colour) || colour.iter().any(|&c| c < 0.0) {
+            let position = local(l.position);
+            if !finite(&position) || !finite(&colour) || colour.iter().any(|&c| c < 0.0) {
                 return Err(
                     self.err(format!("light {} needs a finite position and a finite, non-negative colour", k + 1))
                 );
             }
-            self.scene.lights.push(Light::new(l.position, colour));
+            self.scene.lights.push(Light::new(position, colour));
         }
         if self.scene.lights.is_empty() {
             self.scene.lights = vec![defaults::light_for(&self.scene.cameras[0], flo, fhi)];
@@ -381,7 +402,30 @@ impl<'a> Builder<'a> {
             max_indirections: desc.indirections.unwrap_or(d.max_indirections),
         };
         self.scene.settings = settings;
+        self.scene.origin = origin;
         Ok(self.scene)
+    }
+
+    /// Places every object's triangles relative to the scene's local `origin` (world positions
+    /// computed in f64, rounded to f32 once) and returns the bounds of the framed objects.
+    fn place(&mut self, origin: DVec3) -> Result<Option<(Vec3, Vec3)>, ImportError> {
+        let mut framed: Option<(Vec3, Vec3)> = None;
+        for p in &self.placed {
+            let positions = &mut self.scene.positions[p.triangles.clone()];
+            let normals = &mut self.scene.normals[p.triangles.clone()];
+            if let Err(t) = geometry::transform_triangles(positions, normals, &p.aff, origin) {
+                return Err(ImportError::NonFinite {
+                    path: self.path.to_owned(),
+                    what: format!("triangle {} ({}) after its placement transform", p.triangles.start + t, p.label),
+                });
+            }
+            if p.frame
+                && let Some(b) = bounds(&self.scene.positions[p.triangles.clone()])
+            {
+                framed = Some(framed.map_or(b, |(lo, hi)| (lo.min(b.0), hi.max(b.1))));
+            }
+        }
+        Ok(framed)
     }
 
     fn object(&mut self, k: usize, obj: &Object) -> Result<(), ImportError> {
@@ -407,24 +451,22 @@ impl<'a> Builder<'a> {
                 self.scene.material_ids.extend(std::iter::repeat_n(id, n));
             }
         }
-        let positions = &mut self.scene.positions[first..];
-        let normals = &mut self.scene.normals[first..];
-        if let Err(t) = geometry::transform_triangles(positions, normals, &aff) {
-            return Err(ImportError::NonFinite {
-                path: self.path.to_owned(),
-                what: format!("triangle {} ({label}) after its placement transform", first + t),
-            });
-        }
-        if common.frame() {
-            let added = &self.scene.positions[first..];
-            if let Some(b) = added
-                .iter()
-                .flatten()
-                .fold(None, |acc: Option<(Vec3, Vec3)>, &p| Some(acc.map_or((p, p), |(lo, hi)| (lo.min(p), hi.max(p)))))
-            {
-                self.framed = Some(self.framed.map_or(b, |(lo, hi)| (lo.min(b.0), hi.max(b.1))));
+        let range = first..self.scene.triangle_count();
+        // World bounds in f64, before anything is rounded: they choose the local origin.
+        let world = self.scene.positions[range.clone()].iter().flatten().try_fold(self.world, |acc, &p| {
+            let w = aff.m.transform_point3(p.as_dvec3());
+            w.is_finite().then(|| Some(acc.map_or((w, w), |(lo, hi): (DVec3, DVec3)| (lo.min(w), hi.max(w)))))
+        });
+        match world {
+            Some(w) => self.world = w,
+            None => {
+                return Err(ImportError::NonFinite {
+                    path: self.path.to_owned(),
+                    what: format!("a triangle of {label} after its placement transform"),
+                });
             }
         }
+        self.placed.push(Placed { triangles: range, aff, frame: common.frame(), label });
         Ok(())
     }
 
@@ -583,19 +625,26 @@ fn material(m: &MaterialDesc) -> Result<Material, String> {
     Ok(mat)
 }
 
-fn camera(c: &CameraDesc) -> Result<Camera, String> {
+/// Bounds of triangles; `None` for none.
+fn bounds(positions: &[[Vec3; 3]]) -> Option<(Vec3, Vec3)> {
+    positions.iter().flatten().fold(None, |acc, &p| Some(acc.map_or((p, p), |(lo, hi)| (lo.min(p), hi.max(p)))))
+}
+
+/// A described camera, moved to the scene's local `origin`.
+fn camera(c: &CameraDesc, origin: DVec3) -> Result<Camera, String> {
     if c.name.is_empty() || c.name.len() > CAMERA_NAME_LEN || c.name.contains('\0') {
         return Err(format!("a camera name must have 1 to {CAMERA_NAME_LEN} bytes and no NUL"));
     }
     let up = c.up.unwrap_or([0.0, 1.0, 0.0]);
     let fov = c.fov.unwrap_or(defaults::FOV_DEG);
-    if !finite(&[c.eye, c.at, up].concat()) {
+    let (eye, at) = ((DVec3::from(c.eye) - origin).as_vec3(), (DVec3::from(c.at) - origin).as_vec3());
+    if !finite(&[eye.to_array(), at.to_array(), up].concat()) {
         return Err("eye, at and up must be finite".to_owned());
     }
     if !(fov > 0.0 && fov < 180.0) {
         return Err("the field of view must lie strictly between 0 and 180 degrees".to_owned());
     }
-    let f = (Vec3::from(c.at) - Vec3::from(c.eye)).as_dvec3();
+    let f = (at - eye).as_dvec3();
     let u = Vec3::from(up).as_dvec3();
     if geometry::unit(f).is_none()
         || geometry::unit(u).is_none()
@@ -603,7 +652,7 @@ fn camera(c: &CameraDesc) -> Result<Camera, String> {
     {
         return Err("eye and at must differ, and up must not be parallel to the view direction".to_owned());
     }
-    Ok(Camera::new(&c.name, c.eye, c.at, up, fov))
+    Ok(Camera::new(&c.name, eye.into(), at.into(), up, fov))
 }
 
 fn placement_matrix(p: &Placement) -> Result<DMat4, String> {
@@ -637,7 +686,7 @@ fn placement_matrix(p: &Placement) -> Result<DMat4, String> {
         }
         _ => return Err("axis and angle must be given together".to_owned()),
     }
-    let t = v3(p.translate.unwrap_or([0.0; 3]));
+    let t = DVec3::from(p.translate.unwrap_or([0.0; 3]));
     if !t.is_finite() {
         return Err("the translation must be finite".to_owned());
     }

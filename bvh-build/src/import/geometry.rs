@@ -175,26 +175,45 @@ impl Affine {
         self.m.transform_point3(p.as_dvec3()).as_vec3()
     }
 
+    /// The transformed point relative to `origin`, computed in f64 and rounded once.
+    pub fn point_from(&self, p: Vec3, origin: DVec3) -> Vec3 {
+        (self.m.transform_point3(p.as_dvec3()) - origin).as_vec3()
+    }
+
     /// The transformed unit normal, or `None` where the transform collapses it.
     pub fn normal(&self, n: Vec3) -> Option<Vec3> {
         unit(self.normal * n.as_dvec3())
     }
 }
 
-/// Applies `aff` to triangles with their normals, in place. Returns the index of the first
-/// triangle whose transformed position is not finite.
+/// The local origin of a scene whose world bounds are `lo..hi`: its centre, rounded to a
+/// multiple of the smallest power of two `g` not below its extent. Local coordinates then lie
+/// within `g` of zero, so they keep the relative precision they would have at the world origin
+/// whatever the distance; a scene whose centre lies within `g / 2` of the world origin keeps
+/// origin zero (and its coordinates exactly as given).
+pub fn local_origin(lo: DVec3, hi: DVec3) -> DVec3 {
+    let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
+    let grid = extent.log2().ceil().exp2();
+    let origin = ((lo + hi) * 0.5 / grid).round() * grid;
+    // `+ 0.0` turns -0 into +0, so that a scene at the origin has an all-zero offset.
+    if origin.is_finite() { origin + DVec3::ZERO } else { DVec3::ZERO }
+}
+
+/// Applies `aff` to triangles with their normals, in place, giving positions relative to
+/// `origin`. Returns the index of the first triangle whose transformed position is not finite.
 pub(crate) fn transform_triangles(
     positions: &mut [[Vec3; 3]],
     normals: &mut [[Vec3; 3]],
     aff: &Affine,
+    origin: DVec3,
 ) -> Result<(), usize> {
-    if aff.is_identity() {
+    if aff.is_identity() && origin == DVec3::ZERO {
         return Ok(());
     }
     // In parallel; the first triangle (by index) that fails is reported, and what the others
     // became does not matter then, since the caller gives up the scene.
     let failed = positions.par_iter_mut().zip(normals.par_iter_mut()).position_first(|(p, n)| {
-        let mut q = p.map(|v| aff.point(v));
+        let mut q = p.map(|v| aff.point_from(v, origin));
         if !q.iter().all(|v| v.is_finite()) {
             return true;
         }
@@ -230,7 +249,7 @@ mod tests {
         let aff = Affine::new(DMat4::from_scale(DVec3::new(-1.0, 1.0, 1.0)));
         let mut p = [[Vec3::ZERO, Vec3::X, Vec3::Y]];
         let mut n = [[Vec3::Z; 3]];
-        transform_triangles(&mut p, &mut n, &aff).unwrap();
+        transform_triangles(&mut p, &mut n, &aff, DVec3::ZERO).unwrap();
         assert_eq!(n[0], [Vec3::Z; 3]);
         assert_eq!(face_normal(p[0][0], p[0][1], p[0][2]), Vec3::Z);
     }

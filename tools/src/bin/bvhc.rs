@@ -238,6 +238,8 @@ fn info(file: &Path) -> Result<(), String> {
     let (scene, sections, compiled) = load_any(file)?;
     let s = scene.stats();
     let (lo, hi) = scene.bounds();
+    // Positions are shown in world coordinates; the file stores them relative to its origin.
+    let (lo, hi) = (scene.world(lo), scene.world(hi));
     let b = &scene.build;
     say!("{}{}", file.display(), if compiled { " (compiled on the fly with the default parameters)" } else { "" });
     let smooth = scene.normal_indices.iter().filter(|n| **n != bvh_format::FLAT).count();
@@ -245,6 +247,14 @@ fn info(file: &Path) -> Result<(), String> {
     say!("  vertices        {} ({} normals)", scene.vertices.len(), scene.normals.len());
     say!("  materials       {}", scene.materials.len());
     say!("  bounds          ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4})", lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+    let o = scene.origin;
+    say!(
+        "  origin offset   ({}, {}, {}){}",
+        o[0],
+        o[1],
+        o[2],
+        if o == [0.0; 3] { "" } else { " (stored positions are relative to it; shown here in world coordinates)" }
+    );
     say!("  layouts         {}", layout_names(&scene));
     say!(
         "  build           {}{}, traversal cost {}, intersection cost {}, max leaf size {}",
@@ -288,26 +298,28 @@ fn info(file: &Path) -> Result<(), String> {
     );
     say!("  cameras (the first is the tracers' default)");
     for c in &scene.cameras {
+        let (eye, at) = (scene.world(c.eye), scene.world(c.at));
         say!(
             "    {:<16} eye ({:.3}, {:.3}, {:.3}) at ({:.3}, {:.3}, {:.3}) fov {}",
             format!("\"{}\"", c.name().unwrap_or("?")),
-            c.eye[0],
-            c.eye[1],
-            c.eye[2],
-            c.at[0],
-            c.at[1],
-            c.at[2],
+            eye[0],
+            eye[1],
+            eye[2],
+            at[0],
+            at[1],
+            at[2],
             c.fov_deg
         );
     }
     say!("  lights");
     for (i, l) in scene.lights.iter().enumerate() {
+        let p = scene.world(l.position);
         say!(
             "    light {:<10} at ({:.3}, {:.3}, {:.3}) colour ({:.2}, {:.2}, {:.2})",
             i + 1,
-            l.position[0],
-            l.position[1],
-            l.position[2],
+            p[0],
+            p[1],
+            p[2],
             l.colour[0],
             l.colour[1],
             l.colour[2]

@@ -1,0 +1,157 @@
+//! `stress`: the stability sweep of issue 9. Generated scenes along every axis of trouble
+//! (distance from the origin, scale, axis-parallel and grazing rays, ray origins on surfaces,
+//! degenerate geometry, tree depth, leaf size, secondary rays), rendered by every CPU and GPU
+//! method, every primary hit checked against the exact f64 reference; writes docs/stability.md
+//! with tables and a chart.
+
+use clap::Parser;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tools::cli::Progress;
+use tools::render_args::parse_count;
+use tools::say;
+use tools::stress::cases::{self, AXES, Extent};
+use tools::stress::{METHODS, Method, report};
+
+#[derive(Parser)]
+#[command(
+    name = "stress",
+    version,
+    about = "Sweep every method over the conditions where ray tracers fail and write the failure rates.",
+    long_about = "Sweep every method (CPU ordered, stackless, packet; GPU LST, stackless, SST, SST-subgroup) over \
+generated scenes along each axis of trouble: distance from the origin 10^0..10^7 scene sizes (with and without \
+the compiler's rebasing), scale 10^-8..10^8, axis-parallel rays through faces, edges and vertices (+0 and -0 \
+components), grazing rays down to 1e-6 degrees, ray origins on a surface, edge and vertex, zero-area and needle \
+triangles, duplicates, coplanar overlaps, a vertex shared by 1000 triangles, trees 1000 deep, leaves of 1000 \
+triangles, halls of mirrors up to 64 indirections and glass inside glass.\n\nEvery pixel's primary hit is checked \
+against the exact f64 brute-force reference; points that compare images (distance, scale, secondary rays) also \
+count pixels whose colour differs. Each point and method is counted as wrong hits, leaks, NaN/infinite values, \
+wrong pixels, crashes (panics), hangs (no frame within --timeout) or refusals (a typed error: a limit, not a \
+silent failure). Writes a Markdown report and a chart (SVG and PNG); the exit status is 1 when anything failed \
+in silence."
+)]
+struct Cli {
+    /// Markdown report to write.
+    #[arg(long, default_value = "docs/stability.md")]
+    out: PathBuf,
+    /// Chart to write, as STEM.svg and STEM.png.
+    #[arg(long, default_value = "docs/stability/failure-rates")]
+    chart: PathBuf,
+    /// A cheap slice of every axis (smaller frames, fewer points), as the CI test runs it.
+    #[arg(long)]
+    quick: bool,
+    /// CPU methods only (no Vulkan device needed).
+    #[arg(long)]
+    cpu_only: bool,
+    /// Vulkan device index (see `trace-vk devices`) [default: the first discrete GPU, else any].
+    #[arg(long, value_parser = parse_device)]
+    device: Option<usize>,
+    /// Seconds one method may take on one point before it counts as a hang.
+    #[arg(long, default_value = "120", value_parser = parse_seconds)]
+    timeout: u64,
+    /// Run only the axes whose names contain this text (repeatable), e.g. `--axis distance`.
+    #[arg(long)]
+    axis: Vec<String>,
+    /// Describe the machine in the report as this (default: the CPU model and the device's name).
+    #[arg(long)]
+    machine: Option<String>,
+}
+
+fn parse_device(s: &str) -> Result<usize, String> {
+    parse_count(s, 0, 1 << 16, "the device index").map(|n| n as usize)
+}
+
+fn parse_seconds(s: &str) -> Result<u64, String> {
+    parse_count(s, 1, 86_400, "the timeout in seconds")
+}
+
+fn cpu_model() -> String {
+    let info = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let model = info.lines().find_map(|l| l.strip_prefix("model name")).map(|l| l.trim_start_matches([' ', '\t', ':']));
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    format!("{}, {threads} threads", model.unwrap_or("unknown CPU"))
+}
+
+fn main() -> ExitCode {
+    let cli = tools::cli::parse::<Cli>();
+    tools::cli::run(|| sweep(&cli))
+}
+
+fn sweep(cli: &Cli) -> Result<(), String> {
+    let started = Instant::now();
+    let gpu = if cli.cpu_only {
+        None
+    } else {
+        Some(Arc::new(tracer_vk::Gpu::new(cli.device, false).map_err(|e| format!("{e} (or run with --cpu-only)"))?))
+    };
+    let methods: Vec<Method> =
+        METHODS.iter().copied().filter(|m| gpu.is_some() || matches!(m, Method::Cpu(_))).collect();
+    let machine = cli.machine.clone().unwrap_or_else(|| {
+        let device = gpu.as_ref().map_or("no Vulkan device".to_owned(), |g| g.info().name.clone());
+        format!("{}; Vulkan: {device}", cpu_model())
+    });
+    say!("generating the scenes ...");
+    let extent = if cli.quick { Extent::Quick } else { Extent::Full };
+    let cases: Vec<_> = cases::all(extent)
+        .into_iter()
+        .filter(|c| cli.axis.is_empty() || cli.axis.iter().any(|a| c.axis.contains(a.as_str())))
+        .collect();
+    let progress = Progress::new((cases.len() * methods.len()) as u64, "{bar:40} {pos}/{len} {msg}", false);
+    let rows = tools::stress::sweep(cases, &methods, gpu, Duration::from_secs(cli.timeout), &|row| {
+        progress.inc(1);
+        progress.set_message(format!("{} {} {}", row.axis, row.label, row.method.name()));
+    });
+    progress.finish();
+
+    let silent: Vec<String> = rows
+        .iter()
+        // The f32-world axis shows what the compiler's rebasing prevents; it is not a method.
+        .filter(|r| r.tally.silent_failure() && r.axis != AXES[1])
+        .map(|r| format!("{} {}: {} {}", r.axis, r.label, r.method.name(), report::cell(&r.tally)))
+        .collect();
+    let command = format!(
+        "cargo run --release -p tools --bin stress --{}{}",
+        if cli.quick { " --quick" } else { "" },
+        if cli.cpu_only { " --cpu-only" } else { "" }
+    );
+    let mut md = std::fs::read_to_string(&cli.out).ok().map(|s| head_of(&s)).unwrap_or_default();
+    md += &format!(
+        "## Results\n\nMade by `{command}` on {machine} in {:.0} s. Chart: [{name}.svg]({name}.svg) \
+         (failed pixels per point and method; a refused point has no marker).\n\n![failure rates]({name}.png)\n\n",
+        started.elapsed().as_secs_f64(),
+        name = relative(&cli.chart, &cli.out),
+    );
+    md += &report::markdown(&rows, &AXES);
+    if let Some(dir) = cli.chart.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    }
+    report::charts(&rows, &AXES, &cli.chart)?;
+    tools::output::write_atomically(&cli.out, |w| {
+        use std::io::Write;
+        w.write_all(md.as_bytes()).map_err(|e| e.to_string())
+    })
+    .map_err(|e| e.to_string())?;
+    say!("{} points x methods in {:.0} s -> {}", rows.len(), started.elapsed().as_secs_f64(), cli.out.display());
+    if silent.is_empty() {
+        say!("no silent failure");
+        Ok(())
+    } else {
+        for s in &silent {
+            say!("silent failure: {s}");
+        }
+        Err(format!("{} points failed in silence (listed above)", silent.len()))
+    }
+}
+
+/// The hand-written part of the report: everything before "## Results".
+fn head_of(text: &str) -> String {
+    text.find("## Results").map_or(text.to_owned(), |i| text[..i].to_owned())
+}
+
+/// The chart's path as the report links it.
+fn relative(chart: &std::path::Path, report: &std::path::Path) -> String {
+    let base = report.parent().unwrap_or(std::path::Path::new(""));
+    chart.strip_prefix(base).unwrap_or(chart).display().to_string()
+}

@@ -1,0 +1,178 @@
+//! docs/stability.md: a table per axis and one chart of failure rates, one line per method.
+
+use super::{Method, Row, Tally};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::fmt::Write;
+use std::path::Path;
+
+/// One table cell: "ok", the failure counts, or what stopped the method.
+pub fn cell(t: &Tally) -> String {
+    if let Some(c) = &t.crash {
+        return format!("**CRASH** ({})", c.lines().next().unwrap_or(""));
+    }
+    if t.hang {
+        return "**HANG**".to_owned();
+    }
+    if t.refusal.is_some() {
+        return "refused".to_owned();
+    }
+    if t.failed == 0 {
+        return "ok".to_owned();
+    }
+    let mut parts = Vec::new();
+    for (n, what) in [(t.wrong, "wrong"), (t.leaks, "leak"), (t.non_finite, "NaN/inf"), (t.image, "image")] {
+        if n > 0 {
+            parts.push(format!("{n} {what}"));
+        }
+    }
+    format!("**{:.2}%** ({})", 100.0 * t.failed as f64 / t.pixels.max(1) as f64, parts.join(", "))
+}
+
+fn methods(rows: &[Row]) -> Vec<Method> {
+    let mut m: Vec<Method> = Vec::new();
+    for r in rows {
+        if !m.contains(&r.method) {
+            m.push(r.method);
+        }
+    }
+    m
+}
+
+fn points<'a>(rows: &'a [Row], axis: &str) -> Vec<(f64, &'a str)> {
+    let mut p: Vec<(f64, &str)> = Vec::new();
+    for r in rows.iter().filter(|r| r.axis == axis) {
+        if !p.iter().any(|q| q.1 == r.label) {
+            p.push((r.x, &r.label));
+        }
+    }
+    p
+}
+
+/// The tables and the list of refusals, as Markdown.
+pub fn markdown(rows: &[Row], axes: &[&str]) -> String {
+    let ms = methods(rows);
+    let mut s = String::new();
+    for axis in axes {
+        let pts = points(rows, axis);
+        if pts.is_empty() {
+            continue;
+        }
+        let _ = writeln!(s, "### {axis}\n");
+        let _ = writeln!(s, "| point | {} |", ms.iter().map(|m| m.name()).collect::<Vec<_>>().join(" | "));
+        let _ = writeln!(s, "|---|{}", "---|".repeat(ms.len()));
+        for (_, label) in &pts {
+            let cells: Vec<String> = ms
+                .iter()
+                .map(|m| {
+                    rows.iter()
+                        .find(|r| r.axis == *axis && r.label == *label && r.method == *m)
+                        .map_or("-".to_owned(), |r| cell(&r.tally))
+                })
+                .collect();
+            let _ = writeln!(s, "| {label} | {} |", cells.join(" | "));
+        }
+        s.push('\n');
+    }
+    let mut refusals: Vec<(String, String)> = Vec::new();
+    for r in rows {
+        if let Some(msg) = &r.tally.refusal {
+            let key = (format!("{} {}", r.axis, r.label), msg.clone());
+            if !refusals.iter().any(|(_, m)| m == msg) {
+                refusals.push(key);
+            }
+        }
+    }
+    if !refusals.is_empty() {
+        let _ = writeln!(s, "### Refusals (limits, each stated before the first frame)\n");
+        for (at, msg) in refusals {
+            let _ = writeln!(s, "- {at}: {msg}");
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// Writes the chart as `stem.svg` and `stem.png`.
+pub fn charts(rows: &[Row], axes: &[&str], stem: &Path) -> Result<(), String> {
+    let axes: Vec<&str> = axes.iter().copied().filter(|a| !points(rows, a).is_empty()).collect();
+    let cols = 3;
+    let size = (1500, 360 * axes.len().div_ceil(cols) as u32);
+    let svg = stem.with_extension("svg");
+    let png = stem.with_extension("png");
+    draw(rows, &axes, cols, SVGBackend::new(&svg, size).into_drawing_area())?;
+    draw(rows, &axes, cols, BitMapBackend::new(&png, size).into_drawing_area())?;
+    Ok(())
+}
+
+fn draw<DB: DrawingBackend>(
+    rows: &[Row],
+    axes: &[&str],
+    cols: usize,
+    root: DrawingArea<DB, Shift>,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(err)?;
+    let ms = methods(rows);
+    let panels = root.split_evenly((axes.len().div_ceil(cols), cols));
+    for (panel, axis) in panels.iter().zip(axes) {
+        let pts = points(rows, axis);
+        let n = pts.len();
+        let mut chart = ChartBuilder::on(panel)
+            .caption(*axis, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(28)
+            .y_label_area_size(48)
+            .build_cartesian_2d(-0.3f64..(n as f64 - 0.7), -2.0f64..102.0)
+            .map_err(err)?;
+        let labels: Vec<String> = pts.iter().map(|p| p.1.to_owned()).collect();
+        chart
+            .configure_mesh()
+            .x_labels(n)
+            .x_label_formatter(&|x| {
+                let i = x.round();
+                if (x - i).abs() < 1e-6 && i >= 0.0 {
+                    labels.get(i as usize).cloned().unwrap_or_default()
+                } else {
+                    String::new()
+                }
+            })
+            .y_desc("failed pixels %")
+            .label_style(("sans-serif", 12))
+            .draw()
+            .map_err(err)?;
+        for (k, m) in ms.iter().enumerate() {
+            let colour = Palette99::pick(k).to_rgba();
+            let series: Vec<(f64, f64)> = pts
+                .iter()
+                .enumerate()
+                .filter_map(|(i, p)| {
+                    let r = rows.iter().find(|r| r.axis == *axis && r.label == p.1 && r.method == *m)?;
+                    r.tally.failure_rate().map(|f| (i as f64, 100.0 * f))
+                })
+                .collect();
+            chart
+                .draw_series(LineSeries::new(series.clone(), colour.stroke_width(2)))
+                .map_err(err)?
+                .label(m.name())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour.stroke_width(2)));
+            chart
+                .draw_series(
+                    series.iter().map(|&(x, y)| Circle::new((x, y), 3 + (ms.len() - k) as i32 / 2, colour.filled())),
+                )
+                .map_err(err)?;
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 11))
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(err)?;
+    }
+    root.present().map_err(err)
+}
