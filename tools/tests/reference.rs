@@ -37,4 +37,12 @@ fn the_reference_writes_the_librarys_image() {
 
     let o = run(&dir, "trace-cpu", &["render", "room.bvh", "--reference", "--method", "packet", "-o", "x.png"]);
     assert_one_sentence_error(&o, "--method");
+    for (option, value) in [("--intersect", "mt"), ("--offset", "1e-3"), ("--cutoff", "0.1")] {
+        let o = run(&dir, "trace-cpu", &["render", "room.bvh", "--reference", option, value, "-o", "x.png"]);
+        assert_one_sentence_error(&o, option);
+    }
+    // Samples per pixel count: four primary rays per pixel.
+    let o = run(&dir, "trace-cpu", &["render", "room.bvh", "--reference", "--spp", "4", "--res", "8x6", "-o", "s.png"]);
+    let out = assert_ok(&o, "--reference --spp 4");
+    assert!(out.contains("192 primary"), "{out}");
 }

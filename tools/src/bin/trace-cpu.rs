@@ -29,9 +29,10 @@ enum Command {
         #[arg(long, value_enum, default_value = "auto")]
         method: MethodArg,
         /// Render the exact reference instead: f64 arithmetic throughout, every bounce up to the
-        /// indirection limit (no adaptive stop); the ground truth other images are measured
-        /// against, several times slower than a fast render.
-        #[arg(long, conflicts_with = "method")]
+        /// indirection limit (no adaptive stop), the edge-consistent test and an f64 offset; the
+        /// ground truth other images are measured against, a few times slower than a fast render.
+        /// Takes --spp; refuses --method, --intersect, --offset and --cutoff.
+        #[arg(long, conflicts_with_all = ["method", "intersect", "offset", "cutoff"])]
         reference: bool,
         /// Worker threads, 1 to 1024 [default: all cores].
         #[arg(long, value_parser = parse_threads, allow_hyphen_values = true)]
