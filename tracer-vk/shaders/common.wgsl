@@ -134,6 +134,131 @@ fn fault(bit: u32) {
 var<private> cost_nodes: u32;
 var<private> cost_tris: u32;
 
+// Division and square root as the CPU rounds them (IEEE 754: correctly rounded, subnormals kept).
+// Vulkan lets a device's division and sqrt() be off by 2.5 ulp (NVIDIA's are), so an --exact
+// kernel spells them div_rn() and sqrt_rn(): the device's operation only seeds them, a fused
+// multiply-add (GLSL.std.450 Fma, rounded once by definition) finds the residual exactly, and the
+// residual's sign picks the correctly rounded neighbour. Subnormal operands are normalised and
+// subnormal results rounded with integer operations, so a device that flushes denormals in its
+// float arithmetic still gets them right. The other kernels have no such functions: kernels.rs
+// writes each call as the plain operator there. The Rust model and its exhaustive tests are
+// tracer-vk/tests/exact_rounding.rs.
+//#if EXACT
+struct Split {
+    // The significand as a float in [1, 2) and the exponent of a finite nonzero |x|.
+    m: f32,
+    e: i32,
+}
+
+fn split(magnitude: u32) -> Split {
+    let field = magnitude & 0x7fffffu;
+    let biased = magnitude >> 23u;
+    if biased != 0u {
+        return Split(bitcast<f32>(field | 0x3f800000u), i32(biased) - 127i);
+    }
+    let top = 31u - countLeadingZeros(field);
+    return Split(bitcast<f32>(((field << (23u - top)) & 0x7fffffu) | 0x3f800000u), i32(top) - 149i);
+}
+
+// The neighbours of a positive finite float.
+fn next_up(x: f32) -> f32 {
+    return bitcast<f32>(bitcast<u32>(x) + 1u);
+}
+
+fn next_down(x: f32) -> f32 {
+    return bitcast<f32>(bitcast<u32>(x) - 1u);
+}
+
+fn div_rn(a: f32, b: f32) -> f32 {
+    let sign = (bitcast<u32>(a) ^ bitcast<u32>(b)) & 0x80000000u;
+    let ma = bitcast<u32>(a) & 0x7fffffffu;
+    let mb = bitcast<u32>(b) & 0x7fffffffu;
+    let inf = 0x7f800000u;
+    if ma > inf || mb > inf || (ma == inf && mb == inf) || (ma == 0u && mb == 0u) {
+        return a / b; // NaN
+    }
+    if ma == inf || mb == 0u {
+        return bitcast<f32>(sign | inf);
+    }
+    if ma == 0u || mb == inf {
+        return bitcast<f32>(sign);
+    }
+    let x = split(ma);
+    let y = split(mb);
+    // x.m / y.m lies in (0.5, 2): a Newton step on the device's reciprocal and one on the
+    // quotient make q faithful (less than an ulp off), so the residual x.m - q y.m is exact.
+    var r = 1.0 / y.m;
+    r = fma(fma(-y.m, r, 1.0), r, r);
+    var q = x.m * r;
+    q = fma(fma(-q, y.m, x.m), r, q);
+    // The quotient lies beyond the midpoint to a neighbour where the residual there,
+    // rem -+ (half the gap) y.m, has the residual's sign (an fma gets the sign exactly; a quotient
+    // is never a midpoint).
+    var rem = fma(-q, y.m, x.m);
+    if rem > 0.0 {
+        let up = next_up(q);
+        if fma((q - up) * 0.5, y.m, rem) > 0.0 {
+            q = up;
+        }
+    } else if rem < 0.0 {
+        let down = next_down(q);
+        if fma((q - down) * 0.5, y.m, rem) < 0.0 {
+            q = down;
+        }
+    }
+    rem = fma(-q, y.m, x.m);
+    let bits = bitcast<u32>(q);
+    let e = i32(bits >> 23u) - 127i + x.e - y.e;
+    if e > 127i {
+        return bitcast<f32>(sign | inf);
+    }
+    if e >= -126i {
+        return bitcast<f32>(sign | (u32(e + 127i) << 23u) | (bits & 0x7fffffu));
+    }
+    // A subnormal quotient keeps the top 24 - s bits of q's significand, rounded to nearest even
+    // with the dropped bits and, at exactly half, the residual's sign (the true quotient's side of q).
+    let s = u32(min(-126i - e, 25i));
+    let significand = (bits & 0x7fffffu) | 0x800000u;
+    let kept = significand >> s;
+    let dropped = significand & ((1u << s) - 1u);
+    let half = 1u << (s - 1u);
+    let up = dropped > half || (dropped == half && (rem > 0.0 || (rem == 0.0 && (kept & 1u) == 1u)));
+    return bitcast<f32>(sign | (kept + select(0u, 1u, up)));
+}
+
+fn div3_rn(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(div_rn(a.x, b.x), div_rn(a.y, b.y), div_rn(a.z, b.z));
+}
+
+fn sqrt_rn(x: f32) -> f32 {
+    let bits = bitcast<u32>(x);
+    if bits == 0u || bits == 0x80000000u || bits == 0x7f800000u {
+        return x; // +-0 and +inf
+    }
+    if bits > 0x7f800000u {
+        return sqrt(x); // negative or NaN: NaN
+    }
+    // x = m 2^e with m in [1, 4) and e even: sqrt(m) in [1, 2), never subnormal.
+    let v = split(bits);
+    let odd = (v.e & 1i) != 0i;
+    let m = select(v.m, 2.0 * v.m, odd);
+    let e = select(v.e, v.e - 1i, odd);
+    var s = sqrt(m);
+    s = fma(fma(-s, s, m), 0.5 / s, s);
+    // sqrt(m) passes the midpoint s + g/2 to the neighbour above (g = up - s) where
+    // m - s up - g^2/4 > 0; m - s up is a multiple of g^2, so where it is > 0 (an fma's sign is
+    // exact). Likewise below, with the gap from down to s.
+    let up = next_up(s);
+    let down = next_down(s);
+    if fma(-s, up, m) > 0.0 {
+        s = up;
+    } else if fma(-down, s, m) <= 0.0 {
+        s = down;
+    }
+    return bitcast<f32>(bitcast<u32>(s) + (bitcast<u32>(e / 2i) << 23u));
+}
+//#endif
+
 // Vector arithmetic in tracer-cpu's operation order (wide.rs `V3`): the builtins dot(), cross(),
 // length() and normalize() (see unit()) leave the order and the rounding to the driver, so an --exact kernel
 // (no_contraction.rs refuses them) could not round as the CPU does.
@@ -146,13 +271,13 @@ fn cross3(a: vec3<f32>, b: vec3<f32>) -> vec3<f32> {
 }
 
 fn length3(v: vec3<f32>) -> f32 {
-    return sqrt(dot3(v, v));
+    return sqrt_rn(dot3(v, v));
 }
 
 // tracer-cpu's V3::normalize: one division, then three products (lavapipe's normalize() differs in
 // the last bit for a third of the inputs: tests/tests/wgsl_functions.rs).
 fn unit(v: vec3<f32>) -> vec3<f32> {
-    return v * (1.0 / length3(v));
+    return v * div_rn(1.0, length3(v));
 }
 
 fn is_finite(x: f32) -> bool {
@@ -162,7 +287,7 @@ fn is_finite(x: f32) -> bool {
 // glam's try_normalize: the unit vector where the inverse length is finite and positive, else
 // `fallback`.
 fn normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
-    let rcp = 1.0 / length3(v);
+    let rcp = div_rn(1.0, length3(v));
     return select(fallback, v * rcp, is_finite(rcp) && rcp > 0.0);
 }
 
@@ -173,7 +298,7 @@ struct Ray {
 }
 
 fn make_ray(o: vec3<f32>, d: vec3<f32>) -> Ray {
-    return Ray(o, d, vec3<f32>(1.0) / d);
+    return Ray(o, d, div3_rn(vec3<f32>(1.0), d));
 }
 
 fn is_nan(x: f32) -> bool {
@@ -242,7 +367,7 @@ fn intersect_moller_trumbore(tri: Tri, r: Ray, t_min: f32, t_max: f32) -> vec3<f
     if det == 0.0 {
         return vec3<f32>(-1.0, 0.0, 0.0);
     }
-    let inv = 1.0 / det;
+    let inv = div_rn(1.0, det);
     let s = r.o - tri.p0;
     let u = (s.x * p.x + s.y * p.y + s.z * p.z) * inv;
     if !(u >= 0.0 && u <= 1.0) {
@@ -282,9 +407,9 @@ fn intersect_watertight(tri: Tri, r: Ray, t_min: f32, t_max: f32) -> vec3<f32> {
     if den == 0.0 {
         return vec3<f32>(-1.0, 0.0, 0.0);
     }
-    let t = (n.x * a0.x + n.y * a0.y + n.z * a0.z) / den;
+    let t = div_rn(n.x * a0.x + n.y * a0.y + n.z * a0.z, den);
     if t > t_min && t <= t_max {
-        let inv = 1.0 / sum;
+        let inv = div_rn(1.0, sum);
         return vec3<f32>(t, w1 * inv, w2 * inv);
     }
     return vec3<f32>(-1.0, 0.0, 0.0);
@@ -385,7 +510,7 @@ fn refract_dir(d: vec3<f32>, n: vec3<f32>, eta: f32) -> vec4<f32> {
     if k < 0.0 {
         return vec4<f32>(0.0);
     }
-    return vec4<f32>(unit(eta * d + (eta * cos_i - sqrt(k)) * n), 1.0);
+    return vec4<f32>(unit(eta * d + (eta * cos_i - sqrt_rn(k)) * n), 1.0);
 }
 
 // render_spec::power::phong_pow, operation for operation (see there why pow() is not used).

@@ -174,7 +174,7 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
 //#endif
 //#if REFRACTION
         if m.kt_ior.x > 0.0 {
-            let eta = select(m.kt_ior.y, 1.0 / m.kt_ior.y, s.front);
+            let eta = select(m.kt_ior.y, div_rn(1.0, m.kt_ior.y), s.front);
             let refracted = refract_dir(r.d, s.shading, eta);
             if refracted.w != 0.0 {
                 dir = refracted.xyz;

@@ -80,6 +80,9 @@ pub struct DeviceInfo {
     pub device_local_bytes: u64,
     /// Basic, vote, ballot and arithmetic subgroup operations in compute shaders.
     pub supports_subgroup_ops: bool,
+    /// Shaders may ask that 32-bit subnormals be kept, not flushed to zero
+    /// (`shaderDenormPreserveFloat32`, Vulkan 1.2); `--exact` kernels do where this holds.
+    pub denorm_preserve_f32: bool,
     pub max_workgroup_count: [u32; 3],
     pub max_push_constants_size: u32,
     /// Largest single memory allocation (maxMemoryAllocationSize).
@@ -1274,9 +1277,10 @@ fn candidates(instance: &ash::Instance, instance_api: u32) -> Result<Vec<Candida
         let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
         let mut maintenance3 = vk::PhysicalDeviceMaintenance3Properties::default();
         let mut driver = vk::PhysicalDeviceDriverProperties::default();
+        let mut float_controls = vk::PhysicalDeviceFloatControlsProperties::default();
         let mut props = vk::PhysicalDeviceProperties2::default().push_next(&mut subgroup).push_next(&mut maintenance3);
         if api >= vk::API_VERSION_1_2 {
-            props = props.push_next(&mut driver);
+            props = props.push_next(&mut driver).push_next(&mut float_controls);
         }
         unsafe { instance.get_physical_device_properties2(physical, &mut props) };
         let p = props.properties;
@@ -1318,6 +1322,8 @@ fn candidates(instance: &ash::Instance, instance_api: u32) -> Result<Vec<Candida
                 max_workgroup_size: l.max_compute_work_group_size,
                 timestamp_period_ns: l.timestamp_period,
                 device_local_bytes,
+                denorm_preserve_f32: api >= vk::API_VERSION_1_2
+                    && float_controls.shader_denorm_preserve_float32 == vk::TRUE,
                 supports_subgroup_ops: subgroup.supported_stages.contains(vk::ShaderStageFlags::COMPUTE)
                     && subgroup.supported_operations.contains(ops),
                 max_workgroup_count: l.max_compute_work_group_count,

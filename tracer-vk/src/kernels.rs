@@ -109,6 +109,9 @@ impl Specialisation {
             Intersect::MollerTrumbore => "MOLLER_TRUMBORE",
         });
         features.push(if self.fixed_offset { "FIXED_OFFSET" } else { "SCALE_AWARE_OFFSET" });
+        if self.exact {
+            features.push("EXACT");
+        }
         features
     }
 }
@@ -133,6 +136,78 @@ pub fn strip_features(src: &str, enabled: &[&str]) -> String {
         }
     }
     out
+}
+
+/// The kernel text as the device's operators round: each `div_rn(a, b)`, `div3_rn(a, b)` and
+/// `sqrt_rn(x)` of the shared code (correctly rounded in an `--exact` kernel, common.wgsl) written
+/// as `a / b` and `sqrt(x)`, so that the other kernels are the SPIR-V they were before `--exact`.
+/// Calls are on one line; comments are left as they are.
+pub fn with_device_rounding(src: &str) -> String {
+    let mut out = String::with_capacity(src.len());
+    for line in src.lines() {
+        let (code, comment) = line.split_at(line.find("//").unwrap_or(line.len()));
+        out.push_str(&rewrite_calls(code));
+        out.push_str(comment);
+        out.push('\n');
+    }
+    out
+}
+
+fn rewrite_calls(code: &str) -> String {
+    let mut out = String::with_capacity(code.len());
+    let mut rest = code;
+    while let Some((i, name)) = ["div_rn(", "div3_rn(", "sqrt_rn("]
+        .iter()
+        .filter_map(|name| rest.find(name).map(|i| (i, *name)))
+        .filter(|&(i, _)| !rest[..i].ends_with(|c: char| c.is_alphanumeric() || c == '_'))
+        .min()
+    {
+        out.push_str(&rest[..i]);
+        let args_start = i + name.len();
+        let (args, len) = call_arguments(&rest[args_start..]);
+        match (name, args.as_slice()) {
+            ("sqrt_rn(", [x]) => out.push_str(&format!("sqrt({})", x.trim())),
+            (_, [a, b]) if name != "sqrt_rn(" => {
+                let operand = |a: &str| {
+                    let a = a.trim();
+                    if a.chars().all(|c| c.is_alphanumeric() || c == '_' || c == '.') {
+                        a.to_string()
+                    } else {
+                        format!("({a})")
+                    }
+                };
+                out.push_str(&format!("({} / {})", operand(a), operand(b)));
+            }
+            _ => panic!("the kernel calls {name}) with {} arguments: {code}", args.len()),
+        }
+        rest = &rest[args_start + len..];
+    }
+    out.push_str(rest);
+    out
+}
+
+/// The comma-separated arguments of a call whose opening parenthesis came just before `src`, and
+/// the length of the text up to and including the closing parenthesis.
+fn call_arguments(src: &str) -> (Vec<&str>, usize) {
+    let mut depth = 0;
+    let mut args = Vec::new();
+    let mut start = 0;
+    for (i, c) in src.char_indices() {
+        match c {
+            '(' => depth += 1,
+            ')' if depth == 0 => {
+                args.push(&src[start..i]);
+                return (args, i + 1);
+            }
+            ')' => depth -= 1,
+            ',' if depth == 0 => {
+                args.push(&src[start..i]);
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    panic!("a call in the kernel text is not closed: {src}")
 }
 
 /// The counters buffer the kernels count into, in u32 words; the kernels get these as constants.
@@ -196,13 +271,14 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
          \x20   {}(x, y, x < frame.tile.x + frame.tile.z && y < frame.tile.y + frame.tile.w);\n}}\n",
         stage.entry()
     );
-    format!(
+    let text = format!(
         "{}\n{}\n{}\n{}",
         prelude(spec),
         strip_features(traversal, &features),
         strip_features(STAGES, &features),
         entry
-    )
+    );
+    if spec.exact { text } else { with_device_rounding(&text) }
 }
 
 /// What every kernel starts with: the contract's constants, the counter slots, the per-scene
@@ -210,7 +286,7 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
 /// that a test can append its own entry point and call one shared function at a time.
 pub fn prelude(spec: &Specialisation) -> String {
     let counters: String = counters::WGSL.iter().map(|(name, v)| format!("const {name}: u32 = {v}u;\n")).collect();
-    format!(
+    let text = format!(
         "{}{counters}const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n{}",
         render_spec::constants::wgsl_header(),
         spec.stack_size.max(1),
@@ -218,7 +294,8 @@ pub fn prelude(spec: &Specialisation) -> String {
         spec.workgroup.0,
         spec.workgroup.1,
         strip_features(COMMON, &spec.features()),
-    )
+    );
+    if spec.exact { text } else { with_device_rounding(&text) }
 }
 
 /// Workgroup memory an SST kernel needs: the stack of whole nodes, the step (a node and a word,
@@ -340,6 +417,27 @@ mod tests {
             for (name, _) in SHARED {
                 assert!(!text.contains(&format!("const {name}")), "{file}.wgsl declares {name} again");
             }
+        }
+    }
+
+    /// The default kernels' division and sqrt are the operators they were (the rewritten kernels
+    /// were checked byte for byte against the SPIR-V from before div_rn/sqrt_rn, 160 kernels).
+    #[test]
+    fn the_default_kernels_divide_with_the_operators() {
+        let src = "    return v * div_rn(1.0, length3(v)); // div_rn(a, b) in a comment\n\
+                   let r = Ray(o, d, div3_rn(vec3<f32>(1.0), d));\n\
+                   let t = div_rn(n.x * a.x + n.y, den) + sqrt_rn(dot3(v, v)) + div_rn(1.0, m.kt_ior.y);\n";
+        assert_eq!(
+            with_device_rounding(src),
+            "    return v * (1.0 / (length3(v))); // div_rn(a, b) in a comment\n\
+             let r = Ray(o, d, ((vec3<f32>(1.0)) / d));\n\
+             let t = ((n.x * a.x + n.y) / den) + sqrt(dot3(v, v)) + (1.0 / m.kt_ior.y);\n"
+        );
+        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
+            let plain = source(Stage::Bounce, &spec(method, true, true));
+            assert!(!plain.contains("_rn(") && !plain.contains("fn split"), "{method:?}");
+            let exact = source(Stage::Bounce, &Specialisation { exact: true, ..spec(method, true, true) });
+            assert!(exact.contains("fn div_rn(") && exact.contains("div_rn(1.0, length3(v))"), "{method:?}");
         }
     }
 

@@ -6,13 +6,14 @@
 //! naga wrote. It refuses instructions whose internal arithmetic the driver defines (a dot product
 //! sums in an order of its choosing, `cross` and `normalize` contract inside), because no
 //! decoration makes those equal to the CPU: the kernels spell such operations out in the CPU's
-//! operation order (`dot3`, `cross3`, `length3` in common.wgsl). What stays driver-defined is the
-//! precision of single operations the Vulkan spec lets be inexact (division, `sqrt`); the kernels
-//! compute powers with adds and multiplies (`phong_pow`).
+//! operation order (`dot3`, `cross3`, `length3` in common.wgsl). Division and `sqrt`, which Vulkan
+//! lets a device round inexactly, are correctly rounded by the exact kernels' `div_rn` and
+//! `sqrt_rn` (built on `fma`, which this pass therefore allows); powers are adds and multiplies
+//! (`phong_pow`). [`preserve_denormals`] keeps subnormal results where the device can.
 
 use rspirv::binary::Assemble;
 use rspirv::dr::{Instruction, Operand};
-use rspirv::spirv::{Decoration, GlslStd450Op, Op, Word};
+use rspirv::spirv::{Capability, Decoration, ExecutionMode, GlslStd450Op, Op, Word};
 use std::collections::HashSet;
 
 use crate::error::VkError;
@@ -34,11 +35,13 @@ const DECORATED: [Op; 9] = [
 const COMPOUND: [Op; 5] =
     [Op::Dot, Op::VectorTimesMatrix, Op::MatrixTimesVector, Op::MatrixTimesMatrix, Op::OuterProduct];
 
-/// GLSL.std.450 instructions made of several roundings (or one fused one).
-const COMPOUND_GL: [GlslStd450Op; 12] = [
+/// GLSL.std.450 instructions made of several roundings. `Fma` is not among them: it rounds once
+/// by definition (the exact product plus the addend), which is what the correctly rounded division
+/// and square root of an exact kernel (`div_rn`, `sqrt_rn` in common.wgsl) are built on; the CPU
+/// model of those uses `f32::mul_add`.
+const COMPOUND_GL: [GlslStd450Op; 11] = [
     GlslStd450Op::FMix,
     GlslStd450Op::SmoothStep,
-    GlslStd450Op::Fma,
     GlslStd450Op::Length,
     GlslStd450Op::Distance,
     GlslStd450Op::Cross,
@@ -110,6 +113,39 @@ pub fn forbid_contraction(spirv: &[u32], label: &str) -> Result<Vec<u32>, VkErro
         }
     }
     module.annotations.extend(added);
+    Ok(module.assemble())
+}
+
+/// Returns `spirv` with the execution mode `DenormPreserve` for 32-bit floats on every entry point
+/// (SPV_KHR_float_controls): the device may not flush subnormal operands or results to zero, as
+/// the CPU does not. Only for a device that reports `shaderDenormPreserveFloat32`
+/// ([`crate::DeviceInfo::denorm_preserve_f32`]); elsewhere the mode is not allowed.
+pub fn preserve_denormals(spirv: &[u32], label: &str) -> Result<Vec<u32>, VkError> {
+    let mut module = rspirv::dr::load_words(spirv).map_err(|e| VkError::Shader {
+        label: label.to_string(),
+        message: format!("error: the SPIR-V does not parse: {e}"),
+    })?;
+    module.capabilities.push(Instruction::new(
+        Op::Capability,
+        None,
+        None,
+        vec![Operand::Capability(Capability::DenormPreserve)],
+    ));
+    module.extensions.push(Instruction::new(
+        Op::Extension,
+        None,
+        None,
+        vec![Operand::LiteralString("SPV_KHR_float_controls".to_string())],
+    ));
+    let entries: Vec<Operand> = module.entry_points.iter().filter_map(|e| e.operands.get(1).cloned()).collect();
+    for entry in entries {
+        module.execution_modes.push(Instruction::new(
+            Op::ExecutionMode,
+            None,
+            None,
+            vec![entry, Operand::ExecutionMode(ExecutionMode::DenormPreserve), Operand::LiteralBit32(32)],
+        ));
+    }
     Ok(module.assemble())
 }
 
@@ -231,14 +267,13 @@ mod tests {
             ("v[2] = vec4<f32>(cross(a, b), 0.0);", "Cross"),
             ("v[2] = vec4<f32>(normalize(a), 0.0);", "Normalize"),
             ("v[2].x = length(a);", "Length"),
-            ("v[2].x = fma(a.x, b.x, a.y);", "Fma"),
         ] {
             let words = crate::shader::translate(&src(body), "t", &[]).expect("translates");
             let e = forbid_contraction(&words, "t").expect_err(body).to_string();
             assert!(e.contains(what) && e.contains("--exact") && !e.contains('\n'), "{body}: {e}");
         }
-        // Plain arithmetic passes, decorated.
-        let words = crate::shader::translate(&src("v[2] = vec4<f32>(a * b.x + b - a / b, -a.x);"), "t", &[]).unwrap();
+        // Plain arithmetic passes, decorated, and so does fma (one rounding by definition).
+        let words = crate::shader::translate(&src("v[2] = vec4<f32>(a * b.x + b - a / b, fma(-a.x, b.y, a.z));"), "t", &[]).unwrap();
         let out = forbid_contraction(&words, "t").unwrap();
         let found = arithmetic(&out);
         assert!(found.len() >= 5 && found.iter().all(|a| a.2), "{found:?}");

@@ -348,8 +348,11 @@ impl<'g> Renderer<'g> {
 
     fn pipeline(&mut self, stage: Stage) -> Result<(), VkError> {
         if !self.pipelines.contains_key(&stage) {
-            let spirv = kernels::compile(stage, &self.spec)?;
+            let mut spirv = kernels::compile(stage, &self.spec)?;
             let label = format!("{} {stage:?}", self.spec.method.name());
+            if self.spec.exact && self.gpu.info().denorm_preserve_f32 {
+                spirv = crate::no_contraction::preserve_denormals(&spirv, &label)?;
+            }
             let p = self.gpu.pipeline(&spirv, BINDINGS, kernels::PASS_BYTES, &label)?;
             self.pipelines.insert(stage, p);
         }
