@@ -135,12 +135,12 @@ var<private> cost_nodes: u32;
 var<private> cost_tris: u32;
 
 // Division and square root as the CPU rounds them (IEEE 754: correctly rounded, subnormals kept).
-// Vulkan lets a device's division and sqrt() be off by 2.5 ulp (NVIDIA's are), so an --exact
-// kernel spells them div_rn() and sqrt_rn(): the device's operation only seeds them, a fused
-// multiply-add (GLSL.std.450 Fma, rounded once by definition) finds the residual exactly, and the
-// residual's sign picks the correctly rounded neighbour. Subnormal operands are normalised and
-// subnormal results rounded with integer operations, so a device that flushes denormals in its
-// float arithmetic still gets them right. The other kernels have no such functions: kernels.rs
+// Vulkan lets a device's division and sqrt() be off by 2.5 ulp (NVIDIA's are) and its fma() be
+// unfused (lavapipe's is), so an --exact kernel spells them div_rn() and sqrt_rn(): the device's
+// float operations only estimate the result's significand, integer arithmetic on the significands
+// (products of up to 50 bits in two words) decides which side of each midpoint the exact result
+// lies, and subnormal operands and results are handled with integers too, so a device that
+// flushes denormals still gets them right. The other kernels have no such functions: kernels.rs
 // writes each call as the plain operator there. The Rust model and its exhaustive tests are
 // tracer-vk/tests/exact_rounding.rs.
 //#if EXACT
@@ -160,13 +160,28 @@ fn split(magnitude: u32) -> Split {
     return Split(bitcast<f32>(((field << (23u - top)) & 0x7fffffu) | 0x3f800000u), i32(top) - 149i);
 }
 
-// The neighbours of a positive finite float.
-fn next_up(x: f32) -> f32 {
-    return bitcast<f32>(bitcast<u32>(x) + 1u);
+// The significand of a float in [1, 2) as an integer in [2^23, 2^24).
+fn significand(m: f32) -> u32 {
+    return (bitcast<u32>(m) & 0x7fffffu) | 0x800000u;
 }
 
-fn next_down(x: f32) -> f32 {
-    return bitcast<f32>(bitcast<u32>(x) - 1u);
+// a b for a, b < 2^26, as (high word, low word).
+fn mul_wide(a: u32, b: u32) -> vec2<u32> {
+    let a0 = a & 0xffffu;
+    let b0 = b & 0xffffu;
+    let low = a0 * b0;
+    let mid = (a >> 16u) * b0 + a0 * (b >> 16u);
+    let lo = low + (mid << 16u);
+    return vec2<u32>((a >> 16u) * (b >> 16u) + (mid >> 16u) + select(0u, 1u, lo < low), lo);
+}
+
+// x 2^k for x < 2^26 and 7 <= k <= 31, as (high word, low word).
+fn shl_wide(x: u32, k: u32) -> vec2<u32> {
+    return vec2<u32>(x >> (32u - k), x << k);
+}
+
+fn wide_less(a: vec2<u32>, b: vec2<u32>) -> bool {
+    return a.x < b.x || (a.x == b.x && a.y < b.y);
 }
 
 fn div_rn(a: f32, b: f32) -> f32 {
@@ -185,44 +200,51 @@ fn div_rn(a: f32, b: f32) -> f32 {
     }
     let x = split(ma);
     let y = split(mb);
-    // x.m / y.m lies in (0.5, 2): a Newton step on the device's reciprocal and one on the
-    // quotient make q faithful (less than an ulp off), so the residual x.m - q y.m is exact.
+    // With significands X and Y the quotient's is n = RN(X 2^k / Y), k = 23 where X >= Y (a
+    // quotient in [1, 2)), else 24. A Newton step on the device's reciprocal and one on the
+    // quotient estimate it to about an ulp (with a fused or an unfused fma).
+    let big_x = significand(x.m);
+    let big_y = significand(y.m);
+    let k = select(24u, 23u, big_x >= big_y);
     var r = 1.0 / y.m;
     r = fma(fma(-y.m, r, 1.0), r, r);
     var q = x.m * r;
     q = fma(fma(-q, y.m, x.m), r, q);
-    // The quotient lies beyond the midpoint to a neighbour where the residual there,
-    // rem -+ (half the gap) y.m, has the residual's sign (an fma gets the sign exactly; a quotient
-    // is never a midpoint).
-    var rem = fma(-q, y.m, x.m);
-    if rem > 0.0 {
-        let up = next_up(q);
-        if fma((q - up) * 0.5, y.m, rem) > 0.0 {
-            q = up;
+    var n = u32(q * bitcast<f32>((127u + k) << 23u));
+    // The quotient lies above the midpoint (2n + 1) / 2^(k + 1) where X 2^(k + 1) > (2n + 1) Y;
+    // never on it (an odd multiple of Y is no power-of-two multiple of X this small).
+    let scaled = shl_wide(big_x, k + 1u);
+    for (var i = 0; i < 2; i++) {
+        if wide_less(mul_wide(2u * n + 1u, big_y), scaled) {
+            n += 1u;
         }
-    } else if rem < 0.0 {
-        let down = next_down(q);
-        if fma((q - down) * 0.5, y.m, rem) < 0.0 {
-            q = down;
+        if wide_less(scaled, mul_wide(2u * n - 1u, big_y)) {
+            n -= 1u;
         }
     }
-    rem = fma(-q, y.m, x.m);
-    let bits = bitcast<u32>(q);
-    let e = i32(bits >> 23u) - 127i + x.e - y.e;
+    // Which side of n the quotient lies on, for rounding a subnormal one.
+    let exact = shl_wide(big_x, k);
+    let product = mul_wide(n, big_y);
+    let above = wide_less(product, exact);
+    let below = wide_less(exact, product);
+    var e = x.e - y.e + 23i - i32(k); // a / b = n 2^(e - 23)
+    if n == 0x1000000u {
+        n = 0x800000u;
+        e += 1i;
+    }
     if e > 127i {
         return bitcast<f32>(sign | inf);
     }
     if e >= -126i {
-        return bitcast<f32>(sign | (u32(e + 127i) << 23u) | (bits & 0x7fffffu));
+        return bitcast<f32>(sign | (u32(e + 127i) << 23u) | (n & 0x7fffffu));
     }
-    // A subnormal quotient keeps the top 24 - s bits of q's significand, rounded to nearest even
-    // with the dropped bits and, at exactly half, the residual's sign (the true quotient's side of q).
+    // A subnormal quotient keeps the top 24 - s bits of n, rounded to nearest even with the
+    // dropped bits and, at exactly half, the side of n the quotient lies on.
     let s = u32(min(-126i - e, 25i));
-    let significand = (bits & 0x7fffffu) | 0x800000u;
-    let kept = significand >> s;
-    let dropped = significand & ((1u << s) - 1u);
+    let kept = n >> s;
+    let dropped = n & ((1u << s) - 1u);
     let half = 1u << (s - 1u);
-    let up = dropped > half || (dropped == half && (rem > 0.0 || (rem == 0.0 && (kept & 1u) == 1u)));
+    let up = dropped > half || (dropped == half && (above || (!below && (kept & 1u) == 1u)));
     return bitcast<f32>(sign | (kept + select(0u, 1u, up)));
 }
 
@@ -238,24 +260,28 @@ fn sqrt_rn(x: f32) -> f32 {
     if bits > 0x7f800000u {
         return sqrt(x); // negative or NaN: NaN
     }
-    // x = m 2^e with m in [1, 4) and e even: sqrt(m) in [1, 2), never subnormal.
+    // x = m 2^e with m = W 2^-23 in [1, 4) and e even: sqrt(m) in [1, 2), never subnormal; its
+    // significand n = RN(sqrt(m) 2^23), estimated by the device's sqrt and a Newton step.
     let v = split(bits);
     let odd = (v.e & 1i) != 0i;
     let m = select(v.m, 2.0 * v.m, odd);
     let e = select(v.e, v.e - 1i, odd);
+    let w = significand(v.m) << select(0u, 1u, odd);
     var s = sqrt(m);
     s = fma(fma(-s, s, m), 0.5 / s, s);
-    // sqrt(m) passes the midpoint s + g/2 to the neighbour above (g = up - s) where
-    // m - s up - g^2/4 > 0; m - s up is a multiple of g^2, so where it is > 0 (an fma's sign is
-    // exact). Likewise below, with the gap from down to s.
-    let up = next_up(s);
-    let down = next_down(s);
-    if fma(-s, up, m) > 0.0 {
-        s = up;
-    } else if fma(-down, s, m) <= 0.0 {
-        s = down;
+    var n = u32(s * 8388608.0);
+    // sqrt(m) lies above the midpoint (2n + 1) 2^-24 where W 2^25 > (2n + 1)^2 (never equal:
+    // an odd square is not even).
+    let scaled = shl_wide(w, 25u);
+    for (var i = 0; i < 2; i++) {
+        if wide_less(mul_wide(2u * n + 1u, 2u * n + 1u), scaled) {
+            n += 1u;
+        }
+        if wide_less(scaled, mul_wide(2u * n - 1u, 2u * n - 1u)) {
+            n -= 1u;
+        }
     }
-    return bitcast<f32>(bitcast<u32>(s) + (bitcast<u32>(e / 2i) << 23u));
+    return bitcast<f32>(bitcast<u32>(f32(n) * bitcast<f32>(0x34000000u)) + (bitcast<u32>(e / 2i) << 23u));
 }
 //#endif
 

@@ -298,6 +298,14 @@ pub fn prelude(spec: &Specialisation) -> String {
     if spec.exact { text } else { with_device_rounding(&text) }
 }
 
+/// common.wgsl's correctly rounded division and square root (`div_rn`, `div3_rn`, `sqrt_rn` and
+/// their helpers, the `EXACT` block) alone: for testing them on a device without the rest.
+pub fn exact_rounding_wgsl() -> &'static str {
+    let start = COMMON.find("//#if EXACT\n").expect("common.wgsl has an EXACT block");
+    let len = COMMON[start..].find("//#endif").expect("the EXACT block ends");
+    &COMMON[start..start + len]
+}
+
 /// Workgroup memory an SST kernel needs: the stack of whole nodes, the step (a node and a word,
 /// padded to 48 bytes), the two children, the leaf cache, the votes and two flag words.
 pub fn sst_shared_bytes(spec: &Specialisation) -> u64 {
