@@ -491,7 +491,8 @@ fn functions_equal_their_rust_twins(exact: bool, intersect: Intersect) {
         spirv = tracer_vk::no_contraction::forbid_contraction(&spirv, "function harness").expect("the pass takes it");
         // As the renderer does (render.rs): subnormals kept where the device can.
         if gpu.info().denorm_preserve_f32 {
-            spirv = tracer_vk::no_contraction::preserve_denormals(&spirv, "function harness").expect("the pass takes it");
+            spirv =
+                tracer_vk::no_contraction::preserve_denormals(&spirv, "function harness").expect("the pass takes it");
         }
     }
     let pipeline = gpu.pipeline(&spirv, 16, kernels::PASS_BYTES, "function harness").expect("the pipeline builds");

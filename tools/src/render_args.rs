@@ -116,8 +116,10 @@ pub struct RenderArgs {
     #[arg(long, value_parser = parse_cutoff, allow_hyphen_values = true, help_heading = "Accuracy")]
     pub cutoff: Option<f32>,
     /// Bit-exact arithmetic: trace-vk builds kernels whose float operations the GPU's compiler
-    /// may not fuse into multiply-adds, so that its images equal trace-cpu's bit for bit (at some
-    /// cost in speed). The CPU tracer never fuses them, so trace-cpu is always exact.
+    /// may not fuse into multiply-adds, whose divisions and square roots are correctly rounded,
+    /// and which keep subnormals where the device allows it (shaderDenormPreserveFloat32), so
+    /// that its images equal trace-cpu's bit for bit (at some cost in speed). The CPU tracer never
+    /// fuses them, so trace-cpu is always exact.
     #[arg(long, help_heading = "Accuracy")]
     pub exact: bool,
 }

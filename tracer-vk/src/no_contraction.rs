@@ -280,7 +280,9 @@ mod tests {
             assert!(e.contains(what) && e.contains("--exact") && !e.contains('\n'), "{body}: {e}");
         }
         // Plain arithmetic passes, decorated, and so does fma (one rounding by definition).
-        let words = crate::shader::translate(&src("v[2] = vec4<f32>(a * b.x + b - a / b, fma(-a.x, b.y, a.z));"), "t", &[]).unwrap();
+        let words =
+            crate::shader::translate(&src("v[2] = vec4<f32>(a * b.x + b - a / b, fma(-a.x, b.y, a.z));"), "t", &[])
+                .unwrap();
         let out = forbid_contraction(&words, "t").unwrap();
         let found = arithmetic(&out);
         assert!(found.len() >= 5 && found.iter().all(|a| a.2), "{found:?}");

@@ -177,7 +177,12 @@ fn same(a: f32, b: f32) -> bool {
 fn check_div(a: f32, b: f32, seed: Seed) {
     let got = div_rn(a, b, seed);
     let want = a / b;
-    assert!(same(got, want), "{a:e} / {b:e} ({:#x} / {:#x}), seed {seed:?}: {got:e}, IEEE {want:e}", a.to_bits(), b.to_bits());
+    assert!(
+        same(got, want),
+        "{a:e} / {b:e} ({:#x} / {:#x}), seed {seed:?}: {got:e}, IEEE {want:e}",
+        a.to_bits(),
+        b.to_bits()
+    );
 }
 
 fn check_sqrt(x: f32, seed: Seed) {
@@ -191,9 +196,32 @@ fn check_sqrt(x: f32, seed: Seed) {
 /// greatest finite, infinity and NaN.
 fn special_values() -> Vec<f32> {
     let magnitudes = [
-        0u32, 1, 2, 3, 0x0000_1234, 0x0040_0000, 0x007f_ffff, 0x0080_0000, 0x0080_0001, 0x00ff_ffff, 0x0d00_0000,
-        0x3f00_0000, 0x3f7f_ffff, 0x3f80_0000, 0x3f80_0001, 0x3fff_ffff, 0x4040_0000, 0x3dcc_cccd, 0x4b00_0001,
-        0x7e80_0000, 0x7f00_0000, 0x7f7f_fffe, 0x7f7f_ffff, 0x7f80_0000, 0x7fc0_0000, 0x7f80_0001,
+        0u32,
+        1,
+        2,
+        3,
+        0x0000_1234,
+        0x0040_0000,
+        0x007f_ffff,
+        0x0080_0000,
+        0x0080_0001,
+        0x00ff_ffff,
+        0x0d00_0000,
+        0x3f00_0000,
+        0x3f7f_ffff,
+        0x3f80_0000,
+        0x3f80_0001,
+        0x3fff_ffff,
+        0x4040_0000,
+        0x3dcc_cccd,
+        0x4b00_0001,
+        0x7e80_0000,
+        0x7f00_0000,
+        0x7f7f_fffe,
+        0x7f7f_ffff,
+        0x7f80_0000,
+        0x7fc0_0000,
+        0x7f80_0001,
     ];
     magnitudes.iter().flat_map(|&m| [f32::from_bits(m), f32::from_bits(m | 0x8000_0000)]).collect()
 }
