@@ -265,7 +265,7 @@ fn division_equals_ieee_on_every_pair_of_special_classes() {
 
 #[test]
 fn division_equals_ieee_on_random_operands() {
-    let mut rng = Rng(0xd1e5_0f_f00d);
+    let mut rng = Rng(0x00d1_e50f_f00d);
     // Exponents around 0, at the ends of the range (overflow, subnormal quotients) and between.
     for near in [0, 0, 60, -60, 120, -120, -140] {
         for _ in 0..2_000_000 {
