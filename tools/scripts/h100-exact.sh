@@ -11,6 +11,8 @@
 #                                              --no-run` names (target/release/deps/tracer_vk-*)
 #   .bin/wgsl-functions-tests (optional)       the binary `cargo test --release -p tests --test
 #                                              wgsl_functions --no-run` names
+#   .bin/exact-rounding-tests (optional)        the binary `cargo test --release -p tracer-vk --test
+#                                              exact_rounding --no-run` names (div_rn, sqrt_rn)
 # and, where .gl/ holds the Vulkan loader packages of /work/shared/device.md, unpacks them first.
 # Writes $OUT (default out/h100-exact): summary.md (read this), log.txt, bench.tgz (the CSV and
 # Markdown tables) and differing.tgz (the images of every comparison that differs under --exact).
@@ -126,7 +128,7 @@ with_layer() {
     "$@"
   fi
 }
-for t in tracer-vk-tests:no_contraction wgsl-functions-tests:every_shared; do
+for t in tracer-vk-tests:no_contraction wgsl-functions-tests:every_shared exact-rounding-tests:the_wgsl; do
   b=${t%%:*}
   [ -x "$BIN/$b" ] || continue
   log "$b ${t#*:}"
