@@ -291,6 +291,31 @@ mod tests {
         assert!(gpu.validation_messages().is_empty(), "{:#?}", gpu.validation_messages());
     }
 
+    /// The capability, the extension and the execution mode on the entry point (the device here,
+    /// lavapipe, does not report shaderDenormPreserveFloat32, so no pipeline is made of it).
+    #[test]
+    fn denormals_are_preserved_by_execution_mode() {
+        let spec = Specialisation {
+            method: Method::Lst,
+            stack_size: 23,
+            leaf_size: 8,
+            workgroup: (8, 8),
+            reflection: true,
+            refraction: true,
+            smooth: true,
+            exact: true,
+            intersect: render_spec::Intersect::Watertight,
+            fixed_offset: false,
+        };
+        let words = kernels::compile(Stage::Bounce, &spec).expect("the kernel compiles");
+        let out = rspirv::dr::load_words(preserve_denormals(&words, "t").unwrap()).unwrap();
+        assert!(out.capabilities.iter().any(|i| i.operands == [Operand::Capability(Capability::DenormPreserve)]));
+        assert!(out.extensions.iter().any(|i| i.operands == [Operand::LiteralString("SPV_KHR_float_controls".into())]));
+        let main = out.entry_points[0].operands[1].clone();
+        let mode = [main, Operand::ExecutionMode(ExecutionMode::DenormPreserve), Operand::LiteralBit32(32)];
+        assert!(out.execution_modes.iter().any(|i| i.operands == mode), "{:?}", out.execution_modes);
+    }
+
     /// On the device: `a * b + c` of the exact kernel equals the CPU's two roundings on every
     /// input, including those where a fused multiply-add rounds differently.
     #[test]
