@@ -295,7 +295,13 @@ pub struct Measured {
     pub rays: [u64; 3],
 }
 
-/// Renders `warmup` untimed and then `frames` timed frames of `settings` (`frames` at least 1).
+/// The least wall time of untimed frames before a setting is timed (see [`measure`]).
+const WARM_UP_S: f64 = 0.3;
+/// The most untimed frames [`WARM_UP_S`] may add.
+const MAX_WARM_UP: usize = 500;
+
+/// Renders at least `warmup` untimed frames (more until 0.3 s have passed) and then `frames`
+/// timed frames of `settings` (`frames` at least 1).
 pub fn measure<B: Bench>(
     bench: &B,
     renderer: &mut B::Renderer<'_>,
@@ -303,14 +309,22 @@ pub fn measure<B: Bench>(
     warmup: usize,
     frames: usize,
 ) -> Result<Measured, String> {
+    // Untimed frames: `warmup` of them, and more until WARM_UP_S have passed. A GPU raises its
+    // clocks only after some busy time: on the H100, sub-millisecond frames measured after three
+    // warm-up frames came out up to 4.7 times slower for the first setting of a scene than the
+    // same kernels measured later.
+    let start = std::time::Instant::now();
+    let mut warmed = 0;
+    while warmed < warmup || (start.elapsed().as_secs_f64() < WARM_UP_S && warmed < MAX_WARM_UP) {
+        bench.frame(renderer, settings)?;
+        warmed += 1;
+    }
     let mut times = Vec::with_capacity(frames);
     let mut rays = [0u64; 3];
-    for i in 0..warmup + frames.max(1) {
+    for _ in 0..frames.max(1) {
         let t = bench.frame(renderer, settings)?;
-        if i >= warmup {
-            times.push(t.ms);
-            rays = t.rays;
-        }
+        times.push(t.ms);
+        rays = t.rays;
     }
     let min_ms = times.iter().copied().fold(f64::INFINITY, f64::min);
     Ok(Measured { median_ms: median(&mut times), min_ms, rays })

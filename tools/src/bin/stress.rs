@@ -145,9 +145,10 @@ fn sweep(cli: &Cli) -> Result<(), String> {
     }
 }
 
-/// The hand-written part of the report: everything before "## Results".
+/// The hand-written part of the report: everything before the line "## Results".
 fn head_of(text: &str) -> String {
-    text.find("## Results").map_or(text.to_owned(), |i| text[..i].to_owned())
+    let at = if text.starts_with("## Results\n") { Some(0) } else { text.find("\n## Results\n").map(|i| i + 1) };
+    at.map_or(text.to_owned(), |i| text[..i].to_owned())
 }
 
 /// The chart's path as the report links it.
