@@ -296,11 +296,11 @@ pub struct Measured {
 }
 
 /// The least wall time of untimed frames before a setting is timed (see [`measure`]).
-const WARM_UP_S: f64 = 0.3;
+const WARM_UP_S: f64 = 1.0;
 /// The most untimed frames [`WARM_UP_S`] may add.
 const MAX_WARM_UP: usize = 500;
 
-/// Renders at least `warmup` untimed frames (more until 0.3 s have passed) and then `frames`
+/// Renders at least `warmup` untimed frames (more until 1 s has passed) and then `frames`
 /// timed frames of `settings` (`frames` at least 1).
 pub fn measure<B: Bench>(
     bench: &B,
@@ -312,7 +312,7 @@ pub fn measure<B: Bench>(
     // Untimed frames: `warmup` of them, and more until WARM_UP_S have passed. A GPU raises its
     // clocks only after some busy time: on the H100, sub-millisecond frames measured after three
     // warm-up frames came out up to 4.7 times slower for the first setting of a scene than the
-    // same kernels measured later.
+    // same kernels measured later; 1 s of warm-up removed most of that, though not all (SST).
     let start = std::time::Instant::now();
     let mut warmed = 0;
     while warmed < warmup || (start.elapsed().as_secs_f64() < WARM_UP_S && warmed < MAX_WARM_UP) {
