@@ -279,6 +279,22 @@ pub fn write_text(out: &Output, text: &str) -> Result<(), OutputError> {
     write_atomically(&out.path, |w| w.write_all(text.as_bytes()).map_err(|e| e.to_string()))
 }
 
+/// Writes a chart drawn in memory (plotters' `SVGBackend::with_string` and
+/// `BitMapBackend::with_buffer`, RGB8 rows) as `svg_path` and `png_path`, each replaced only
+/// when complete, so that a failed run leaves the previous charts as they were.
+pub fn write_chart(
+    svg_path: &Path,
+    svg: &str,
+    png_path: &Path,
+    size: (u32, u32),
+    pixels: &[u8],
+) -> Result<(), OutputError> {
+    write_atomically(svg_path, |w| w.write_all(svg.as_bytes()).map_err(|e| e.to_string()))?;
+    let rgb: Vec<[u8; 3]> = pixels.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let out = Output { path: png_path.to_owned(), format: Format::Png };
+    write_image(&out, &Frame { width: size.0, height: size.1, rgb: &rgb })
+}
+
 /// A false-colour ramp from dark blue (0) through cyan, green and yellow to red (1).
 pub fn false_colour(x: f32) -> [u8; 3] {
     const STOPS: [[f32; 3]; 6] =

@@ -3,7 +3,7 @@
 //! dashed line. Written as SVG and PNG.
 
 use super::report::Row;
-use crate::output::{self, Format, Frame, Output};
+use crate::output;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -33,17 +33,13 @@ pub fn draw(dir: &Path, stem: &str, title: &str, rows: &[&Row], front: &[&Row]) 
         plot(&root, title, rows, front)?;
         root.present().map_err(|e| format!("cannot draw the chart {stem}: {e}"))?;
     }
-    output::write_atomically(&svg_path, |w| std::io::Write::write_all(w, svg.as_bytes()).map_err(|e| e.to_string()))
-        .map_err(|e| e.to_string())?;
     let mut pixels = vec![0u8; (SIZE.0 * SIZE.1 * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut pixels, SIZE).into_drawing_area();
         plot(&root, title, rows, front)?;
         root.present().map_err(|e| format!("cannot draw the chart {stem}: {e}"))?;
     }
-    let rgb: Vec<[u8; 3]> = pixels.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    let out = Output { path: png_path.clone(), format: Format::Png };
-    output::write_image(&out, &Frame { width: SIZE.0, height: SIZE.1, rgb: &rgb }).map_err(|e| e.to_string())?;
+    output::write_chart(&svg_path, &svg, &png_path, SIZE, &pixels).map_err(|e| e.to_string())?;
     Ok(vec![svg_path, png_path])
 }
 

@@ -93,16 +93,18 @@ pub fn markdown(rows: &[Row], axes: &[&str]) -> String {
     s
 }
 
-/// Writes the chart as `stem.svg` and `stem.png`.
+/// Writes the chart as `stem.svg` and `stem.png` (drawn in memory, each file replaced only when
+/// complete).
 pub fn charts(rows: &[Row], axes: &[&str], stem: &Path) -> Result<(), String> {
     let axes: Vec<&str> = axes.iter().copied().filter(|a| !points(rows, a).is_empty()).collect();
     let cols = 3;
     let size = (1500, 360 * axes.len().div_ceil(cols) as u32);
-    let svg = stem.with_extension("svg");
-    let png = stem.with_extension("png");
-    draw(rows, &axes, cols, SVGBackend::new(&svg, size).into_drawing_area())?;
-    draw(rows, &axes, cols, BitMapBackend::new(&png, size).into_drawing_area())?;
-    Ok(())
+    let mut svg = String::new();
+    draw(rows, &axes, cols, SVGBackend::with_string(&mut svg, size).into_drawing_area())?;
+    let mut pixels = vec![0u8; (size.0 * size.1 * 3) as usize];
+    draw(rows, &axes, cols, BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area())?;
+    crate::output::write_chart(&stem.with_extension("svg"), &svg, &stem.with_extension("png"), size, &pixels)
+        .map_err(|e| e.to_string())
 }
 
 fn draw<DB: DrawingBackend>(
