@@ -10,7 +10,8 @@
 
 use crate::device::{Buffer, Gpu, Pipeline};
 use crate::error::VkError;
-use crate::kernels::{self, Method, Specialisation, Stage, counters};
+use crate::kernels::{self, Half, Method, Specialisation, Stage, counters};
+use crate::rt::RtTracer;
 use crate::tiles::{self, Tile};
 use bvh_format::{Light, SceneFile};
 use bytemuck::{Pod, Zeroable};
@@ -140,6 +141,10 @@ pub struct Renderer<'g> {
     materials: Buffer,
     input_index: Buffer,
     pipelines: HashMap<Stage, Pipeline>,
+    /// rt-pipeline: the first halves of the stages that trace (rt_pipeline.wgsl), and the driver's
+    /// structures and pipeline.
+    ray_halves: HashMap<Stage, Pipeline>,
+    rt: Option<RtTracer>,
     targets: Option<Targets>,
     /// A tile holds at most this many pixels (besides the device's own limits).
     tile_pixels: u64,
@@ -247,7 +252,14 @@ impl<'g> Renderer<'g> {
         method: Method,
         workgroup: (u32, u32),
     ) -> Result<Self, VkRenderError> {
+        // Refused before anything is uploaded, in one sentence naming what the device lacks.
+        if method == Method::RtPipeline {
+            crate::rt::properties(gpu)?;
+        }
+        // rt-pipeline reads no tree of the file; the binding gets one unused node.
+        let placeholder = [bvh_format::Node::zeroed()];
         let nodes = match method {
+            Method::RtPipeline => &placeholder[..],
             Method::Lst | Method::Sst | Method::SstSubgroup => scene
                 .child_pair
                 .as_deref()
@@ -299,6 +311,7 @@ impl<'g> Renderer<'g> {
         fits(info, "normals", &arrays.normals)?;
         fits(info, "materials", &scene.materials)?;
         fits(info, "input indices", &scene.input_index)?;
+        let rt = if method == Method::RtPipeline { Some(RtTracer::new(gpu, &arrays.tris)?) } else { None };
         Ok(Self {
             gpu,
             scene,
@@ -310,6 +323,8 @@ impl<'g> Renderer<'g> {
             materials: gpu.create_buffer_with(&scene.materials, "materials")?,
             input_index: gpu.create_buffer_with(&scene.input_index, "input index")?,
             pipelines: HashMap::new(),
+            ray_halves: HashMap::new(),
+            rt,
             targets: None,
             tile_pixels: tiles::device_tile_pixels(info),
         })
@@ -317,6 +332,11 @@ impl<'g> Renderer<'g> {
 
     pub fn specialisation(&self) -> &Specialisation {
         &self.spec
+    }
+
+    /// rt-pipeline: what the driver's acceleration-structure build took.
+    pub fn structure_build(&self) -> Option<crate::rt::accel::BuildReport> {
+        self.rt.as_ref().map(RtTracer::build_report)
     }
 
     /// Builds the kernels without contracting any float operations (`--exact`): on a GPU whose
@@ -336,6 +356,7 @@ impl<'g> Renderer<'g> {
         if self.spec != spec {
             self.spec = spec;
             self.pipelines.clear();
+            self.ray_halves.clear();
         }
     }
 
@@ -347,20 +368,37 @@ impl<'g> Renderer<'g> {
     }
 
     fn pipeline(&mut self, stage: Stage) -> Result<(), VkError> {
-        if !self.pipelines.contains_key(&stage) {
-            let mut spirv = kernels::compile(stage, &self.spec)?;
-            let label = format!("{} {stage:?}", self.spec.method.name());
+        let rt = self.rt.is_some();
+        // rt-pipeline's kernels also bind the ray and hit records.
+        let bindings = if rt { BINDINGS + 2 } else { BINDINGS };
+        let halves: &[Half] = if rt && stage != Stage::Convert { &[Half::Emit, Half::Collect] } else { &[Half::Collect] };
+        for &half in halves {
+            let map = if half == Half::Emit { &self.ray_halves } else { &self.pipelines };
+            if map.contains_key(&stage) {
+                continue;
+            }
+            let mut spirv = kernels::compile_half(stage, &self.spec, half)?;
+            let label = match half {
+                Half::Emit => format!("{} {stage:?} (ray half)", self.spec.method.name()),
+                Half::Collect => format!("{} {stage:?}", self.spec.method.name()),
+            };
             if self.spec.exact && self.gpu.info().denorm_preserve_f32 {
                 spirv = crate::no_contraction::preserve_denormals(&spirv, &label)?;
             }
-            let p = self.gpu.pipeline(&spirv, BINDINGS, kernels::PASS_BYTES, &label)?;
-            self.pipelines.insert(stage, p);
+            let p = self.gpu.pipeline(&spirv, bindings, kernels::PASS_BYTES, &label)?;
+            match half {
+                Half::Emit => self.ray_halves.insert(stage, p),
+                Half::Collect => self.pipelines.insert(stage, p),
+            };
         }
         Ok(())
     }
 
     /// Per-pixel buffers for tiles of up to `pixels` pixels.
     fn targets(&mut self, pixels: u64) -> Result<(), VkError> {
+        if let Some(rt) = self.rt.as_mut() {
+            rt.reserve(self.gpu, pixels)?;
+        }
         if self.targets.as_ref().is_some_and(|t| t.pixels >= pixels) {
             return Ok(());
         }
@@ -540,8 +578,8 @@ impl<'g> Renderer<'g> {
         let t = self.targets.as_ref().expect("the targets were made before the tiles");
         let (wx, wy) = self.spec.workgroup;
         let groups = [tile.width.div_ceil(wx), tile.height.div_ceil(wy), 1];
-        // In the order of BINDING_NAMES.
-        let buffers: [&Buffer; BINDINGS as usize] = [
+        // In the order of BINDING_NAMES, then rt-pipeline's records.
+        let mut buffers: Vec<&Buffer> = vec![
             frame_buf,
             &self.nodes,
             &self.tris,
@@ -557,7 +595,12 @@ impl<'g> Renderer<'g> {
             &t.image,
             counters,
         ];
+        if let Some(rt) = &self.rt {
+            buffers.extend(rt.records()?);
+        }
         let p = &self.pipelines;
+        let rays = &self.ray_halves;
+        let rt = self.rt.as_ref();
         let shade_passes = light_count.max(1);
         let mut first = 0;
         loop {
@@ -567,7 +610,14 @@ impl<'g> Renderer<'g> {
             let timings = g.run(|rec| {
                 let mut pass = |rec: &mut crate::device::Recorder, stage: Stage, light: u32, depth: u32| {
                     dispatches += 1;
-                    rec.dispatch(&p[&stage], &buffers, &PassData::bytes(light, depth), groups)
+                    let push = PassData::bytes(light, depth);
+                    // rt-pipeline: the stage's first half writes the rays, the driver traces them,
+                    // the second half is the stage with their hits.
+                    if let (Some(rt), Some(emit)) = (rt, rays.get(&stage)) {
+                        rec.dispatch(emit, &buffers, &push, groups)?;
+                        rt.record_trace(rec, tile.width, tile.height);
+                    }
+                    rec.dispatch(&p[&stage], &buffers, &push, groups)
                 };
                 rec.zero(counters);
                 rec.mark("start");
@@ -670,6 +720,7 @@ impl SceneArrays {
 pub fn upload_bytes(scene: &SceneFile, method: Method) -> u64 {
     let nodes = match method {
         Method::Stackless => scene.escape.as_ref(),
+        Method::RtPipeline => None,
         _ => scene.child_pair.as_ref(),
     };
     let a = SceneArrays::new(scene);
