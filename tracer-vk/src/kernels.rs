@@ -34,6 +34,9 @@ pub enum Method {
 }
 
 impl Method {
+    /// Every method, in the order `trace-vk` lists them.
+    pub const ALL: [Method; 5] = [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup, Method::RtPipeline];
+
     pub fn name(self) -> &'static str {
         match self {
             Method::Lst => "lst",

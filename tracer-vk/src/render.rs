@@ -34,6 +34,12 @@ pub fn allowed_workgroups(limit: u32) -> Vec<(u32, u32)> {
     sides().flat_map(|w| sides().map(move |h| (w, h))).filter(|&(w, h)| workgroup_allowed(w, h, limit)).collect()
 }
 
+/// rt-pipeline's passes are timed in three parts: the stage's first half (writing the rays), the
+/// driver's traversal, and the stage's second half under the stage's own label. These label the
+/// first two, summed over a frame's passes in [`Output::passes`].
+pub const RT_RAY_HALVES: &str = "rt-pipeline ray halves";
+pub const RT_TRAVERSAL: &str = "rt-pipeline traversal";
+
 /// Bounces in the first submission of a tile (every shipped scene needs at most 5); each later
 /// submission doubles the bounces done so far. Between submissions the live paths are counted.
 const FIRST_BOUNCES: u32 = 8;
@@ -615,7 +621,9 @@ impl<'g> Renderer<'g> {
                     // the second half is the stage with their hits.
                     if let (Some(rt), Some(emit)) = (rt, rays.get(&stage)) {
                         rec.dispatch(emit, &buffers, &push, groups)?;
+                        rec.mark(RT_RAY_HALVES);
                         rt.record_trace(rec, tile.width, tile.height);
+                        rec.mark(RT_TRAVERSAL);
                     }
                     rec.dispatch(&p[&stage], &buffers, &push, groups)
                 };

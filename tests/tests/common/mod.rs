@@ -4,7 +4,7 @@
 #![allow(dead_code)] // each test file uses its own part
 
 use bvh_format::SceneFile;
-use render_spec::{Image, NO_TRIANGLE};
+use render_spec::Image;
 use std::path::Path;
 use tracer_vk::Gpu;
 
@@ -48,20 +48,8 @@ pub fn diff(cpu: &Image, gpu: &Image) -> Diff {
     // (both backends round differently there); anything else is a real disagreement.
     let aov = cpu.aov.as_ref().expect("the CPU render keeps AOVs");
     let gpu = gpu.aov.as_ref().expect("the GPU render keeps AOVs");
-    let (mut differs, mut ties) = (0, 0);
-    for i in 0..n {
-        if aov.prim[i] == gpu.prim[i] {
-            continue;
-        }
-        let (a, b) = (aov.t[i], gpu.t[i]);
-        let both_hit = aov.prim[i] != NO_TRIANGLE && gpu.prim[i] != NO_TRIANGLE;
-        if both_hit && (a - b).abs() <= 1e-4 * a.abs().max(b.abs()) {
-            ties += 1;
-        } else {
-            differs += 1;
-        }
-    }
-    Diff { within_one: within as f64 / n as f64, flip_mean, prim_differs: differs, prim_ties: ties }
+    let prims = aov.prim_diff(gpu);
+    Diff { within_one: within as f64 / n as f64, flip_mean, prim_differs: prims.differs, prim_ties: prims.ties }
 }
 
 /// Asserts that a GPU frame (with AOVs) is the CPU's image: colours within 1/255 almost
