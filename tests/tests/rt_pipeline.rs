@@ -4,7 +4,8 @@
 //! tools/scripts/h100-rtpipe.sh), its images equal LST's to the cross-backend tests' tolerance:
 //! the same primary-hit triangles but for ties, 99.9% of pixels within 1/255, FLIP below 0.01, and
 //! the same rays of every kind. Where it has not (lavapipe here and in CI), the method is refused
-//! before anything is uploaded, in one sentence naming what is missing.
+//! before anything is uploaded, in one sentence naming what is missing; the split stages are tested
+//! there with LST's traversal standing in for the driver's.
 
 mod common;
 
@@ -41,6 +42,55 @@ fn the_renderer_refuses_rt_pipeline_exactly_where_the_device_lacks_it() {
             let b = r.structure_build().expect("rt-pipeline built structures");
             assert!(b.bottom_bytes > 0 && b.top_bytes > 0, "{b:?}");
             println!("built on {}: {b:?}", info.name);
+        }
+    }
+    let messages = gpu.validation_messages();
+    assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
+}
+
+/// rt-pipeline's stages split around the trace, with LST in place of the driver's traversal, give
+/// LST's images bit for bit: every colour, primary triangle, distance and normal and the same rays
+/// of every kind, over whole frames and small tiles, cast and Whitted. This runs the ray and hit
+/// records, the halves and their slots on any device (lavapipe here); only the driver's traversal
+/// itself needs the H100.
+#[test]
+fn the_split_stages_with_lst_in_place_of_the_driver_give_lsts_images() {
+    let gpu = gpu();
+    for (scene_name, camera, w, h) in [("room.toml", "close-up", 96, 72), ("bunny.toml", "medium", 96, 72)] {
+        let scene = compile(scene_name);
+        let cam = CameraSpec::from(scene.camera(camera).expect("the camera exists"));
+        for mode in [Mode::Cast, Mode::Whitted] {
+            let settings = Settings {
+                width: w,
+                height: h,
+                camera: cam,
+                mode,
+                lights: scene.lights.clone(),
+                max_indirections: scene.settings.max_indirections,
+                aovs: true,
+                accuracy: render_spec::Accuracy::default(),
+            };
+            let lst = Renderer::new(&gpu, &scene, Method::Lst, (8, 8)).unwrap().render(&settings).unwrap().image;
+            let mut r = Renderer::rt_stand_in(&gpu, &scene, (8, 8)).unwrap();
+            assert!(r.structure_build().is_none(), "the stand-in builds no driver structures");
+            for tile in [u64::MAX, 1000] {
+                r.limit_tile_pixels(tile);
+                let out = r.render(&settings).expect("the split stages render");
+                let split = out.image;
+                let what = format!("{scene_name} {camera} {mode:?} tiles of {tile} pixels");
+                let (a, b) = (lst.aov.as_ref().unwrap(), split.aov.as_ref().unwrap());
+                let differ = lst.rgb.iter().zip(&split.rgb).filter(|(p, q)| p != q).count();
+                assert_eq!(differ, 0, "{what}: {differ} pixels differ from LST's");
+                assert_eq!(a.prim, b.prim, "{what}: primary triangles");
+                assert_eq!(a.t, b.t, "{what}: distances");
+                assert_eq!(a.normal, b.normal, "{what}: normals");
+                assert_eq!(split.rays, lst.rays, "{what}: rays of every kind");
+                assert!(lst.rays.primary > 0 && (mode == Mode::Cast || lst.rays.shadow > 0), "{what}: {:?}", lst.rays);
+                // The passes are timed in parts: the ray halves, the traversal, the hit halves.
+                for part in [tracer_vk::render::RT_RAY_HALVES, tracer_vk::render::RT_TRAVERSAL] {
+                    assert!(out.passes.iter().any(|(l, _)| l == part), "{what}: no {part} in {:?}", out.passes);
+                }
+            }
         }
     }
     let messages = gpu.validation_messages();

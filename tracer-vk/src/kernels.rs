@@ -322,6 +322,34 @@ pub fn source_half(stage: Stage, spec: &Specialisation, half: Half) -> String {
     if spec.exact { text } else { with_device_rounding(&text) }
 }
 
+/// rt-pipeline's traversal done by LST in a compute kernel, one invocation per pixel's ray record
+/// (`stand_in` in rt_pipeline.wgsl): for testing the split stages on a device without ray
+/// tracing. `spec` is the renderer's (any method); the kernel walks the child-pair tree.
+pub fn stand_in_source(spec: &Specialisation) -> String {
+    let spec = Specialisation { method: Method::Lst, ..*spec };
+    let mut features = spec.features();
+    features.push("RT_STAND_IN");
+    let text = format!(
+        "{}\n{}\n{}\n\
+         @compute @workgroup_size(WG_X * WG_Y)\n\
+         fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {{\n\
+         \x20   lid = li;\n\
+         \x20   let x = frame.tile.x + wg.x * WG_X + li % WG_X;\n    let y = frame.tile.y + wg.y * WG_Y + li / WG_X;\n\
+         \x20   if x < frame.tile.x + frame.tile.z && y < frame.tile.y + frame.tile.w {{\n\
+         \x20       stand_in((y - frame.tile.y) * frame.tile.z + (x - frame.tile.x));\n    }}\n}}\n",
+        prelude(&spec),
+        strip_features(LST, &features),
+        strip_features(RT_PIPELINE, &features),
+    );
+    if spec.exact { text } else { with_device_rounding(&text) }
+}
+
+/// Translates [`stand_in_source`].
+pub fn compile_stand_in(spec: &Specialisation) -> Result<Vec<u32>, VkError> {
+    let words = shader::translate(&stand_in_source(spec), "rt-pipeline stand-in traversal", &[])?;
+    if spec.exact { crate::no_contraction::forbid_contraction(&words, "rt-pipeline stand-in traversal") } else { Ok(words) }
+}
+
 /// What every kernel starts with: the contract's constants, the counter slots, the per-scene
 /// constants, then common.wgsl (records, bindings, intersection and shading functions). Public so
 /// that a test can append its own entry point and call one shared function at a time.

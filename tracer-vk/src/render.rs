@@ -133,6 +133,17 @@ struct Targets {
     accum: Buffer,
     aovs: Buffer,
     image: Buffer,
+    /// rt-pipeline: the ray and hit records the split stages exchange with the traversal.
+    rt_records: Option<[Buffer; 2]>,
+}
+
+/// Who traces rt-pipeline's ray records.
+enum RtTraversal {
+    /// The driver: acceleration structures and a ray-tracing pipeline.
+    Driver(RtTracer),
+    /// LST in a compute kernel (made with the other kernels), for testing the split stages on a
+    /// device without ray tracing.
+    StandIn(Option<Pipeline>),
 }
 
 /// A scene on the GPU, ready to render frames with one traversal method.
@@ -150,7 +161,7 @@ pub struct Renderer<'g> {
     /// rt-pipeline: the first halves of the stages that trace (rt_pipeline.wgsl), and the driver's
     /// structures and pipeline.
     ray_halves: HashMap<Stage, Pipeline>,
-    rt: Option<RtTracer>,
+    rt: Option<RtTraversal>,
     targets: Option<Targets>,
     /// A tile holds at most this many pixels (besides the device's own limits).
     tile_pixels: u64,
@@ -258,14 +269,35 @@ impl<'g> Renderer<'g> {
         method: Method,
         workgroup: (u32, u32),
     ) -> Result<Self, VkRenderError> {
+        Self::make(gpu, scene, method, workgroup, false)
+    }
+
+    /// rt-pipeline's stages, split around the trace as on a device with ray tracing, with LST's
+    /// traversal in a compute kernel in place of the driver's (the scene needs its child-pair
+    /// tree): tests the split stages and their records on any device. Its images are LST's.
+    pub fn rt_stand_in(gpu: &'g Gpu, scene: &'g SceneFile, workgroup: (u32, u32)) -> Result<Self, VkRenderError> {
+        Self::make(gpu, scene, Method::RtPipeline, workgroup, true)
+    }
+
+    fn make(
+        gpu: &'g Gpu,
+        scene: &'g SceneFile,
+        method: Method,
+        workgroup: (u32, u32),
+        stand_in: bool,
+    ) -> Result<Self, VkRenderError> {
         // Refused before anything is uploaded, in one sentence naming what the device lacks.
-        if method == Method::RtPipeline {
+        if method == Method::RtPipeline && !stand_in {
             crate::rt::properties(gpu)?;
         }
         // rt-pipeline reads no tree of the file; the binding gets one unused node.
         let placeholder = [bvh_format::Node::zeroed()];
         let nodes = match method {
-            Method::RtPipeline => &placeholder[..],
+            Method::RtPipeline if !stand_in => &placeholder[..],
+            Method::RtPipeline => scene
+                .child_pair
+                .as_deref()
+                .ok_or(RenderError::MissingLayout { method: "LST (rt-pipeline's stand-in)", layout: "child-pair" })?,
             Method::Lst | Method::Sst | Method::SstSubgroup => scene
                 .child_pair
                 .as_deref()
@@ -317,7 +349,11 @@ impl<'g> Renderer<'g> {
         fits(info, "normals", &arrays.normals)?;
         fits(info, "materials", &scene.materials)?;
         fits(info, "input indices", &scene.input_index)?;
-        let rt = if method == Method::RtPipeline { Some(RtTracer::new(gpu, &arrays.tris)?) } else { None };
+        let rt = match (method, stand_in) {
+            (Method::RtPipeline, false) => Some(RtTraversal::Driver(RtTracer::new(gpu, &arrays.tris)?)),
+            (Method::RtPipeline, true) => Some(RtTraversal::StandIn(None)),
+            _ => None,
+        };
         Ok(Self {
             gpu,
             scene,
@@ -342,7 +378,10 @@ impl<'g> Renderer<'g> {
 
     /// rt-pipeline: what the driver's acceleration-structure build took.
     pub fn structure_build(&self) -> Option<crate::rt::accel::BuildReport> {
-        self.rt.as_ref().map(RtTracer::build_report)
+        match &self.rt {
+            Some(RtTraversal::Driver(t)) => Some(t.build_report()),
+            _ => None,
+        }
     }
 
     /// Builds the kernels without contracting any float operations (`--exact`): on a GPU whose
@@ -363,6 +402,9 @@ impl<'g> Renderer<'g> {
             self.spec = spec;
             self.pipelines.clear();
             self.ray_halves.clear();
+            if let Some(RtTraversal::StandIn(p)) = &mut self.rt {
+                *p = None;
+            }
         }
     }
 
@@ -377,6 +419,10 @@ impl<'g> Renderer<'g> {
         let rt = self.rt.is_some();
         // rt-pipeline's kernels also bind the ray and hit records.
         let bindings = if rt { BINDINGS + 2 } else { BINDINGS };
+        if let Some(RtTraversal::StandIn(p @ None)) = &mut self.rt {
+            let spirv = kernels::compile_stand_in(&self.spec)?;
+            *p = Some(self.gpu.pipeline(&spirv, bindings, kernels::PASS_BYTES, "rt-pipeline stand-in traversal")?);
+        }
         let halves: &[Half] = if rt && stage != Stage::Convert { &[Half::Emit, Half::Collect] } else { &[Half::Collect] };
         for &half in halves {
             let map = if half == Half::Emit { &self.ray_halves } else { &self.pipelines };
@@ -402,9 +448,6 @@ impl<'g> Renderer<'g> {
 
     /// Per-pixel buffers for tiles of up to `pixels` pixels.
     fn targets(&mut self, pixels: u64) -> Result<(), VkError> {
-        if let Some(rt) = self.rt.as_mut() {
-            rt.reserve(self.gpu, pixels)?;
-        }
         if self.targets.as_ref().is_some_and(|t| t.pixels >= pixels) {
             return Ok(());
         }
@@ -417,7 +460,19 @@ impl<'g> Renderer<'g> {
             accum: g.create_buffer(pixels * ACCUM_BYTES, "accumulated colour")?,
             aovs: g.create_buffer(pixels * AOV_BYTES, "AOVs")?,
             image: g.create_buffer(pixels * IMAGE_BYTES, "image")?,
+            rt_records: match &self.rt {
+                None => None,
+                Some(_) => Some([
+                    g.create_buffer(pixels * crate::rt::spirv::RAY_BYTES as u64, "rt-pipeline ray records")?,
+                    g.create_buffer(pixels * crate::rt::spirv::HIT_BYTES as u64, "rt-pipeline hit records")?,
+                ]),
+            },
         });
+        if let (Some(RtTraversal::Driver(rt)), Some(t)) = (&self.rt, &self.targets)
+            && let Some([rays, hits]) = &t.rt_records
+        {
+            rt.bind_records(rays, hits);
+        }
         Ok(())
     }
 
@@ -601,8 +656,8 @@ impl<'g> Renderer<'g> {
             &t.image,
             counters,
         ];
-        if let Some(rt) = &self.rt {
-            buffers.extend(rt.records()?);
+        if let Some(records) = &t.rt_records {
+            buffers.extend(records);
         }
         let p = &self.pipelines;
         let rays = &self.ray_halves;
@@ -622,7 +677,13 @@ impl<'g> Renderer<'g> {
                     if let (Some(rt), Some(emit)) = (rt, rays.get(&stage)) {
                         rec.dispatch(emit, &buffers, &push, groups)?;
                         rec.mark(RT_RAY_HALVES);
-                        rt.record_trace(rec, tile.width, tile.height);
+                        match rt {
+                            RtTraversal::Driver(t) => t.record_trace(rec, tile.width, tile.height),
+                            RtTraversal::StandIn(p) => {
+                                let p = p.as_ref().expect("the stand-in was made with the kernels");
+                                rec.dispatch(p, &buffers, &push, groups)?;
+                            }
+                        }
                         rec.mark(RT_TRAVERSAL);
                     }
                     rec.dispatch(&p[&stage], &buffers, &push, groups)

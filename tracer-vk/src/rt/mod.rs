@@ -154,13 +154,6 @@ pub struct RtTracer {
     // Before `accel`: the pipeline's descriptor set names the top-level structure.
     pipeline: pipeline::RtPipeline,
     accel: accel::Accel,
-    records: Option<Records>,
-}
-
-struct Records {
-    pixels: u64,
-    rays: crate::device::Buffer,
-    hits: crate::device::Buffer,
 }
 
 impl RtTracer {
@@ -170,7 +163,7 @@ impl RtTracer {
         let props = properties(gpu)?;
         let accel = accel::Accel::build(gpu, &props, tris)?;
         let pipeline = pipeline::RtPipeline::new(gpu, &props, accel.top())?;
-        Ok(RtTracer { pipeline, accel, records: None })
+        Ok(RtTracer { pipeline, accel })
     }
 
     /// What the driver's build took.
@@ -178,23 +171,10 @@ impl RtTracer {
         self.accel.report
     }
 
-    /// Ray and hit records for tiles of up to `pixels` pixels.
-    pub fn reserve(&mut self, gpu: &Gpu, pixels: u64) -> Result<(), VkError> {
-        if self.records.as_ref().is_some_and(|r| r.pixels >= pixels) {
-            return Ok(());
-        }
-        self.records = None;
-        let rays = gpu.create_buffer(pixels * spirv::RAY_BYTES as u64, "rt ray records")?;
-        let hits = gpu.create_buffer(pixels * spirv::HIT_BYTES as u64, "rt hit records")?;
-        self.pipeline.bind_records(&rays, &hits);
-        self.records = Some(Records { pixels, rays, hits });
-        Ok(())
-    }
-
-    /// The ray and hit records (bindings 14 and 15 of the split kernels, rt_pipeline.wgsl).
-    pub fn records(&self) -> Result<[&crate::device::Buffer; 2], VkError> {
-        let r = self.records.as_ref().ok_or_else(|| VkError::Usage("rt-pipeline traced before reserve".into()))?;
-        Ok([&r.rays, &r.hits])
+    /// Traces the ray records in `rays` into the hit records in `hits` from now on (the
+    /// per-pixel buffers of the split kernels, bindings 14 and 15). Not while a run is recorded.
+    pub fn bind_records(&self, rays: &crate::device::Buffer, hits: &crate::device::Buffer) {
+        self.pipeline.bind_records(rays, hits);
     }
 
     /// Records the trace of a tile's ray records into its hit records.
