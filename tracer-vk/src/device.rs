@@ -1378,7 +1378,11 @@ fn open_device(instance: &ash::Instance, api: u32, choice: Option<usize>) -> Res
     let rt_extensions = crate::rt::EXTENSIONS.map(|e| e.as_ptr());
     let mut rt = crate::rt::Features::wanted();
     if chosen.info.rt_pipeline.is_supported() {
-        info = info.enabled_extension_names(&rt_extensions).push_next(&mut rt.v12).push_next(&mut rt.accel).push_next(&mut rt.pipeline);
+        info = info
+            .enabled_extension_names(&rt_extensions)
+            .push_next(&mut rt.v12)
+            .push_next(&mut rt.accel)
+            .push_next(&mut rt.pipeline);
     }
     // SAFETY: valid create info for a device of this instance.
     let device = unsafe { instance.create_device(chosen.physical, &info, None) }.map_err(|e| match e {

@@ -347,7 +347,11 @@ pub fn stand_in_source(spec: &Specialisation) -> String {
 /// Translates [`stand_in_source`].
 pub fn compile_stand_in(spec: &Specialisation) -> Result<Vec<u32>, VkError> {
     let words = shader::translate(&stand_in_source(spec), "rt-pipeline stand-in traversal", &[])?;
-    if spec.exact { crate::no_contraction::forbid_contraction(&words, "rt-pipeline stand-in traversal") } else { Ok(words) }
+    if spec.exact {
+        crate::no_contraction::forbid_contraction(&words, "rt-pipeline stand-in traversal")
+    } else {
+        Ok(words)
+    }
 }
 
 /// What every kernel starts with: the contract's constants, the counter slots, the per-scene

@@ -140,7 +140,7 @@ struct Targets {
 /// Who traces rt-pipeline's ray records.
 enum RtTraversal {
     /// The driver: acceleration structures and a ray-tracing pipeline.
-    Driver(RtTracer),
+    Driver(Box<RtTracer>),
     /// LST in a compute kernel (made with the other kernels), for testing the split stages on a
     /// device without ray tracing.
     StandIn(Option<Pipeline>),
@@ -350,7 +350,7 @@ impl<'g> Renderer<'g> {
         fits(info, "materials", &scene.materials)?;
         fits(info, "input indices", &scene.input_index)?;
         let rt = match (method, stand_in) {
-            (Method::RtPipeline, false) => Some(RtTraversal::Driver(RtTracer::new(gpu, &arrays.tris)?)),
+            (Method::RtPipeline, false) => Some(RtTraversal::Driver(Box::new(RtTracer::new(gpu, &arrays.tris)?))),
             (Method::RtPipeline, true) => Some(RtTraversal::StandIn(None)),
             _ => None,
         };
@@ -423,7 +423,8 @@ impl<'g> Renderer<'g> {
             let spirv = kernels::compile_stand_in(&self.spec)?;
             *p = Some(self.gpu.pipeline(&spirv, bindings, kernels::PASS_BYTES, "rt-pipeline stand-in traversal")?);
         }
-        let halves: &[Half] = if rt && stage != Stage::Convert { &[Half::Emit, Half::Collect] } else { &[Half::Collect] };
+        let halves: &[Half] =
+            if rt && stage != Stage::Convert { &[Half::Emit, Half::Collect] } else { &[Half::Collect] };
         for &half in halves {
             let map = if half == Half::Emit { &self.ray_halves } else { &self.pipelines };
             if map.contains_key(&stage) {

@@ -8,9 +8,9 @@ use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
 use tools::vk_bench::{VkBench, check_validation};
 use tracer_vk::kernels::Method;
+use tracer_vk::render::RT_TRAVERSAL;
 use tracer_vk::render::Renderer;
 use tracer_vk::rt::Support;
-use tracer_vk::render::RT_TRAVERSAL;
 use tracer_vk::{Gpu, list_devices};
 
 #[derive(Parser)]

@@ -153,7 +153,8 @@ impl Accel {
         let bottom_range = [vk::AccelerationStructureBuildRangeInfoKHR::default().primitive_count(count as u32)];
         let top_range = [vk::AccelerationStructureBuildRangeInfoKHR::default().primitive_count(1)];
         let build = vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR;
-        let as_rw = vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR | vk::AccessFlags::ACCELERATION_STRUCTURE_WRITE_KHR;
+        let as_rw =
+            vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR | vk::AccessFlags::ACCELERATION_STRUCTURE_WRITE_KHR;
         let timings = gpu.run(|rec| {
             let cmd = rec.raw();
             // SAFETY: `cmd` is recording; every buffer and structure outlives the run, which waits.
@@ -293,7 +294,8 @@ mod tests {
         let transform: Vec<f32> = (0..12).map(f).collect();
         assert_eq!(transform, [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
         assert_eq!(word(12), vk::Packed24_8::new(0, 0xff).low_24() | (0xff << 24));
-        let flags = vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE | vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE;
+        let flags =
+            vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE | vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE;
         let packed = vk::Packed24_8::new(0, flags.as_raw() as u8);
         assert_eq!(packed.high_8() as u32, word(13) >> 24);
         assert_eq!(word(13) & 0xff_ffff, 0, "hit group record 0");

@@ -26,8 +26,11 @@ use crate::device::Gpu;
 use crate::error::VkError;
 
 /// The device extensions rt-pipeline needs.
-pub const EXTENSIONS: [&CStr; 3] =
-    [ash::khr::acceleration_structure::NAME, ash::khr::ray_tracing_pipeline::NAME, ash::khr::deferred_host_operations::NAME];
+pub const EXTENSIONS: [&CStr; 3] = [
+    ash::khr::acceleration_structure::NAME,
+    ash::khr::ray_tracing_pipeline::NAME,
+    ash::khr::deferred_host_operations::NAME,
+];
 
 /// Whether a device can run rt-pipeline, and the limits its shader binding table follows.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -92,7 +95,8 @@ pub(crate) unsafe fn query_support(instance: &ash::Instance, physical: vk::Physi
     let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
     let mut accel = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default();
     let mut rt = vk::PhysicalDeviceRayTracingPipelineFeaturesKHR::default();
-    let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut v12).push_next(&mut accel).push_next(&mut rt);
+    let mut features =
+        vk::PhysicalDeviceFeatures2::default().push_next(&mut v12).push_next(&mut accel).push_next(&mut rt);
     // SAFETY: the structures chained are known to a Vulkan 1.2 device with these extensions.
     unsafe { instance.get_physical_device_features2(physical, &mut features) };
     for (present, name) in [
@@ -211,14 +215,7 @@ impl RawBuffer {
         // SAFETY: valid create info; `b` is dropped (destroying what was made) on every failure.
         let buffer = unsafe { device.create_buffer(&info, None) }
             .map_err(|e| VkError::alloc("vkCreateBuffer", e, label, size))?;
-        let mut b = RawBuffer {
-            device,
-            buffer,
-            memory: vk::DeviceMemory::null(),
-            size,
-            address: 0,
-            mapped: None,
-        };
+        let mut b = RawBuffer { device, buffer, memory: vk::DeviceMemory::null(), size, address: 0, mapped: None };
         // SAFETY: `buffer` is live.
         let req = unsafe { b.device.get_buffer_memory_requirements(buffer) };
         let memory = gpu.memory_properties();
@@ -246,8 +243,7 @@ impl RawBuffer {
                 .bind_buffer_memory(buffer, b.memory, 0)
                 .map_err(|e| VkError::alloc("vkBindBufferMemory", e, label, size))?;
             if addressed {
-                b.address =
-                    b.device.get_buffer_device_address(&vk::BufferDeviceAddressInfo::default().buffer(buffer));
+                b.address = b.device.get_buffer_device_address(&vk::BufferDeviceAddressInfo::default().buffer(buffer));
             }
             if types[type_index as usize].property_flags.contains(vk::MemoryPropertyFlags::HOST_VISIBLE) {
                 let ptr = b
@@ -324,7 +320,8 @@ mod tests {
 
     #[test]
     fn the_refusal_is_one_sentence_naming_what_is_missing() {
-        let s = refusal("llvmpipe", &join(&["VK_KHR_acceleration_structure".into(), "VK_KHR_ray_tracing_pipeline".into()]));
+        let s =
+            refusal("llvmpipe", &join(&["VK_KHR_acceleration_structure".into(), "VK_KHR_ray_tracing_pipeline".into()]));
         assert_eq!(
             s,
             "--method rt-pipeline needs VK_KHR_acceleration_structure and VK_KHR_ray_tracing_pipeline, which llvmpipe \

@@ -298,7 +298,9 @@ mod tests {
     #[test]
     fn the_binding_table_follows_the_alignment_rules() {
         // NVIDIA's values, and made-up ones where every rule bites.
-        for (p, stride, region) in [(props(32, 32, 64), 32, 64), (props(20, 16, 48), 32, 48), (props(64, 64, 32), 64, 64)] {
+        for (p, stride, region) in
+            [(props(32, 32, 64), 32, 64), (props(20, 16, 48), 32, 48), (props(64, 64, 32), 64, 64)]
+        {
             let l = SbtLayout::new(&p).unwrap();
             assert_eq!(l.stride, stride, "{p:?}");
             assert_eq!(l.offsets, [0, region, 2 * region], "{p:?}");

@@ -50,7 +50,11 @@ pub fn stages() -> Result<Stages, VkError> {
         label: "rt-pipeline stages".into(),
         message: format!("error: rspirv could not build the module: {e}"),
     };
-    Ok(Stages { ray_gen: ray_gen().map_err(fail)?, miss: miss().map_err(fail)?, closest_hit: closest_hit().map_err(fail)? })
+    Ok(Stages {
+        ray_gen: ray_gen().map_err(fail)?,
+        miss: miss().map_err(fail)?,
+        closest_hit: closest_hit().map_err(fail)?,
+    })
 }
 
 type Built = Result<Vec<u32>, rspirv::dr::Error>;
@@ -215,7 +219,8 @@ fn ray_gen() -> Built {
 
     b.begin_block(Some(write_block))?;
     let result = b.load(payload_ty, None, payload, None, [])?;
-    for (member, ty, ptr) in [(0u32, float, p_sb_float), (1, uint, p_sb_uint), (2, float, p_sb_float), (3, float, p_sb_float)]
+    for (member, ty, ptr) in
+        [(0u32, float, p_sb_float), (1, uint, p_sb_uint), (2, float, p_sb_float), (3, float, p_sb_float)]
     {
         let value = b.composite_extract(ty, None, result, [member])?;
         let m = [u0, u1, u2, u3][member as usize];
