@@ -93,9 +93,6 @@ pub struct DeviceInfo {
     pub timestamps: bool,
     pub vendor_id: u32,
     pub device_id: u32,
-    /// Whether `--method rt-pipeline` runs here (the ray-tracing extensions and features, which
-    /// the device is opened with whenever it has them: crate::rt explains why).
-    pub rt_pipeline: crate::rt::Support,
 }
 
 /// Every device that can run compute work, in the order [`Gpu::new`] numbers them.
@@ -591,16 +588,6 @@ impl Gpu {
     /// The ash device, for commands this API does not wrap (recorded through [`Recorder::raw`]).
     pub fn ash_device(&self) -> &ash::Device {
         &self.inner.device
-    }
-
-    /// The instance, for the extension function tables rt-pipeline loads.
-    pub(crate) fn instance(&self) -> &ash::Instance {
-        &self.inner.instance
-    }
-
-    /// The device's memory types, for the buffers rt-pipeline allocates itself.
-    pub(crate) fn memory_properties(&self) -> &vk::PhysicalDeviceMemoryProperties {
-        &self.inner.memory
     }
 
     pub fn set_timeout(&mut self, timeout: Duration) {
@@ -1348,8 +1335,6 @@ fn candidates(instance: &ash::Instance, instance_api: u32) -> Result<Vec<Candida
                 timestamps: timestamp_bits > 0,
                 vendor_id: p.vendor_id,
                 device_id: p.device_id,
-                // SAFETY: `physical` belongs to `instance`.
-                rt_pipeline: unsafe { crate::rt::query_support(instance, physical, api) },
             },
         });
     }
@@ -1373,17 +1358,8 @@ fn open_device(instance: &ash::Instance, api: u32, choice: Option<usize>) -> Res
     let priorities = [1.0f32];
     let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(chosen.family).queue_priorities(&priorities)];
     // Compute on storage buffers needs no optional features; none are enabled so that every
-    // Vulkan 1.1 device qualifies. rt-pipeline's are, where the device has them (crate::rt).
-    let mut info = vk::DeviceCreateInfo::default().queue_create_infos(&queues);
-    let rt_extensions = crate::rt::EXTENSIONS.map(|e| e.as_ptr());
-    let mut rt = crate::rt::Features::wanted();
-    if chosen.info.rt_pipeline.is_supported() {
-        info = info
-            .enabled_extension_names(&rt_extensions)
-            .push_next(&mut rt.v12)
-            .push_next(&mut rt.accel)
-            .push_next(&mut rt.pipeline);
-    }
+    // Vulkan 1.1 device qualifies.
+    let info = vk::DeviceCreateInfo::default().queue_create_infos(&queues);
     // SAFETY: valid create info for a device of this instance.
     let device = unsafe { instance.create_device(chosen.physical, &info, None) }.map_err(|e| match e {
         vk::Result::ERROR_OUT_OF_DEVICE_MEMORY => VkError::OutOfDeviceMemory { label: "device".into(), bytes: 0 },
