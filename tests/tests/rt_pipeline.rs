@@ -10,7 +10,7 @@
 mod common;
 
 use common::{compile, gpu};
-use render_spec::{CameraSpec, Mode, Settings};
+use render_spec::Mode;
 use tracer_vk::VkError;
 use tracer_vk::kernels::Method;
 use tracer_vk::render::{Renderer, VkRenderError};
@@ -58,18 +58,8 @@ fn the_split_stages_with_lst_in_place_of_the_driver_give_lsts_images() {
     let gpu = gpu();
     for (scene_name, camera, w, h) in [("room.toml", "close-up", 96, 72), ("bunny.toml", "medium", 96, 72)] {
         let scene = compile(scene_name);
-        let cam = CameraSpec::from(scene.camera(camera).expect("the camera exists"));
         for mode in [Mode::Cast, Mode::Whitted] {
-            let settings = Settings {
-                width: w,
-                height: h,
-                camera: cam,
-                mode,
-                lights: scene.lights.clone(),
-                max_indirections: scene.settings.max_indirections,
-                aovs: true,
-                accuracy: render_spec::Accuracy::default(),
-            };
+            let settings = common::frame_settings(&scene, camera, w, h, mode);
             // Exact kernels (no contraction): two kernels holding the same LST code then round
             // alike on any device, also where the compiler would fuse differently in each.
             let mut lst = Renderer::new(&gpu, &scene, Method::Lst, (8, 8)).unwrap();
@@ -105,18 +95,8 @@ fn the_split_stages_with_lst_in_place_of_the_driver_give_lsts_images() {
 fn compare_with_lst(scene_name: &str, camera: &str, w: u32, h: u32) {
     let gpu = gpu();
     let scene = compile(scene_name);
-    let cam = CameraSpec::from(scene.camera(camera).expect("the camera exists"));
     for mode in [Mode::Cast, Mode::Whitted] {
-        let settings = Settings {
-            width: w,
-            height: h,
-            camera: cam,
-            mode,
-            lights: scene.lights.clone(),
-            max_indirections: scene.settings.max_indirections,
-            aovs: true,
-            accuracy: render_spec::Accuracy::default(),
-        };
+        let settings = common::frame_settings(&scene, camera, w, h, mode);
         let lst = Renderer::new(&gpu, &scene, Method::Lst, (8, 8)).unwrap().render(&settings).unwrap().image;
         let mut r = Renderer::new(&gpu, &scene, Method::RtPipeline, (8, 8))
             .unwrap_or_else(|e| panic!("this test needs a device with rt-pipeline (run it on the H100): {e}"));

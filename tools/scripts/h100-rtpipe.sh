@@ -17,7 +17,8 @@
 # bench.tgz (CSV and Markdown tables) and differing.tgz (image pairs that differ).
 #
 # Env: RES (default 1280x960), MODES (default "cast whitted"), BENCH_RES (default 1920x1440),
-# FRAMES (default 20), BENCH_MODES (default cast,whitted1,whitted2).
+# FRAMES (default 20), BENCH_MODES (default cast,whitted1,whitted2), SCENE_FILES (default
+# scenes/*.toml).
 set -uo pipefail
 set -x
 OUT=${OUT:-out/h100-rtpipe}
@@ -59,7 +60,7 @@ echo "VK_DRIVER_FILES=${VK_DRIVER_FILES:-} LD_LIBRARY_PATH=${LD_LIBRARY_PATH:-}"
 # Every shipped scene, compiled once; bvhc's build time kept for the table.
 SCENES=()
 declare -A BVHC_BUILD
-for t in scenes/*.toml; do
+for t in ${SCENE_FILES:-scenes/*.toml}; do
   n=$(basename "$t" .toml)
   if "$BIN/bvhc" compile "$t" -o "$WORK/scenes/$n.bvh" >"$WORK/bvhc-$n.txt" 2>&1; then
     cat "$WORK/bvhc-$n.txt"
@@ -95,14 +96,18 @@ log "smoke: $SMOKE"
 # tests need a device with ray tracing), and the refusal/acceptance test.
 if [ -x "$BIN/rt-pipeline-tests" ]; then
   log "rt-pipeline-tests"
-  with_layer "$BIN/rt-pipeline-tests" --include-ignored --nocapture --test-threads 1 >"$WORK/tests.txt" 2>&1
+  export SCENES_DIR="$PWD/scenes"
+  with_layer "$BIN/rt-pipeline-tests" --include-ignored --nocapture --test-threads 1 \
+    >"$WORK/tests.txt" 2>&1
   rc=$?
   cat "$WORK/tests.txt"
   {
     echo "## tests/tests/rt_pipeline.rs on this device (--include-ignored, validation layer on): exit $rc"
     echo
     echo '```'
-    grep -E 'rt-pipeline against LST|^test |test result|panicked|built on|refused on' "$WORK/tests.txt" | cut -c1-400 | head -40
+    # Each panic with the line after it (the assertion's message).
+    sed -n '/panicked/{N;p;d}; /rt-pipeline against LST\|^test \|test result\|built on\|refused on/p' "$WORK/tests.txt" |
+      cut -c1-400 | head -60
     echo '```'
     echo
   } >>"$OUT/summary.md"
@@ -139,7 +144,7 @@ for s in "${SCENES[@]}"; do
     total_diff=$((total_diff + diff))
     total_other=$((total_other + other))
     [ "$diff" = 0 ] || cp "$base-lst.png" "$base-rt-pipeline.png" "$WORK/differing/"
-    build=$(grep -o 'built its structures in [^;]*' "$base-rt-pipeline.txt" | sed 's/built its structures in //')
+    build=$(grep -o 'built its structures in [^)]*)' "$base-rt-pipeline.txt" | sed 's/built its structures in //')
     trav=$(grep -o 'its traversal took .*' "$base-rt-pipeline.txt" | sed "s/its traversal took //; s/ of the frame's / \/ /")
     lst_frame=$(grep -o 'on [^:]*: [^,]* GPU' "$base-lst.txt" | sed 's/.*: //; s/ GPU//')
     echo "| $s | $mode | $diff ($max) | $same / $ties / $other | ${BVHC_BUILD[$s]:-?} s | $build | $trav / $lst_frame |" >>"$OUT/summary.md"

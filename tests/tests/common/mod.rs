@@ -4,13 +4,17 @@
 #![allow(dead_code)] // each test file uses its own part
 
 use bvh_format::SceneFile;
-use render_spec::Image;
+use render_spec::{Image, Settings};
 use std::path::Path;
 use tracer_vk::Gpu;
 
-/// A scene of `scenes/`, compiled with default settings.
+/// A scene of `scenes/` (or of $SCENES_DIR, for a test binary run on another machine), compiled
+/// with default settings.
 pub fn compile(name: &str) -> SceneFile {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name);
+    let dir = std::env::var_os("SCENES_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes"));
+    let p = dir.join(name);
     let scene = bvh_build::import::load(&p, &Default::default()).expect("the scene imports");
     bvh_build::compile(&scene, &Default::default(), Default::default()).expect("the scene compiles")
 }
@@ -20,6 +24,20 @@ pub fn gpu() -> Gpu {
     match Gpu::new(None, true) {
         Ok(g) => g,
         Err(e) => panic!("the GPU tests need a Vulkan device: {e}"),
+    }
+}
+
+/// A frame of `scene` from its stored `camera` with the scene's lights and indirections, AOVs kept.
+pub fn frame_settings(scene: &SceneFile, camera: &str, width: u32, height: u32, mode: render_spec::Mode) -> Settings {
+    Settings {
+        width,
+        height,
+        camera: render_spec::CameraSpec::from(scene.camera(camera).expect("the camera exists")),
+        mode,
+        lights: scene.lights.clone(),
+        max_indirections: scene.settings.max_indirections,
+        aovs: true,
+        accuracy: render_spec::Accuracy::default(),
     }
 }
 

@@ -180,7 +180,7 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     if let Some(b) = renderer.structure_build() {
         let traversal: f64 = out.passes.iter().filter(|(l, _)| l == RT_TRAVERSAL).map(|(_, ms)| ms).sum();
         lines.push(format!(
-            "rt-pipeline: the driver built its structures in {} (bottom level {}, top level {}; {} MiB, scratch {} MiB); its traversal took {} of the frame's {}",
+            "rt-pipeline: the driver built its structures in {} (bottom level {}, top level {}) into {} MiB with {} MiB of scratch; its traversal took {} of the frame's {}",
             duration((b.bottom_ms + b.top_ms) / 1e3),
             duration(b.bottom_ms / 1e3),
             duration(b.top_ms / 1e3),
