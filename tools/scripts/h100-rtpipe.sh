@@ -161,7 +161,7 @@ done
 BENCH_SCENES=()
 for s in "${SCENES[@]}"; do BENCH_SCENES+=("$WORK/scenes/$s.bvh"); done
 log "trace-vk bench"
-timeout 540 "$BIN/trace-vk" bench "${BENCH_SCENES[@]}" --cameras medium --res "$BENCH_RES" --modes "$BENCH_MODES" \
+timeout 360 "$BIN/trace-vk" bench "${BENCH_SCENES[@]}" --cameras medium --res "$BENCH_RES" --modes "$BENCH_MODES" \
   --methods lst,rt-pipeline --frames "$FRAMES" --csv "$WORK/bench/rtpipe.csv"
 log "bench exit $?"
 {
