@@ -14,6 +14,7 @@ pub mod import;
 pub mod peers;
 pub mod scene;
 pub mod sweep;
+mod weld;
 
 pub use compile::{
     Layouts, MAX_BINS, build_tree, build_tree_with_progress, check_params, compile, compile_with_progress,
