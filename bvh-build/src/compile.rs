@@ -103,6 +103,20 @@ pub fn compile_with_progress(
     layouts: Layouts,
     progress: Option<&AtomicUsize>,
 ) -> Result<SceneFile, BuildError> {
+    let file = compile_for_writing(scene, params, layouts, progress)?;
+    file.validate().map_err(BuildError::Invalid)?;
+    Ok(file)
+}
+
+/// [`compile_with_progress`] without its validation, for a caller that hands the file straight to
+/// `bvh_format::write_to` (or `write`), which validates it before writing a byte: one validation
+/// on the way to disk instead of two (about 130 ms for a million triangles on the H100 host).
+pub fn compile_for_writing(
+    scene: &Scene,
+    params: &BuildParams,
+    layouts: Layouts,
+    progress: Option<&AtomicUsize>,
+) -> Result<SceneFile, BuildError> {
     if !layouts.child_pair && !layouts.escape {
         return Err(BuildError::Params("at least one node layout must be chosen".to_owned()));
     }
@@ -128,7 +142,6 @@ pub fn compile_with_progress(
         cameras: scene.cameras.clone(),
         lights: scene.lights.clone(),
     };
-    file.validate().map_err(BuildError::Invalid)?;
     Ok(file)
 }
 
