@@ -131,12 +131,10 @@ pub fn weld(points: &[Vec3]) -> Welded {
     }
     let number: Vec<AtomicU32> = (0..n).map(|_| AtomicU32::new(0)).collect();
     parts.into_par_iter().enumerate().for_each(|(c, (part, base))| {
-        let mut out = part.iter_mut();
-        let mut id = base as u32;
-        for i in (c * CHUNK..n.min(c * CHUNK + CHUNK)).filter(|&i| is_first(i)) {
-            *out.next().expect("counted above") = (points[i] + Vec3::ZERO).to_array();
+        let firsts = (c * CHUNK..n.min(c * CHUNK + CHUNK)).filter(|&i| is_first(i));
+        for ((i, out), id) in firsts.zip(part.iter_mut()).zip(base as u32..) {
+            *out = (points[i] + Vec3::ZERO).to_array();
             number[i].store(id, Ordering::Relaxed);
-            id += 1;
         }
     });
     let indices = (0..n)
