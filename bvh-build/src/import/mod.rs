@@ -70,10 +70,22 @@ pub enum ImportError {
 /// and default settings, with `max_indirections` 2 when a material reflects or refracts and 0
 /// otherwise. A description sets all of these itself (see `docs/scene-description.md`).
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
+    Kind::of(path)?;
+    load_bytes(path, &read_file(path)?, opts, &|file| std::fs::read(file))
+}
+
+/// Reads a file that a scene refers to: an OBJ's material library, a glTF buffer, a mesh of a
+/// description. [`load`] reads the file system.
+pub type ReadFile<'a> = &'a dyn Fn(&Path) -> std::io::Result<Vec<u8>>;
+
+/// [`load`] of a file already in memory: `path` names it (its extension picks the reader, its
+/// folder is where the files it refers to lie) and `read` reads those files, so that a caller
+/// can serve them from memory or refuse them (the fuzz targets in `bvh-build/fuzz` do).
+pub fn load_bytes(path: &Path, bytes: &[u8], opts: &ImportOptions, read: ReadFile<'_>) -> Result<Scene, ImportError> {
     match Kind::of(path)? {
-        Kind::Description => description::load(path, opts),
+        Kind::Description => description::load_bytes(path, bytes, opts, read),
         kind => {
-            let (mut scene, file_cameras) = load_mesh_file(path, kind, opts)?;
+            let (mut scene, file_cameras) = load_mesh_file(path, bytes, kind, opts, read)?;
             let (lo, hi) = scene.bounds().ok_or_else(|| ImportError::Empty { path: path.to_owned() })?;
             scene.cameras = defaults::cameras(lo, hi);
             scene.cameras.extend(file_cameras);
@@ -108,16 +120,19 @@ impl Kind {
     }
 }
 
-/// Triangles and materials of one OBJ or glTF file (no cameras, lights or settings in the
-/// scene), plus the file's own cameras. Errs when the file holds no triangles.
+/// Triangles and materials of one OBJ or glTF file, `bytes` read from `path` (no cameras, lights
+/// or settings in the scene), plus the file's own cameras. Errs when the file holds no
+/// triangles.
 pub(crate) fn load_mesh_file(
     path: &Path,
+    bytes: &[u8],
     kind: Kind,
     opts: &ImportOptions,
+    read: ReadFile<'_>,
 ) -> Result<(Scene, Vec<Camera>), ImportError> {
     let (scene, cameras) = match kind {
-        Kind::Obj => (obj::load(path, opts)?, Vec::new()),
-        Kind::Gltf => gltf::load(path, opts)?,
+        Kind::Obj => (obj::load_bytes(path, bytes, opts, read)?, Vec::new()),
+        Kind::Gltf => gltf::load_bytes(path, bytes, opts, read)?,
         Kind::Description => {
             return Err(ImportError::Description {
                 path: path.to_owned(),
