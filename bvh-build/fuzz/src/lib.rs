@@ -37,7 +37,7 @@ pub const MESH_GLTF: &str = r#"{"asset": {"version": "2.0"},
 "nodes": [{"mesh": 0}], "scenes": [{"nodes": [0]}], "scene": 0}"#;
 
 /// Scenes up to this many triangles are also compiled (cheap); larger ones are only checked.
-pub const MAX_COMPILED_TRIANGLES: usize = 4096;
+pub const MAX_COMPILED_TRIANGLES: usize = 1024;
 
 /// Where a fuzz input stops being the OBJ file and starts being its material library (served
 /// for every `mtllib` it names).
