@@ -666,7 +666,10 @@ fn description_errors_are_clear() {
         // Counts whose triangle count wraps past u64 to under the limit (it used to generate 2^63
         // triangles).
         ("[[object]]\ntype = \"sphere\"\nradius = 1\nsegments = 4294901791\nrings = 2147516402\n", "triangles"),
-        ("[[object]]\ntype = \"torus\"\nmajor = 2\nminor = 1\nsegments = 4294901791\nsides = 2147516401\n", "triangles"),
+        (
+            "[[object]]\ntype = \"torus\"\nmajor = 2\nminor = 1\nsegments = 4294901791\nsides = 2147516401\n",
+            "triangles",
+        ),
         ("[material.m]\nkr = 0.5\nkt = 0.5\n", "not both"),
         ("[material.m]\nkt = 1.5\n", "between 0 and 1"),
         (

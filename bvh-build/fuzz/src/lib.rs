@@ -16,7 +16,8 @@ pub const MESH_OBJ: &str = "mtllib stub.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\
 usemtl Glass\nf 1//1 2//1 3//1\nusemtl ToyCar\nf 3 2 4\n";
 
 /// The material library of [`MESH_OBJ`].
-pub const MESH_MTL: &str = "newmtl Glass\nKd 0.3 0.8 0.3\nd 0.5\nNi 1.5\nnewmtl ToyCar\nKd 0.8 0.1 0.1\nKs 0.5 0.5 0.5\nNs 100\n";
+pub const MESH_MTL: &str =
+    "newmtl Glass\nKd 0.3 0.8 0.3\nd 0.5\nNi 1.5\nnewmtl ToyCar\nKd 0.8 0.1 0.1\nKs 0.5 0.5 0.5\nNs 100\n";
 
 /// A two-triangle glTF (its buffer a `data:` URI) served for every `.gltf` and `.glb` a scene
 /// description places, materials named as in [`MESH_OBJ`].

@@ -485,8 +485,11 @@ impl<'a> Builder<'a> {
         let smooth = m.smooth_normals.unwrap_or(self.opts.smooth_normals);
         let key = (file.clone(), smooth);
         if !self.meshes.contains_key(&key) {
-            let bytes = (self.read)(&file)
-                .map_err(|source| ImportError::MissingMesh { path: self.path.to_owned(), mesh: file.clone(), source })?;
+            let bytes = (self.read)(&file).map_err(|source| ImportError::MissingMesh {
+                path: self.path.to_owned(),
+                mesh: file.clone(),
+                source,
+            })?;
             let opts = ImportOptions { smooth_normals: smooth };
             let (part, _cameras) = load_mesh_file(&file, &bytes, kind, &opts, self.read)?;
             self.scene.warnings.extend(part.warnings.iter().cloned());

@@ -105,11 +105,16 @@ fn load_buffers(
             }
             buffer::Source::Uri(uri) => {
                 let file = base.join(percent_decode(uri));
-                read(&file).map_err(|e| format!("buffer {i} refers to {}, which cannot be read ({e})", file.display()))?
+                read(&file)
+                    .map_err(|e| format!("buffer {i} refers to {}, which cannot be read ({e})", file.display()))?
             }
         };
         if data.len() < buffer.length() {
-            return Err(format!("buffer {i} holds {} bytes, fewer than the {} it declares", data.len(), buffer.length()));
+            return Err(format!(
+                "buffer {i} holds {} bytes, fewer than the {} it declares",
+                data.len(),
+                buffer.length()
+            ));
         }
         out.push(buffer::Data(data));
     }
