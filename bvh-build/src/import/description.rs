@@ -202,7 +202,8 @@ pub const SPHERE_SEGMENTS: u32 = 32;
 pub const SPHERE_RINGS: u32 = 16;
 pub const TORUS_SEGMENTS: u32 = 48;
 pub const TORUS_SIDES: u32 = 16;
-/// Most triangles one generated shape may have, so that a typo cannot exhaust memory.
+/// Most triangles the generated shapes of one description may have together, so that a typo
+/// (or a few dozen bytes of hostile input) cannot exhaust memory or take minutes.
 pub const MAX_SHAPE_TRIANGLES: u64 = 1 << 22;
 
 /// Reads a scene description and everything it references.
@@ -284,6 +285,8 @@ struct Builder<'a> {
     placed: Vec<Placed>,
     /// World bounds of all objects, in f64.
     world: Option<(DVec3, DVec3)>,
+    /// Triangles of the generated shapes so far, against [`MAX_SHAPE_TRIANGLES`].
+    generated: u64,
 }
 
 struct Placed {
@@ -315,6 +318,7 @@ impl<'a> Builder<'a> {
             meshes: HashMap::new(),
             placed: Vec::new(),
             world: None,
+            generated: 0,
         };
         for (name, m) in &desc.material {
             let mat = material(m).map_err(|msg| b.err(format!("material '{name}': {msg}")))?;
@@ -452,6 +456,7 @@ impl<'a> Builder<'a> {
                     None => self.intern(DEFAULT_MATERIAL_NAME, super::default_material()),
                 };
                 let n = mesh.triangle_count();
+                self.generated += n as u64;
                 self.scene.positions.extend(mesh.positions);
                 self.scene.normals.extend(mesh.normals);
                 self.scene.material_ids.extend(std::iter::repeat_n(id, n));
@@ -564,8 +569,12 @@ impl<'a> Builder<'a> {
         // Saturating: u32 counts can multiply past u64 and wrap to a small number.
         let limit = |factors: [u32; 2]| -> Result<(), String> {
             let n = factors.iter().fold(2u64, |n, &f| n.saturating_mul(u64::from(f)));
-            if n > MAX_SHAPE_TRIANGLES {
-                Err(format!("it would have {n} triangles, more than the {MAX_SHAPE_TRIANGLES} allowed"))
+            let left = MAX_SHAPE_TRIANGLES.saturating_sub(self.generated);
+            if n > left {
+                Err(format!(
+                    "it would have {n} triangles, more than the {left} left of the {MAX_SHAPE_TRIANGLES} that the \
+                     generated shapes of a description may have together"
+                ))
             } else {
                 Ok(())
             }
