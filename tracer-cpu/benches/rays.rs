@@ -9,8 +9,8 @@ mod rayset;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use rayset::{Engine, Kind, RaySet};
-use std::time::Duration;
 use render_spec::Intersect;
+use std::time::Duration;
 use tracer_cpu::{Method, Tracer, packet};
 
 fn primary_rays(c: &mut Criterion) {

@@ -23,11 +23,11 @@
 mod rayset;
 
 use rayset::{Engine, Kind, RaySet};
+use render_spec::Intersect;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use tracer_cpu::embree::{self, Flags};
-use render_spec::Intersect;
 use tracer_cpu::{Method, Tracer, packet};
 
 /// The tracers of the table, in column order.

@@ -133,9 +133,15 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
                 for (r, o) in rays.iter().zip(out.iter_mut()) {
                     let Some((ray, t_max)) = r else { continue };
                     *o = if any {
-                        if tracer.occluded_with(test, method, ray, *t_max, stack, &mut cost) { 0.0 } else { f32::INFINITY }
+                        if tracer.occluded_with(test, method, ray, *t_max, stack, &mut cost) {
+                            0.0
+                        } else {
+                            f32::INFINITY
+                        }
                     } else {
-                        tracer.closest_with(test, method, ray, 0.0, *t_max, stack, &mut cost).map_or(f32::INFINITY, |h| h.t)
+                        tracer
+                            .closest_with(test, method, ray, 0.0, *t_max, stack, &mut cost)
+                            .map_or(f32::INFINITY, |h| h.t)
                     };
                 }
             }
