@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # Issue 9 item 5: a million executions of each importer fuzz target (OBJ, glTF/GLB, scene
 # description), on a host without a Rust toolchain. Run from the repository root after
-# tools/scripts/fuzz-build.sh has filled .fuzzbin/ (binaries, seeds). About 2 to 5 minutes on
+# tools/scripts/fuzz-build.sh has filled .fuzzbin/ (binaries, seeds). About 3 to 9 minutes on
 # 16 cores.
 #
 # Each target gets several libFuzzer processes (the cores shared among the targets, below),
 # RUNS/jobs executions each (RUNS default 1,000,000), one shared corpus started from the seeds,
 # -timeout=30 s per input (a 4-million-triangle description takes 11 s under AddressSanitizer
-# on a loaded 2-core machine) and -rss_limit_mb=2048, and -max_total_time=MAX_TIME (default 480 s)
+# on a loaded 2-core machine) and -rss_limit_mb=2048, and -max_total_time=MAX_TIME (default 520 s)
 # so that the run ends within the device's 10 minutes even if a target is slower than expected.
 # Writes into $OUT (default out/fuzz): <target>/fuzz-<job>.log, artifacts/<target>/ (crash,
 # timeout and out-of-memory inputs), summary.txt with one line per target:
@@ -17,7 +17,7 @@
 set -uo pipefail
 OUT=${OUT:-out/fuzz}
 RUNS=${RUNS:-1000000}
-MAX_TIME=${MAX_TIME:-480}
+MAX_TIME=${MAX_TIME:-520}
 BIN=${FUZZBIN:-.fuzzbin}
 TARGETS=(obj gltf description)
 # Jobs per target: the description target runs about half as many inputs per second as the
