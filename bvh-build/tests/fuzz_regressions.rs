@@ -56,3 +56,22 @@ fn every_saved_crash_input_passes_the_fuzz_checks() {
         }
     }
 }
+
+/// The first crash the fuzzing found (`obj`, a `newmtl` name with NUL bytes): the scene file
+/// separates material names by NUL, so such a name failed the compiled file's validation. Each
+/// format can spell one (MTL bytes, a JSON `\u0000`, a quoted TOML key).
+#[test]
+fn material_names_with_a_nul_byte_are_refused_in_every_format() {
+    for ((target, import), ext) in TARGETS.into_iter().zip(["obj", "gltf", "toml"]) {
+        let file = fuzz_dir("regressions", target).join(format!("material-name-with-nul.{ext}"));
+        let data = std::fs::read(&file).unwrap();
+        match import(&data, &ImportOptions::default()) {
+            Ok(_) => panic!("{} was accepted", file.display()),
+            Err(e) => {
+                let msg = e.to_string();
+                assert!(msg.contains("holds a NUL byte, which a scene file cannot store"), "{target}: {msg}");
+                assert!(msg.contains("fuzz."), "{target}: the file is named: {msg}");
+            }
+        }
+    }
+}

@@ -61,6 +61,8 @@ pub enum ImportError {
     Empty { path: PathBuf },
     #[error("{}: {message}", path.display())]
     Defaults { path: PathBuf, message: String },
+    #[error("{}: the material name {name:?} holds a NUL byte, which a scene file cannot store", path.display())]
+    MaterialName { path: PathBuf, name: String },
 }
 
 /// Reads a scene, choosing the reader by extension (`.obj`, `.gltf`, `.glb`, `.toml`; any case).
@@ -82,8 +84,8 @@ pub type ReadFile<'a> = &'a dyn Fn(&Path) -> std::io::Result<Vec<u8>>;
 /// folder is where the files it refers to lie) and `read` reads those files, so that a caller
 /// can serve them from memory or refuse them (the fuzz targets in `bvh-build/fuzz` do).
 pub fn load_bytes(path: &Path, bytes: &[u8], opts: &ImportOptions, read: ReadFile<'_>) -> Result<Scene, ImportError> {
-    match Kind::of(path)? {
-        Kind::Description => description::load_bytes(path, bytes, opts, read),
+    let scene = match Kind::of(path)? {
+        Kind::Description => description::load_bytes(path, bytes, opts, read)?,
         kind => {
             let (mut scene, file_cameras) = load_mesh_file(path, bytes, kind, opts, read)?;
             let (lo, hi) = scene.bounds().ok_or_else(|| ImportError::Empty { path: path.to_owned() })?;
@@ -96,9 +98,14 @@ pub fn load_bytes(path: &Path, bytes: &[u8], opts: &ImportOptions, read: ReadFil
                 max_indirections: if scene.materials.iter().any(|m| m.kr > 0.0 || m.kt > 0.0) { 2 } else { 0 },
                 ..SceneSettings::default()
             };
-            Ok(scene)
+            scene
         }
+    };
+    // The scene file separates material names by NUL bytes (MTL and glTF names may hold one).
+    if let Some(name) = scene.material_names.iter().find(|n| n.contains('\0')) {
+        return Err(ImportError::MaterialName { path: path.to_owned(), name: name.clone() });
     }
+    Ok(scene)
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
