@@ -87,6 +87,7 @@ pub fn write(scene: &SceneFile) -> Result<Vec<u8>, FormatError> {
         ambient: scene.settings.ambient,
         background: scene.settings.background,
         origin: scene.origin,
+        scale_log2: scene.scale_log2,
         ..Header::default()
     };
     header.header_crc = header_crc(&header, bytemuck::cast_slice(&table));

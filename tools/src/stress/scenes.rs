@@ -329,6 +329,7 @@ fn hand_built(positions: Vec<[Vec3; 3]>, nodes: Vec<Node>, camera: Camera) -> Sc
         build: BuildParams { max_leaf_size: n, ..BuildParams::default() },
         settings: SceneSettings::default(),
         origin: [0.0; 3],
+        scale_log2: 0,
         vertices: positions.iter().flatten().map(|p| p.to_array()).collect(),
         triangles: (0..n).map(|i| IndexedTriangle { vertices: [3 * i, 3 * i + 1, 3 * i + 2], material: 0 }).collect(),
         normals: Vec::new(),
