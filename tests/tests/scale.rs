@@ -102,7 +102,9 @@ fn every_power_of_ten_renders_like_scale_one_on_the_cpu() {
             .rgb
             .iter()
             .zip(&image.rgb)
-            .filter(|(a, b)| a.iter().zip(b.iter()).any(|(x, y)| x.abs_diff(*y) > tools::stress::check::COLOUR_TOLERANCE))
+            .filter(|(a, b)| {
+                a.iter().zip(b.iter()).any(|(x, y)| x.abs_diff(*y) > tools::stress::check::COLOUR_TOLERANCE)
+            })
             .count();
         println!("10^{k}: stored unit 2^{}, largest channel difference {worst:?}, {off} pixels off", file.scale_log2);
         assert_eq!(off, 0, "10^{k}: {off} pixels differ from scale 1 by more than the tolerance");

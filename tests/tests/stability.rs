@@ -51,3 +51,45 @@ fn no_method_fails_in_silence_on_any_axis() {
     }
     assert!(gpu.validation_messages().is_empty());
 }
+
+/// The subnormal-direction axis tests what it says: the tilted mirror's normal has a subnormal x
+/// component, every primary ray of the one-pixel-wide frame has x = 0, most hit the
+/// mirror, and their reflection (the CPU's own `reflect`) has a subnormal, non-zero x component, and
+/// the f64 reference sees the lit wall in that reflection (not the black background).
+#[test]
+fn subnormal_mirror_reflects_rays_with_subnormal_components_onto_the_wall() {
+    use render_spec::CameraSpec;
+    for eps in [1e-39f32, 1e-44] {
+        let scene =
+            bvh_build::compile(&tools::stress::scenes::subnormal_mirror(eps), &Default::default(), Default::default())
+                .expect("compiles");
+        let shot = cases::shot(&scene, CameraSpec::from(&scene.cameras[0]), 1, 16);
+        let frame = shot.frame().expect("a valid camera");
+        // The mirror is flat: the tracers shade it with its geometric normal.
+        let mirror = (0..scene.triangles.len()).find(|&i| scene.triangles[i].material == 0).expect("a mirror");
+        let [a, b, c] = scene.positions(mirror).map(glam::Vec3::from);
+        let normal = (b - a).cross(c - a);
+        let normal = normal * (1.0 / normal.length());
+        assert!(normal.x.is_subnormal(), "{eps:e}: normal {normal:?}");
+        let reference = tracer_cpu::reference::render(&scene, &shot).expect("the reference renders").image;
+        let aov = tracer_cpu::render(&tracer_cpu::Tracer::new(&scene), &shot, tracer_cpu::Method::Ordered)
+            .expect("renders")
+            .aov
+            .expect("AOVs");
+        let mut reflected = 0;
+        for y in 0..16 {
+            let d = frame.direction(0, y);
+            assert_eq!(d.x, 0.0, "{eps:e}: row {y}: {d:?}");
+            // The upper rows see the wall itself.
+            if aov.prim[y as usize] >= 2 {
+                continue;
+            }
+            reflected += 1;
+            let r = tracer_cpu::shade::reflect(d, normal);
+            assert!(r.x.is_subnormal(), "{eps:e}: row {y}: reflection {r:?}");
+            let rgb = reference.rgb[y as usize];
+            assert!(rgb.iter().any(|c| *c > 40), "{eps:e}: row {y}: the reflection shows {rgb:?}, not the wall");
+        }
+        assert!(reflected >= 8, "{eps:e}: only {reflected} of 16 rows see the mirror");
+    }
+}
