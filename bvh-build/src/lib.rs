@@ -15,9 +15,11 @@ pub mod peers;
 pub mod scene;
 pub mod sweep;
 pub mod unit;
+mod weld;
 
 pub use compile::{
-    Layouts, MAX_BINS, build_tree, build_tree_with_progress, check_params, compile, compile_with_progress,
+    Layouts, MAX_BINS, build_tree, build_tree_with_progress, check_params, compile, compile_for_writing,
+    compile_with_progress,
 };
 pub use import::{ImportError, ImportOptions};
 pub use scene::Scene;

@@ -21,7 +21,7 @@ pub use types::{
     BuildParams, CAMERA_NAME_LEN, Camera, FLAT, IndexedTriangle, Light, Material, Node, SceneSettings, Strategy,
     Triangle,
 };
-pub use write::{write, write_file};
+pub use write::{WriteError, write, write_file, write_to};
 
 /// Largest magnitude of [`SceneFile::scale_log2`] a file may hold: a rescaled f32 scene spans at
 /// most 2^277 (subnormal to largest), so no compiler needs more.
