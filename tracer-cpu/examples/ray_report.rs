@@ -166,8 +166,8 @@ fn main() {
         scene_lines.push(format!("{name} ({n_tris} triangles, {})", path.display()));
         let tracer = Tracer::new(&scene);
         let engines: [Option<Engine>; ENGINES.len()] = [
-            Some(Engine::Scalar(&tracer, Method::Ordered)),
-            scene.escape.is_some().then_some(Engine::Scalar(&tracer, Method::Stackless)),
+            tracer.walk(Method::Ordered).ok().map(Engine::Scalar),
+            tracer.walk(Method::Stackless).ok().map(Engine::Scalar),
             packet::available().then_some(Engine::Packet(&tracer)),
             Some(Engine::Embree1(&em)),
             Some(Engine::Embree1(&em_robust)),
