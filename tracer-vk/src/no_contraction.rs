@@ -236,6 +236,7 @@ mod tests {
                     exact: true,
                     intersect: render_spec::Intersect::Watertight,
                     fixed_offset: false,
+                    split: crate::kernels::Split::NONE,
                 };
                 // The exact kernel's text as naga writes it, then with the pass.
                 let source = kernels::source(stage, &spec);
@@ -306,6 +307,7 @@ mod tests {
             exact: true,
             intersect: render_spec::Intersect::Watertight,
             fixed_offset: false,
+            split: crate::kernels::Split::NONE,
         };
         let words = kernels::compile(Stage::Bounce, &spec).expect("the kernel compiles");
         let out = rspirv::dr::load_words(preserve_denormals(&words, "t").unwrap()).unwrap();
