@@ -9,6 +9,7 @@ mod rayset;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use rayset::{Engine, Kind, RaySet};
+use render_spec::Intersect;
 use std::time::Duration;
 use tracer_cpu::{Method, Tracer, packet};
 
@@ -21,8 +22,10 @@ fn primary_rays(c: &mut Criterion) {
     let embree = tracer_cpu::embree::Scene::new(&scene.leaf_triangles(), tracer_cpu::embree::Flags::Default)
         .expect("Embree builds the bunny");
 
-    let mut engines =
-        vec![("ours-ordered", Engine::Scalar(tracer.walk(Method::Ordered).expect("the bunny has both layouts")))];
+    let mut engines = vec![(
+        "ours-ordered",
+        Engine::Scalar(tracer.walk(Method::Ordered).expect("the bunny has both layouts"), Intersect::Watertight),
+    )];
     if packet::available() {
         engines.push(("ours-packet", Engine::Packet(&tracer)));
     }
