@@ -8,7 +8,7 @@
 //! pixel whose stage never finished, a traversal that gave up on a ray) refuses the frame: a wrong
 //! image is never returned in silence.
 
-use crate::device::{Buffer, Gpu, Pipeline};
+use crate::device::{Buffer, DeviceKind, Gpu, Pipeline};
 use crate::error::VkError;
 use crate::kernels::{self, Method, Specialisation, Split, Stage, counters};
 use crate::tiles::{self, Tile};
@@ -77,6 +77,10 @@ pub enum VkRenderError {
         "the scene's {what} need {bytes} bytes in one storage buffer, more than this device's {limit_name} of {limit} bytes; it takes scenes of up to {fits} {what}"
     )]
     SceneTooLarge { what: &'static str, bytes: u64, limit_name: &'static str, limit: u64, fits: u64 },
+    #[error(
+        "LST needs a stack of {depth} entries for this tree, more than the {limit} that {device} compiles in reasonable time (a deeper stack takes it minutes); use stackless"
+    )]
+    PrivateStack { depth: u32, limit: u32, device: String },
     #[error(
         "the scene's {what} need {bytes} bytes, more than {chunks} storage buffers of this device's {limit_name} of {limit} bytes each; it takes scenes of up to {fits} {what}"
     )]
@@ -301,6 +305,13 @@ impl<'g> Renderer<'g> {
         }
         if method == Method::SstSubgroup && !info.supports_subgroup_ops {
             return Err(VkRenderError::NoSubgroups(info.name.clone()));
+        }
+        if method == Method::Lst && info.kind == DeviceKind::Cpu && spec.stack_size > CPU_DEVICE_STACK_LIMIT {
+            return Err(VkRenderError::PrivateStack {
+                depth: spec.stack_size,
+                limit: CPU_DEVICE_STACK_LIMIT,
+                device: info.name.clone(),
+            });
         }
         if matches!(method, Method::Sst | Method::SstSubgroup) {
             let needed = kernels::sst_shared_bytes(&spec);
@@ -706,6 +717,14 @@ pub fn upload_bytes(scene: &SceneFile, method: Method) -> u64 {
     .iter()
     .sum::<usize>() as u64
 }
+
+/// The deepest LST stack a CPU Vulkan device (lavapipe) is asked to compile. LST keeps its stack
+/// in two private arrays of the tree's depth, and lavapipe compiles a kernel at its first dispatch
+/// (inside the submission, so a slow compile reads as a hang): a first frame of a 400-deep chain
+/// took 0.9 s including the compile, 700 deep 71 s, 1000 deep more than the 120 s timeout (600 s
+/// in docs/stability.md), while later frames take milliseconds. The H100 renders the 1000-deep
+/// chain at once. Measured with `tools::stress::scenes::chain` on this machine's lavapipe.
+pub const CPU_DEVICE_STACK_LIMIT: u32 = 512;
 
 /// `data` in buffers of `per_chunk` records each (at least one buffer, for an empty array too),
 /// labelled with the array's name and, after the first, the chunk's number.
