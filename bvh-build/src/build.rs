@@ -448,13 +448,8 @@ mod tests {
 
     /// A deterministic pseudo-random soup of small triangles in a 10-unit cube.
     fn soup(n: usize) -> Vec<[Vec3; 3]> {
-        let mut seed = 12345u32;
-        let mut rnd = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 17;
-            seed ^= seed << 5;
-            seed as f32 / u32::MAX as f32
-        };
+        let mut rng = ::tests::Rng(12345);
+        let mut rnd = || rng.unit();
         (0..n)
             .map(|_| {
                 let c = Vec3::new(rnd(), rnd(), rnd()) * 10.0;

@@ -148,13 +148,8 @@ mod tests {
 
     /// Small triangles scattered on a sphere-ish shell plus a few large ones, deterministic.
     fn triangles(n: usize) -> Vec<[Vec3; 3]> {
-        let mut s = 0x9e37_79b9u32;
-        let mut r = move || {
-            s ^= s << 13;
-            s ^= s >> 17;
-            s ^= s << 5;
-            s as f32 / u32::MAX as f32
-        };
+        let mut rng = ::tests::Rng(0x9e37_79b9);
+        let mut r = move || rng.unit();
         (0..n)
             .map(|i| {
                 let c = Vec3::new(r(), r(), r()) * 2.0 - 1.0;

@@ -24,6 +24,27 @@ impl Rng {
         (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
     }
 
+    /// A float in `[-1, 1)`.
+    pub fn signed(&mut self) -> f32 {
+        self.unit() * 2.0 - 1.0
+    }
+
+    /// A point in `[-1, 1)^3` (to build a vector of any maths library from).
+    pub fn signed3(&mut self) -> [f32; 3] {
+        [self.signed(), self.signed(), self.signed()]
+    }
+
+    /// A direction uniform on the unit sphere, by rejection from the cube.
+    pub fn direction(&mut self) -> [f32; 3] {
+        loop {
+            let v = self.signed3();
+            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            if l > 1e-3 && l <= 1.0 {
+                return v.map(|x| x / l);
+            }
+        }
+    }
+
     /// `n` random bytes (the top byte of each number).
     pub fn bytes(&mut self, n: usize) -> Vec<u8> {
         (0..n).map(|_| (self.next_u64() >> 56) as u8).collect()

@@ -302,7 +302,8 @@ fn count_leaks(
         }
         c.rays += 1;
         for method in [Method::Ordered, Method::Stackless] {
-            let hit = tracer.closest(method, &ray, 0.0, f32::INFINITY, &mut stack, &mut cost);
+            let walk = tracer.walk(method).expect("the file has both layouts");
+            let hit = walk.closest(&ray, 0.0, f32::INFINITY, &mut stack, &mut cost);
             // Farther than the target by more than rounding: the ray went through.
             if hit.is_none_or(|h| h.t > expected * 1.001) {
                 c.traced += 1;
@@ -417,7 +418,14 @@ fn leaks_from(scene: &SceneFile, tracer: &Tracer<'_>, t: &Targets, eye: Vec3) ->
             let mut scalar = Vec::with_capacity(batch.len());
             for (i, (ray, expected, edge, fan)) in batch.iter().enumerate() {
                 p.set(i, ray, f32::INFINITY);
-                let hit = tracer.closest_with(test, Method::Ordered, ray, 0.0, f32::INFINITY, stack, &mut cost);
+                let hit = tracer.walk(Method::Ordered).expect("both layouts").closest_with(
+                    test,
+                    ray,
+                    0.0,
+                    f32::INFINITY,
+                    stack,
+                    &mut cost,
+                );
                 scalar.push(hit);
                 if hit.is_none_or(|h| !fan.contains(&(h.tri as usize)) && h.t > expected * 1.001) {
                     *(if *edge { &mut leaks.edges } else { &mut leaks.vertices }) += 1;

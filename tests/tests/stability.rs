@@ -52,6 +52,32 @@ fn no_method_fails_in_silence_on_any_axis() {
     assert!(gpu.validation_messages().is_empty());
 }
 
+/// A 1000-deep chain gave no LST frame on lavapipe (docs/stability.md, finding 5): lavapipe
+/// compiles the kernel's 1000-entry private stack for minutes inside the first submission. LST
+/// now refuses a stack deeper than `CPU_DEVICE_STACK_LIMIT` on CPU devices before the first frame,
+/// naming the depth; stackless renders the same chain, and LST still takes the deepest allowed.
+#[test]
+fn lst_refuses_a_stack_lavapipe_cannot_compile_before_the_first_frame() {
+    use tracer_vk::kernels::Method;
+    use tracer_vk::render::{CPU_DEVICE_STACK_LIMIT, Renderer, VkRenderError};
+    let gpu = common::gpu();
+    let deep = tools::stress::scenes::chain(1001);
+    let depth = deep.stats().max_depth;
+    let lst = Renderer::new(&gpu, &deep, Method::Lst, (8, 8));
+    if gpu.info().kind == tracer_vk::DeviceKind::Cpu {
+        let e = lst.err().expect("a 1000-deep stack is refused on a CPU device");
+        assert!(matches!(&e, VkRenderError::PrivateStack { depth: d, .. } if *d == depth), "{e:?}");
+        let text = e.to_string();
+        assert!(text.contains(&depth.to_string()) && text.contains("stackless") && !text.contains('\n'), "{text}");
+        let allowed = tools::stress::scenes::chain(CPU_DEVICE_STACK_LIMIT);
+        assert!(allowed.stats().max_depth <= CPU_DEVICE_STACK_LIMIT);
+        assert!(Renderer::new(&gpu, &allowed, Method::Lst, (8, 8)).is_ok());
+    } else {
+        assert!(lst.is_ok(), "only CPU devices limit LST's stack");
+    }
+    assert!(Renderer::new(&gpu, &deep, Method::Stackless, (8, 8)).is_ok());
+}
+
 /// The subnormal-direction axis tests what it says: the tilted mirror's normal has a subnormal x
 /// component, every primary ray of the one-pixel-wide frame has x = 0, most hit the
 /// mirror, and their reflection (the CPU's own `reflect`) has a subnormal, non-zero x component, and

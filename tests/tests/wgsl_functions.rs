@@ -494,6 +494,7 @@ fn functions_equal_their_rust_twins(exact: bool, intersect: Intersect) {
         exact,
         intersect,
         fixed_offset: false,
+        split: tracer_vk::kernels::Split::NONE,
     };
     let source = format!("{}\n{HARNESS}", kernels::prelude(&spec));
     let mut spirv = tracer_vk::translate(&source, "function harness", &[]).expect("the harness compiles");

@@ -22,7 +22,10 @@ fn primary_rays(c: &mut Criterion) {
     let embree = tracer_cpu::embree::Scene::new(&scene.leaf_triangles(), tracer_cpu::embree::Flags::Default)
         .expect("Embree builds the bunny");
 
-    let mut engines = vec![("ours-ordered", Engine::Scalar(&tracer, Method::Ordered, Intersect::Watertight))];
+    let mut engines = vec![(
+        "ours-ordered",
+        Engine::Scalar(tracer.walk(Method::Ordered).expect("the bunny has both layouts"), Intersect::Watertight),
+    )];
     if packet::available() {
         engines.push(("ours-packet", Engine::Packet(&tracer)));
     }

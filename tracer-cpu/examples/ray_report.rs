@@ -170,13 +170,13 @@ fn main() {
         scene_lines.push(format!("{name} ({n_tris} triangles, {})", path.display()));
         let tracer = Tracer::new(&scene);
         let engines: [Option<Engine>; ENGINES.len()] = [
-            Some(Engine::Scalar(&tracer, Method::Ordered, Intersect::Watertight)),
-            scene.escape.is_some().then_some(Engine::Scalar(&tracer, Method::Stackless, Intersect::Watertight)),
+            tracer.walk(Method::Ordered).ok().map(|w| Engine::Scalar(w, Intersect::Watertight)),
+            tracer.walk(Method::Stackless).ok().map(|w| Engine::Scalar(w, Intersect::Watertight)),
             packet::available().then_some(Engine::Packet(&tracer)),
             Some(Engine::Embree1(&em)),
             Some(Engine::Embree1(&em_robust)),
             Some(Engine::Embree8(&em)),
-            Some(Engine::Scalar(&tracer, Method::Ordered, Intersect::MollerTrumbore)),
+            tracer.walk(Method::Ordered).ok().map(|w| Engine::Scalar(w, Intersect::MollerTrumbore)),
         ];
 
         for &(w, h) in &opts.sizes {

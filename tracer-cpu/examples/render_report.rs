@@ -166,9 +166,10 @@ impl<T> Drop for Recorder<'_, T> {
 
 /// The renderer's own way of tracing for `method` (what `render` picks).
 fn lanes_for<'a>(tracer: &'a Tracer<'a>, method: Method) -> Either<Packets<'a>, OneByOne<'a>> {
+    let walk = tracer.walk(method).expect("the scene has the layout the method reads");
     match method {
-        Method::Packet => Either::A(Packets::new(tracer)),
-        m => Either::B(OneByOne::new(tracer, m)),
+        Method::Packet => Either::A(Packets::new(walk)),
+        _ => Either::B(OneByOne::new(walk)),
     }
 }
 
@@ -279,9 +280,10 @@ fn main() {
                         pool.install(|| render(&tracer, &settings, method)).expect("renders");
                     };
                     let mut b = || {
+                        let walk = tracer.walk(method).expect("the scene has the layout the method reads");
                         pool.install(|| match method {
-                            Method::Packet => replay(|| Packets::new(&tracer), &calls),
-                            m => replay(|| OneByOne::new(&tracer, m), &calls),
+                            Method::Packet => replay(|| Packets::new(walk), &calls),
+                            _ => replay(|| OneByOne::new(walk), &calls),
                         })
                     };
                     let mut c = || {

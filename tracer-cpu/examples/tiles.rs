@@ -55,11 +55,12 @@ fn main() {
             accuracy: render_spec::Accuracy::default(),
         };
         let frame = |tiles: Tiles| {
+            let walk = tracer.walk(Method::Auto).expect("the scene has a layout");
             pool.install(|| match Method::Auto.resolve(&scene) {
                 Method::Packet => {
-                    render_with(&tracer, &settings, Method::Packet, || Packets::new(&tracer), tiles, &|_| {})
+                    render_with(&tracer, &settings, Method::Packet, || Packets::new(walk), tiles, &|_| {})
                 }
-                m => render_with(&tracer, &settings, m, || OneByOne::new(&tracer, m), tiles, &|_| {}),
+                m => render_with(&tracer, &settings, m, || OneByOne::new(walk), tiles, &|_| {}),
             })
             .expect("renders");
         };

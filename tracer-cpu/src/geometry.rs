@@ -268,15 +268,10 @@ mod tests {
         assert!(intersect(&t, &Ray::new(Vec3::new(0.2, 0.2, -1.0), up), 0.0, f32::INFINITY).is_some());
     }
 
-    /// A tiny deterministic generator (xorshift) for test inputs.
+    /// Deterministic test inputs in `[-1, 1)`.
     fn randoms(seed: u64) -> impl FnMut() -> f32 {
-        let mut x = seed;
-        move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        }
+        let mut rng = ::tests::Rng(seed);
+        move || rng.signed()
     }
 
     #[test]

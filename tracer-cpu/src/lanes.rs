@@ -3,10 +3,9 @@
 //! of one indirection) to a [`TraceLanes`], which traces them as an AVX2 packet or one by one.
 //! Every way finds the same hits (bit for bit), so the choice changes speed and the cost AOV only.
 
-use crate::Method;
 use crate::geometry::{MollerTrumbore, TriangleTest, Watertight};
 use crate::packet::{self, Entry, LANES, Rays, Results};
-use crate::render::Tracer;
+use crate::render::Walk;
 use crate::traverse::Stack;
 use render_spec::Intersect;
 
@@ -18,16 +17,16 @@ pub trait TraceLanes {
     fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results;
 }
 
-/// One ray at a time with a scalar traversal ([`Method::Ordered`] or [`Method::Stackless`]).
+/// One ray at a time with a scalar traversal (ordered or stackless, as
+/// [`Tracer::walk`](crate::Tracer::walk) chose it).
 pub struct OneByOne<'a> {
-    tracer: &'a Tracer<'a>,
-    method: Method,
+    walk: Walk<'a>,
     stack: Stack,
 }
 
 impl<'a> OneByOne<'a> {
-    pub fn new(tracer: &'a Tracer<'a>, method: Method) -> Self {
-        Self { tracer, method, stack: Stack::default() }
+    pub fn new(walk: Walk<'a>) -> Self {
+        Self { walk, stack: Stack::default() }
     }
 
     fn trace<const ANY: bool, T: TriangleTest>(&mut self, rays: &Rays) -> Results {
@@ -37,8 +36,7 @@ impl<'a> OneByOne<'a> {
                 continue;
             }
             let ray = rays.ray(i);
-            let hit =
-                self.tracer.trace::<ANY, T>(self.method, &ray, 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
+            let hit = self.walk.trace::<ANY, T>(&ray, 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
             out.set(i, hit);
         }
         out
@@ -65,7 +63,6 @@ impl TraceLanes for OneByOne<'_> {
 /// are left after some bounces) goes one ray at a time with ordered traversal, which then costs
 /// less than walking the tree for a mostly empty packet.
 pub struct Packets<'a> {
-    tracer: &'a Tracer<'a>,
     stack: Vec<Entry>,
     single: OneByOne<'a>,
 }
@@ -74,17 +71,21 @@ pub struct Packets<'a> {
 const SPARSE: usize = 2;
 
 impl<'a> Packets<'a> {
-    /// Only where [`packet::available`] and the scene has the child-pair layout (the renderer checks).
-    pub fn new(tracer: &'a Tracer<'a>) -> Self {
-        Self { tracer, stack: Vec::with_capacity(128), single: OneByOne::new(tracer, Method::Ordered) }
+    /// Packets over the child-pair layout of `walk` (from `Tracer::walk(Method::Packet)`), only
+    /// where [`packet::available`]. Given a stackless walk, every ray goes one by one on it: packets
+    /// exist for the child-pair layout only, and the caller chose that walk.
+    pub fn new(walk: Walk<'a>) -> Self {
+        Self { stack: Vec::with_capacity(128), single: OneByOne::new(walk) }
     }
 
     fn trace<const ANY: bool, T: TriangleTest>(&mut self, rays: &Rays) -> Results {
-        if rays.count() <= SPARSE {
-            return self.single.trace::<ANY, T>(rays);
+        let walk = self.single.walk;
+        match walk.child_pair() {
+            Some(nodes) if rays.count() > SPARSE => {
+                packet::trace::<ANY, T>(nodes, walk.tracer().triangles(), rays, &mut self.stack)
+            }
+            _ => self.single.trace::<ANY, T>(rays),
         }
-        let nodes = self.tracer.scene.child_pair.as_deref().expect("the renderer checked the layout");
-        packet::trace::<ANY, T>(nodes, self.tracer.triangles(), rays, &mut self.stack)
     }
 
     fn trace_with<const ANY: bool>(&mut self, rays: &Rays, test: Intersect) -> Results {

@@ -23,7 +23,7 @@ pub mod whitted;
 pub mod wide;
 
 pub use geometry::{Cost, Hit, Ray};
-pub use render::{Tracer, render, render_with_progress};
+pub use render::{Tracer, Walk, render, render_with_progress};
 
 /// How rays find their closest hit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -37,38 +37,72 @@ impl<'a> Tracer<'a> {
         &self.tris
     }
 
-    fn layout_for(&self, method: Method) -> Result<(), RenderError> {
-        match method {
-            Method::Stackless if self.escape.is_none() => {
-                Err(RenderError::MissingLayout { method: method.name(), layout: "escape-pointer" })
+    /// The scalar traversal `method` names, bound to the layout it reads: the child-pair layout
+    /// for [`Method::Ordered`] and [`Method::Packet`], the escape-pointer layout for
+    /// [`Method::Stackless`], and for [`Method::Auto`] what [`Method::resolve`] picks. A method
+    /// whose layout the file lacks is refused here ([`RenderError::MissingLayout`]), never walked
+    /// on the other layout: the caller decides, once, which traversal its rays take.
+    pub fn walk(&self, method: Method) -> Result<Walk<'_>, RenderError> {
+        let resolved = method.resolve(self.scene);
+        let missing = |layout| RenderError::MissingLayout { method: resolved.name(), layout };
+        let layout = match resolved {
+            Method::Stackless => Layout::Escape(self.escape.ok_or_else(|| missing("escape-pointer"))?),
+            // `resolve` never answers Auto; it is listed so that the match stays exhaustive.
+            Method::Ordered | Method::Packet | Method::Auto => {
+                Layout::ChildPair(self.child_pair.ok_or_else(|| missing("child-pair"))?)
             }
-            Method::Ordered | Method::Packet if self.child_pair.is_none() => {
-                Err(RenderError::MissingLayout { method: method.name(), layout: "child-pair" })
-            }
-            _ => Ok(()),
+        };
+        Ok(Walk { tracer: self, layout })
+    }
+}
+
+/// The node layout a [`Walk`] reads.
+#[derive(Clone, Copy)]
+enum Layout<'a> {
+    ChildPair(&'a [Node]),
+    Escape(&'a [Node]),
+}
+
+/// A scalar traversal bound to its tracer and to the layout it walks, made by [`Tracer::walk`]
+/// (which refuses a method whose layout the file lacks).
+#[derive(Clone, Copy)]
+pub struct Walk<'t> {
+    tracer: &'t Tracer<'t>,
+    layout: Layout<'t>,
+}
+
+impl<'t> Walk<'t> {
+    pub fn tracer(&self) -> &'t Tracer<'t> {
+        self.tracer
+    }
+
+    /// The traversal this walk runs: [`Method::Ordered`] on the child-pair layout or
+    /// [`Method::Stackless`] on the escape-pointer layout.
+    pub fn method(&self) -> Method {
+        match self.layout {
+            Layout::ChildPair(_) => Method::Ordered,
+            Layout::Escape(_) => Method::Stackless,
+        }
+    }
+
+    /// The child-pair nodes, where this walk reads them (what packets trace).
+    pub(crate) fn child_pair(&self) -> Option<&'t [Node]> {
+        match self.layout {
+            Layout::ChildPair(nodes) => Some(nodes),
+            Layout::Escape(_) => None,
         }
     }
 
     /// Closest hit in `(t_min, t_max]` with the default (watertight) triangle test; adds the work
     /// done to `cost`.
-    pub fn closest(
-        &self,
-        method: Method,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        stack: &mut Stack,
-        cost: &mut Cost,
-    ) -> Option<Hit> {
-        self.closest_with(Intersect::Watertight, method, ray, t_min, t_max, stack, cost)
+    pub fn closest(&self, ray: &Ray, t_min: f32, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> Option<Hit> {
+        self.closest_with(Intersect::Watertight, ray, t_min, t_max, stack, cost)
     }
 
     /// [`Self::closest`] with the triangle test `test`.
-    #[allow(clippy::too_many_arguments)]
     pub fn closest_with(
         &self,
         test: Intersect,
-        method: Method,
         ray: &Ray,
         t_min: f32,
         t_max: f32,
@@ -76,51 +110,38 @@ impl<'a> Tracer<'a> {
         cost: &mut Cost,
     ) -> Option<Hit> {
         match test {
-            Intersect::Watertight => self.trace::<false, Watertight>(method, ray, t_min, t_max, stack, cost),
-            Intersect::MollerTrumbore => self.trace::<false, MollerTrumbore>(method, ray, t_min, t_max, stack, cost),
+            Intersect::Watertight => self.trace::<false, Watertight>(ray, t_min, t_max, stack, cost),
+            Intersect::MollerTrumbore => self.trace::<false, MollerTrumbore>(ray, t_min, t_max, stack, cost),
         }
     }
 
     /// Whether anything lies in `(0, t_max]` along the ray, with the default (watertight) test.
-    pub fn occluded(&self, method: Method, ray: &Ray, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> bool {
-        self.occluded_with(Intersect::Watertight, method, ray, t_max, stack, cost)
+    pub fn occluded(&self, ray: &Ray, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> bool {
+        self.occluded_with(Intersect::Watertight, ray, t_max, stack, cost)
     }
 
     /// [`Self::occluded`] with the triangle test `test`.
-    pub fn occluded_with(
-        &self,
-        test: Intersect,
-        method: Method,
-        ray: &Ray,
-        t_max: f32,
-        stack: &mut Stack,
-        cost: &mut Cost,
-    ) -> bool {
+    pub fn occluded_with(&self, test: Intersect, ray: &Ray, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> bool {
         match test {
-            Intersect::Watertight => self.trace::<true, Watertight>(method, ray, 0.0, t_max, stack, cost),
-            Intersect::MollerTrumbore => self.trace::<true, MollerTrumbore>(method, ray, 0.0, t_max, stack, cost),
+            Intersect::Watertight => self.trace::<true, Watertight>(ray, 0.0, t_max, stack, cost),
+            Intersect::MollerTrumbore => self.trace::<true, MollerTrumbore>(ray, 0.0, t_max, stack, cost),
         }
         .is_some()
     }
 
-    /// The scalar traversal `method` names, on the layout it reads (or whichever is present), with
-    /// the triangle test `T`.
+    /// This walk's traversal with the triangle test `T`.
     pub(crate) fn trace<const ANY: bool, T: TriangleTest>(
         &self,
-        method: Method,
         ray: &Ray,
         t_min: f32,
         t_max: f32,
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Hit> {
-        let tris = &self.tris;
-        match (method, self.child_pair, self.escape) {
-            (Method::Stackless, _, Some(esc)) | (_, None, Some(esc)) => {
-                traverse::escape::<ANY, T>(esc, tris, ray, t_min, t_max, cost)
-            }
-            (_, Some(cp), _) => traverse::child_pair::<ANY, T>(cp, tris, ray, t_min, t_max, stack, cost),
-            (_, None, None) => None,
+        let tris = &self.tracer.tris;
+        match self.layout {
+            Layout::Escape(nodes) => traverse::escape::<ANY, T>(nodes, tris, ray, t_min, t_max, cost),
+            Layout::ChildPair(nodes) => traverse::child_pair::<ANY, T>(nodes, tris, ray, t_min, t_max, stack, cost),
         }
     }
 }
@@ -166,9 +187,10 @@ pub fn render_with_progress(
     progress: &(dyn Fn(u32) + Sync),
 ) -> Result<Image, RenderError> {
     let tiles = Tiles::default();
+    let walk = tracer.walk(method)?;
     match method.resolve(tracer.scene) {
-        Method::Packet => render_with(tracer, settings, Method::Packet, || Packets::new(tracer), tiles, progress),
-        m => render_with(tracer, settings, m, || OneByOne::new(tracer, m), tiles, progress),
+        Method::Packet => render_with(tracer, settings, Method::Packet, || Packets::new(walk), tiles, progress),
+        m => render_with(tracer, settings, m, || OneByOne::new(walk), tiles, progress),
     }
 }
 
@@ -232,7 +254,7 @@ fn render_in<T: TraceLanes>(
 ) -> Result<Image, RenderError> {
     let tiles = tiles.blocks();
     let frame = settings.frame()?;
-    tracer.layout_for(method.resolve(tracer.scene))?;
+    tracer.walk(method)?;
     let (w, h) = (settings.width as usize, settings.height as usize);
     let sh = Shading::new(tracer.scene, settings);
     let samples: Vec<(f32, f32)> = render_spec::accuracy::sample_positions(settings.accuracy.spp).collect();
@@ -442,11 +464,12 @@ mod tests {
                     accuracy: render_spec::Accuracy::default(),
                 };
                 let tiles = Tiles { rows: 6, columns: 12 };
+                let walk = tracer.walk(method).unwrap();
                 let image = |avx| match method.resolve(&scene) {
                     Method::Packet => {
-                        render_in(&tracer, &settings, Method::Packet, || Packets::new(&tracer), tiles, &|_| {}, avx)
+                        render_in(&tracer, &settings, Method::Packet, || Packets::new(walk), tiles, &|_| {}, avx)
                     }
-                    m => render_in(&tracer, &settings, m, || OneByOne::new(&tracer, m), tiles, &|_| {}, avx),
+                    m => render_in(&tracer, &settings, m, || OneByOne::new(walk), tiles, &|_| {}, avx),
                 };
                 let (a, b) = (image(true).unwrap(), image(false).unwrap());
                 assert_eq!(a.rgb, b.rgb, "{mode:?} {method:?}");
@@ -499,7 +522,7 @@ mod tests {
             let one = Settings { accuracy: Default::default(), ..settings.clone() };
             let frame = settings.frame().unwrap();
             let sh = Shading::new(&scene, &settings);
-            let mut lanes = OneByOne::new(&tracer, Method::Ordered);
+            let mut lanes = OneByOne::new(tracer.walk(Method::Ordered).unwrap());
             let mut want = Vec::new();
             for y in 0..h {
                 for x in 0..w {
@@ -514,26 +537,19 @@ mod tests {
                 }
             }
             for method in [Method::Packet, Method::Ordered, Method::Stackless] {
+                let walk = tracer.walk(method).unwrap();
                 for avx in [true, false] {
                     let image = match method.resolve(&scene) {
                         Method::Packet => render_in(
                             &tracer,
                             &settings,
                             Method::Packet,
-                            || Packets::new(&tracer),
+                            || Packets::new(walk),
                             Tiles::default(),
                             &|_| {},
                             avx,
                         ),
-                        m => render_in(
-                            &tracer,
-                            &settings,
-                            m,
-                            || OneByOne::new(&tracer, m),
-                            Tiles::default(),
-                            &|_| {},
-                            avx,
-                        ),
+                        m => render_in(&tracer, &settings, m, || OneByOne::new(walk), Tiles::default(), &|_| {}, avx),
                     }
                     .unwrap();
                     assert_eq!(image.rgb, want, "{spp} spp, {method:?}, avx {avx}");
@@ -546,14 +562,8 @@ mod tests {
                     let first =
                         frame.sample_direction(0, 0, render_spec::accuracy::sample_positions(spp).next().unwrap());
                     let mut stack = Stack::default();
-                    let hit = tracer.closest(
-                        method,
-                        &Ray::new(frame.eye, first),
-                        0.0,
-                        f32::INFINITY,
-                        &mut stack,
-                        &mut Cost::default(),
-                    );
+                    let hit =
+                        walk.closest(&Ray::new(frame.eye, first), 0.0, f32::INFINITY, &mut stack, &mut Cost::default());
                     assert_eq!(a.t[0], hit.map_or(f32::INFINITY, |h| h.t));
                     assert!(a.nodes.iter().sum::<u32>() > b.nodes.iter().sum::<u32>() * (spp - 1));
                 }

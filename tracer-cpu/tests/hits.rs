@@ -72,8 +72,8 @@ fn fast_hits<T: TriangleTest>(
     for &(o, d) in chunk {
         let ray = Ray::new(o, d);
         let mut c = Cost::default();
-        let a = tracer.closest_with(T::KIND, Method::Ordered, &ray, 0.0, f32::INFINITY, stack, &mut c);
-        let b = tracer.closest_with(T::KIND, Method::Stackless, &ray, 0.0, f32::INFINITY, stack, &mut c);
+        let a = tracer.walk(Method::Ordered).unwrap().closest_with(T::KIND, &ray, 0.0, f32::INFINITY, stack, &mut c);
+        let b = tracer.walk(Method::Stackless).unwrap().closest_with(T::KIND, &ray, 0.0, f32::INFINITY, stack, &mut c);
         assert_eq!(a, b, "{name}: ordered and stackless disagree on origin {o:?} dir {d:?}");
         ordered.push(a);
     }
@@ -176,8 +176,8 @@ fn rays_through_shared_vertices_break_ties_the_same_way_on_every_path() {
         let d = (v - o).normalize();
         let ray = Ray::new(o, d);
         let mut c = Cost::default();
-        let a = tracer.closest(Method::Ordered, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
-        let b = tracer.closest(Method::Stackless, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
+        let a = tracer.walk(Method::Ordered).unwrap().closest(&ray, 0.0, f32::INFINITY, &mut stack, &mut c);
+        let b = tracer.walk(Method::Stackless).unwrap().closest(&ray, 0.0, f32::INFINITY, &mut stack, &mut c);
         assert_eq!(a, b, "ray {i}");
         rays += 1;
         if a.is_none() {

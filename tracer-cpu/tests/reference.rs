@@ -24,16 +24,16 @@ fn rays(scene: &SceneFile, random: usize, aimed: usize, seed: u64) -> Vec<(DVec3
     let (centre, radius) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
     let mut rng = Rng(seed ^ 0x5851_f42d_4c95_7f2d);
     for i in 0..aimed {
-        let k = (rng.next() * scene.triangles.len() as f32) as usize % scene.triangles.len();
+        let k = rng.below(scene.triangles.len());
         let p = scene.positions(k).map(|v| DVec3::from(v.map(f64::from)));
-        let j = (rng.next() * 3.0) as usize % 3;
+        let j = rng.below(3);
         let (a, b) = (p[j], p[(j + 1) % 3]);
         let target = match i % 3 {
             0 => a,
             1 => (a + b) * 0.5,
-            _ => a + (b - a) * f64::from(rng.next()),
+            _ => a + (b - a) * f64::from(rng.unit()),
         };
-        let origin = centre + rng.unit().as_dvec3() * radius * (1.2 + f64::from(rng.next()));
+        let origin = centre + glam::Vec3::from(rng.direction()).as_dvec3() * radius * (1.2 + f64::from(rng.unit()));
         out.push((origin, (target - origin).normalize()));
     }
     out

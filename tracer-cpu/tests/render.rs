@@ -107,9 +107,10 @@ fn shadow_rays_end_at_the_light() {
     let from = Vec3::new(0.0, 1e-3, 0.0);
     let up = Ray::new(from, Vec3::Y);
     for method in [Method::Ordered, Method::Stackless] {
+        let walk = tracer.walk(method).unwrap();
         // The roof is 2 away: a light at 1.5 is not blocked, one at 2.5 is.
-        assert!(!tracer.occluded(method, &up, 1.5, &mut stack, &mut cost), "{method:?}");
-        assert!(tracer.occluded(method, &up, 2.5, &mut stack, &mut cost), "{method:?}");
+        assert!(!walk.occluded(&up, 1.5, &mut stack, &mut cost), "{method:?}");
+        assert!(walk.occluded(&up, 2.5, &mut stack, &mut cost), "{method:?}");
     }
     // In an image: the floor under a light below the roof is lit; above the roof it is dark.
     let lit = {
@@ -193,6 +194,38 @@ fn bad_settings_are_errors() {
     only_escape.child_pair = None;
     let s = settings(&scene, "down", Mode::Cast, Method::Ordered, 8, 8);
     assert!(render(&Tracer::new(&only_escape), &s).unwrap_err().to_string().contains("child-pair"));
+}
+
+/// A traversal is bound to its layout when it is chosen: asking for one whose layout the file
+/// lacks is a typed refusal, never a silent walk of the other layout; `Auto` is the documented
+/// choice that takes whichever layout is there.
+#[test]
+fn a_walk_on_a_missing_layout_is_refused() {
+    use render_spec::RenderError;
+    let scene = floor_and_roof();
+    let mut only_escape = scene.clone();
+    only_escape.child_pair = None;
+    let mut only_child_pair = scene.clone();
+    only_child_pair.escape = None;
+    let (escape, child_pair) = (Tracer::new(&only_escape), Tracer::new(&only_child_pair));
+    for method in [Method::Ordered, Method::Packet] {
+        let e = escape.walk(method).err().expect("no child-pair layout to walk");
+        assert!(matches!(e, RenderError::MissingLayout { layout: "child-pair", .. }), "{method:?}: {e:?}");
+    }
+    let e = child_pair.walk(Method::Stackless).err().expect("no escape layout to walk");
+    assert!(matches!(e, RenderError::MissingLayout { method: "stackless", layout: "escape-pointer" }), "{e:?}");
+    let mut neither = scene.clone();
+    (neither.child_pair, neither.escape) = (None, None);
+    assert!(Tracer::new(&neither).walk(Method::Auto).is_err());
+    // What each walk does traverse, and that it finds the roof 2 above the floor.
+    assert_eq!(escape.walk(Method::Auto).unwrap().method(), Method::Stackless);
+    assert_eq!(escape.walk(Method::Stackless).unwrap().method(), Method::Stackless);
+    assert_eq!(child_pair.walk(Method::Auto).unwrap().method(), Method::Ordered);
+    let up = Ray::new(Vec3::new(0.0, 1e-3, 0.0), Vec3::Y);
+    for walk in [escape.walk(Method::Auto).unwrap(), child_pair.walk(Method::Ordered).unwrap()] {
+        let hit = walk.closest(&up, 0.0, f32::INFINITY, &mut Stack::default(), &mut Cost::default());
+        assert!(hit.is_some_and(|h| (h.t - (2.0 - 1e-3)).abs() < 1e-4), "{:?}: {hit:?}", walk.method());
+    }
 }
 
 #[test]

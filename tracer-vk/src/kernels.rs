@@ -110,6 +110,37 @@ pub struct Specialisation {
     pub intersect: Intersect,
     /// Origins move by the frame's fixed distance (`--offset D`) instead of the scale-aware offset.
     pub fixed_offset: bool,
+    /// How the node and triangle arrays are spread over storage-buffer bindings.
+    pub split: Split,
+}
+
+/// The most bindings one scene array (nodes or triangles) is spread over.
+pub const MAX_CHUNKS: u32 = 4;
+
+/// Storage-buffer ranges are a limit of one binding (maxStorageBufferRange: 128 MiB on lavapipe,
+/// 4 GiB on the H100), not of the device: an array larger than one binding is cut into up to
+/// [`MAX_CHUNKS`] bindings of `*_chunk` records each, and the kernels pick the binding by index
+/// range. With one chunk each (every scene that fits one binding) the kernel text is exactly the
+/// unsplit one, so the hot path is unchanged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Split {
+    /// Bindings of the node array (1 to [`MAX_CHUNKS`]) and nodes per binding.
+    pub node_chunks: u32,
+    pub node_chunk: u32,
+    /// Bindings of the triangle array and triangles per binding.
+    pub tri_chunks: u32,
+    pub tri_chunk: u32,
+}
+
+impl Split {
+    /// One binding per array.
+    pub const NONE: Split = Split { node_chunks: 1, node_chunk: u32::MAX, tri_chunks: 1, tri_chunk: u32::MAX };
+
+    /// Bindings after the unsplit table (`render::BINDINGS`): the node chunks after the first, then
+    /// the triangle chunks after the first.
+    pub fn extra_bindings(&self) -> u32 {
+        self.node_chunks.max(1) - 1 + self.tri_chunks.max(1) - 1
+    }
 }
 
 impl Specialisation {
@@ -319,6 +350,7 @@ pub fn source_half(stage: Stage, spec: &Specialisation, half: Half) -> String {
         strip_features(STAGES, &features),
         entry
     );
+    let text = split_arrays(&text, &spec.split);
     if spec.exact { text } else { with_device_rounding(&text) }
 }
 
@@ -369,6 +401,106 @@ pub fn prelude(spec: &Specialisation) -> String {
         strip_features(COMMON, &spec.features()),
     );
     if spec.exact { text } else { with_device_rounding(&text) }
+}
+
+/// Binding number of the first of the split bindings (after common.wgsl's fixed table).
+const FIRST_SPLIT_BINDING: u32 = 14;
+
+/// With one chunk per array, `text` unchanged. Otherwise every read `nodes[i]` / `tris[i]` becomes
+/// `node_at(i)` / `tri_at(i)`, which picks the binding by index range, and the extra bindings and
+/// the two functions are declared.
+fn split_arrays(text: &str, split: &Split) -> String {
+    let mut text = text.to_string();
+    let mut binding = FIRST_SPLIT_BINDING;
+    let mut decls = String::new();
+    for (array, record, accessor, chunks, chunk) in [
+        ("nodes", "Node", "node_at", split.node_chunks, split.node_chunk),
+        ("tris", "Tri", "tri_at", split.tri_chunks, split.tri_chunk),
+    ] {
+        if chunks <= 1 {
+            continue;
+        }
+        let chunk_const = format!("{}_CHUNK", array.to_uppercase());
+        text = rewrite_indexing(&text, array, accessor);
+        // The traversals bound their indices by the array's length: the whole array's, over all chunks.
+        let last = chunks - 1;
+        text = text.replace(
+            &format!("arrayLength(&{array})"),
+            &format!("({last}u * {chunk_const} + arrayLength(&{array}{last}))"),
+        );
+        decls += &format!(
+            "const {chunk_const}: u32 = {chunk}u;
+"
+        );
+        let mut body = String::new();
+        for c in 1..chunks {
+            decls += &format!(
+                "@group(0) @binding({binding}) var<storage, read> {array}{c}: array<{record}>;
+"
+            );
+            binding += 1;
+        }
+        // A chain of range tests: a read pays one comparison per chunk boundary below its index,
+        // so a scene split in two pays one comparison more per read than the unsplit kernel.
+        for c in 0..chunks - 1 {
+            let name = if c == 0 { array.to_string() } else { format!("{array}{c}") };
+            body += &format!(
+                "    if i < {}u * {chunk_const} {{ return {name}[i - {c}u * {chunk_const}]; }}
+",
+                c + 1
+            );
+        }
+        body += &format!(
+            "    return {array}{last}[i - {last}u * {chunk_const}];
+"
+        );
+        decls += &format!(
+            "fn {accessor}(i: u32) -> {record} {{
+{body}}}
+"
+        );
+    }
+    if decls.is_empty() {
+        text
+    } else {
+        format!(
+            "{text}
+{decls}"
+        )
+    }
+}
+
+/// `array[expr]` (with `array` a whole word) as `accessor(expr)`, brackets matched.
+fn rewrite_indexing(text: &str, array: &str, accessor: &str) -> String {
+    let pattern = format!("{array}[");
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(at) = rest.find(&pattern) {
+        let word_start = at == 0 || !rest[..at].ends_with(|c: char| c.is_alphanumeric() || c == '_');
+        out += &rest[..at];
+        if !word_start {
+            out += &pattern;
+            rest = &rest[at + pattern.len()..];
+            continue;
+        }
+        let inner = &rest[at + pattern.len()..];
+        let mut depth = 1;
+        let end = inner
+            .char_indices()
+            .find(|&(_, c)| {
+                depth += match c {
+                    '[' => 1,
+                    ']' => -1,
+                    _ => 0,
+                };
+                depth == 0
+            })
+            .map(|(i, _)| i)
+            .expect("brackets in the kernel source match");
+        out += &format!("{accessor}({})", rewrite_indexing(&inner[..end], array, accessor));
+        rest = &inner[end + 1..];
+    }
+    out + rest
 }
 
 /// common.wgsl's correctly rounded division and square root (`div_rn`, `div3_rn`, `sqrt_rn` and
@@ -424,6 +556,7 @@ mod tests {
             exact: false,
             intersect: Intersect::Watertight,
             fixed_offset: false,
+            split: Split::NONE,
         }
     }
 
@@ -567,5 +700,36 @@ mod tests {
         let src = "a\n//#if X\nb\n//#endif\nc\n//#if Y\nd\n//#endif\n";
         assert_eq!(strip_features(src, &["Y"]), "a\nc\nd\n");
         assert_eq!(strip_features(src, &[]), "a\nc\n");
+    }
+
+    /// A split kernel reads nodes and triangles only through the accessors, declares one binding
+    /// per extra chunk, and translates for every traversal and stage; an unsplit one is the text
+    /// of the file unchanged (so the hot path of scenes that fit one binding is the same code).
+    #[test]
+    fn split_kernels_translate_and_unsplit_ones_are_unchanged() {
+        let split = Split { node_chunks: 3, node_chunk: 1000, tri_chunks: 2, tri_chunk: 700 };
+        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
+            for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce] {
+                let plain = spec(method, true, true);
+                let unsplit = source(stage, &plain);
+                assert!(!unsplit.contains("node_at") && !unsplit.contains("tri_at"));
+                let s = Specialisation { split, ..plain };
+                let text = source(stage, &s);
+                for read in ["nodes[", "tris[", "arrayLength(&nodes)"] {
+                    let stray = text.match_indices(read).any(|(at, _)| {
+                        !text[..at].ends_with(|c: char| c.is_alphanumeric() || c == '_')
+                            && !text[at..].starts_with("nodes[i - ")
+                            && !text[at..].starts_with("tris[i - ")
+                    });
+                    assert!(!stray, "{method:?} {stage:?}: a read `{read}` bypasses the accessors");
+                }
+                for binding in 14..14 + split.extra_bindings() {
+                    assert!(text.contains(&format!("@binding({binding})")), "binding {binding}");
+                }
+                compile(stage, &s).unwrap_or_else(|e| panic!("{method:?} {stage:?}: {e}"));
+            }
+        }
+        assert_eq!(split.extra_bindings(), 3);
+        assert_eq!(Split::NONE.extra_bindings(), 0);
     }
 }

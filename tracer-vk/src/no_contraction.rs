@@ -236,6 +236,7 @@ mod tests {
                     exact: true,
                     intersect: render_spec::Intersect::Watertight,
                     fixed_offset: false,
+                    split: crate::kernels::Split::NONE,
                 };
                 // The exact kernel's text as naga writes it, then with the pass.
                 let source = kernels::source(stage, &spec);
@@ -306,6 +307,7 @@ mod tests {
             exact: true,
             intersect: render_spec::Intersect::Watertight,
             fixed_offset: false,
+            split: crate::kernels::Split::NONE,
         };
         let words = kernels::compile(Stage::Bounce, &spec).expect("the kernel compiles");
         let out = rspirv::dr::load_words(preserve_denormals(&words, "t").unwrap()).unwrap();
@@ -326,13 +328,8 @@ mod tests {
                    let x = v[id.x]; v[id.x].w = x.x * x.y + x.z; }";
         // Products that need more than 24 bits, offset by about their own size: where a fused
         // multiply-add keeps the low bits the product's rounding drops.
-        let mut seed = 0x9e37_79b9_u32;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 17;
-            seed ^= seed << 5;
-            1.0 + (seed >> 8) as f32 / (1u32 << 24) as f32
-        };
+        let mut rng = ::tests::Rng(0x9e37_79b9);
+        let mut next = || 1.0 + rng.unit();
         let input: Vec<[f32; 4]> = (0..N)
             .map(|_| {
                 let (a, b) = (next(), next());

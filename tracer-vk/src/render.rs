@@ -8,9 +8,9 @@
 //! pixel whose stage never finished, a traversal that gave up on a ray) refuses the frame: a wrong
 //! image is never returned in silence.
 
-use crate::device::{Buffer, Gpu, Pipeline};
+use crate::device::{Buffer, DeviceKind, Gpu, Pipeline};
 use crate::error::VkError;
-use crate::kernels::{self, Half, Method, Specialisation, Stage, counters};
+use crate::kernels::{self, Half, Method, Specialisation, Split, Stage, counters};
 use crate::rt::RtTracer;
 use crate::tiles::{self, Tile};
 use bvh_format::{Light, SceneFile};
@@ -84,6 +84,14 @@ pub enum VkRenderError {
         "the scene's {what} need {bytes} bytes in one storage buffer, more than this device's {limit_name} of {limit} bytes; it takes scenes of up to {fits} {what}"
     )]
     SceneTooLarge { what: &'static str, bytes: u64, limit_name: &'static str, limit: u64, fits: u64 },
+    #[error(
+        "LST needs a stack of {depth} entries for this tree, more than the {limit} that {device} compiles in reasonable time (a deeper stack takes it minutes); use stackless"
+    )]
+    PrivateStack { depth: u32, limit: u32, device: String },
+    #[error(
+        "the scene's {what} need {bytes} bytes, more than {chunks} storage buffers of this device's {limit_name} of {limit} bytes each; it takes scenes of up to {fits} {what}"
+    )]
+    SplitTooLarge { what: &'static str, bytes: u64, chunks: u32, limit_name: &'static str, limit: u64, fits: u64 },
     #[error("a {width} x {height} image needs {bytes} bytes of host memory, which could not be allocated")]
     HostMemory { width: u32, height: u32, bytes: u64 },
     #[error(
@@ -151,8 +159,9 @@ pub struct Renderer<'g> {
     gpu: &'g Gpu,
     scene: &'g SceneFile,
     spec: Specialisation,
-    nodes: Buffer,
-    tris: Buffer,
+    /// The node and triangle arrays, one buffer per binding (`spec.split`).
+    nodes: Vec<Buffer>,
+    tris: Vec<Buffer>,
     normal_indices: Buffer,
     normals: Buffer,
     materials: Buffer,
@@ -269,14 +278,26 @@ impl<'g> Renderer<'g> {
         method: Method,
         workgroup: (u32, u32),
     ) -> Result<Self, VkRenderError> {
-        Self::make(gpu, scene, method, workgroup, false)
+        Self::with_binding_limit(gpu, scene, method, workgroup, u64::MAX)
+    }
+
+    /// [`Renderer::new`], with nodes and triangles split over bindings of at most `binding_bytes`
+    /// (or the device's limit where that is lower): for tests, which thus split small scenes.
+    pub fn with_binding_limit(
+        gpu: &'g Gpu,
+        scene: &'g SceneFile,
+        method: Method,
+        workgroup: (u32, u32),
+        binding_bytes: u64,
+    ) -> Result<Self, VkRenderError> {
+        Self::make(gpu, scene, method, workgroup, false, binding_bytes)
     }
 
     /// rt-pipeline's stages, split around the trace as on a device with ray tracing, with LST's
     /// traversal in a compute kernel in place of the driver's (the scene needs its child-pair
     /// tree): tests the split stages and their records on any device. Its images are LST's.
     pub fn rt_stand_in(gpu: &'g Gpu, scene: &'g SceneFile, workgroup: (u32, u32)) -> Result<Self, VkRenderError> {
-        Self::make(gpu, scene, Method::RtPipeline, workgroup, true)
+        Self::make(gpu, scene, Method::RtPipeline, workgroup, true, u64::MAX)
     }
 
     fn make(
@@ -285,6 +306,7 @@ impl<'g> Renderer<'g> {
         method: Method,
         workgroup: (u32, u32),
         stand_in: bool,
+        binding_bytes: u64,
     ) -> Result<Self, VkRenderError> {
         // Refused before anything is uploaded, in one sentence naming what the device lacks.
         if method == Method::RtPipeline && !stand_in {
@@ -307,6 +329,18 @@ impl<'g> Renderer<'g> {
                 .as_deref()
                 .ok_or(RenderError::MissingLayout { method: method.name(), layout: "escape-pointer" })?,
         };
+        let info = gpu.info();
+        let node_what = if method == Method::Stackless { "escape-pointer nodes" } else { "child-pair nodes" };
+        let arrays = SceneArrays::new(scene);
+        // rt-pipeline's ray and hit records take the binding numbers the split would use, so its
+        // arrays must each fit one binding, as before the split.
+        if method == Method::RtPipeline {
+            fits(info, node_what, nodes)?;
+            fits(info, "triangles", &arrays.tris)?;
+        }
+        let (node_chunks, node_chunk) = chunking(info, binding_bytes, node_what, nodes)?;
+        let (tri_chunks, tri_chunk) = chunking(info, binding_bytes, "triangles", &arrays.tris)?;
+        let split = Split { node_chunks, node_chunk, tri_chunks, tri_chunk };
         let stats = scene.stats();
         let spec = Specialisation {
             method,
@@ -319,8 +353,8 @@ impl<'g> Renderer<'g> {
             exact: false,
             intersect: Intersect::Watertight,
             fixed_offset: false,
+            split,
         };
-        let info = gpu.info();
         let (wx, wy) = workgroup;
         let limit = info.max_workgroup_invocations.min(info.max_workgroup_size[0]).min(MAX_WORKGROUP_INVOCATIONS);
         if !workgroup_allowed(wx, wy, limit) {
@@ -328,6 +362,13 @@ impl<'g> Renderer<'g> {
         }
         if method == Method::SstSubgroup && !info.supports_subgroup_ops {
             return Err(VkRenderError::NoSubgroups(info.name.clone()));
+        }
+        if method == Method::Lst && info.kind == DeviceKind::Cpu && spec.stack_size > CPU_DEVICE_STACK_LIMIT {
+            return Err(VkRenderError::PrivateStack {
+                depth: spec.stack_size,
+                limit: CPU_DEVICE_STACK_LIMIT,
+                device: info.name.clone(),
+            });
         }
         if matches!(method, Method::Sst | Method::SstSubgroup) {
             let needed = kernels::sst_shared_bytes(&spec);
@@ -341,10 +382,6 @@ impl<'g> Renderer<'g> {
                 });
             }
         }
-        let node_what = if method == Method::Stackless { "escape-pointer nodes" } else { "child-pair nodes" };
-        fits(info, node_what, nodes)?;
-        let arrays = SceneArrays::new(scene);
-        fits(info, "triangles", &arrays.tris)?;
         fits(info, "normal indices", &arrays.normal_indices)?;
         fits(info, "normals", &arrays.normals)?;
         fits(info, "materials", &scene.materials)?;
@@ -358,8 +395,8 @@ impl<'g> Renderer<'g> {
             gpu,
             scene,
             spec,
-            nodes: gpu.create_buffer_with(nodes, "nodes")?,
-            tris: gpu.create_buffer_with(&arrays.tris, "triangles")?,
+            nodes: upload_chunks(gpu, nodes, node_chunk, "nodes")?,
+            tris: upload_chunks(gpu, &arrays.tris, tri_chunk, "triangles")?,
             normal_indices: gpu.create_buffer_with(&arrays.normal_indices, "normal indices")?,
             normals: gpu.create_buffer_with(&arrays.normals, "normals")?,
             materials: gpu.create_buffer_with(&scene.materials, "materials")?,
@@ -438,6 +475,7 @@ impl<'g> Renderer<'g> {
             if self.spec.exact && self.gpu.info().denorm_preserve_f32 {
                 spirv = crate::no_contraction::preserve_denormals(&spirv, &label)?;
             }
+            let bindings = bindings + self.spec.split.extra_bindings();
             let p = self.gpu.pipeline(&spirv, bindings, kernels::PASS_BYTES, &label)?;
             match half {
                 Half::Emit => self.ray_halves.insert(stage, p),
@@ -640,11 +678,11 @@ impl<'g> Renderer<'g> {
         let t = self.targets.as_ref().expect("the targets were made before the tiles");
         let (wx, wy) = self.spec.workgroup;
         let groups = [tile.width.div_ceil(wx), tile.height.div_ceil(wy), 1];
-        // In the order of BINDING_NAMES, then rt-pipeline's records.
+        // In the order of BINDING_NAMES, then the split bindings or rt-pipeline's records.
         let mut buffers: Vec<&Buffer> = vec![
             frame_buf,
-            &self.nodes,
-            &self.tris,
+            &self.nodes[0],
+            &self.tris[0],
             &self.normal_indices,
             &self.normals,
             &self.materials,
@@ -657,6 +695,9 @@ impl<'g> Renderer<'g> {
             &t.image,
             counters,
         ];
+        // The split bindings, in the order of `kernels::Split::extra_bindings` (rt-pipeline never
+        // splits: its records take those binding numbers).
+        buffers.extend(self.nodes[1..].iter().chain(&self.tris[1..]));
         if let Some(records) = &t.rt_records {
             buffers.extend(records);
         }
@@ -806,6 +847,52 @@ pub fn upload_bytes(scene: &SceneFile, method: Method) -> u64 {
     .sum::<usize>() as u64
 }
 
+/// The deepest LST stack a CPU Vulkan device (lavapipe) is asked to compile. LST keeps its stack
+/// in two private arrays of the tree's depth, and lavapipe compiles a kernel at its first dispatch
+/// (inside the submission, so a slow compile reads as a hang): a first frame of a 400-deep chain
+/// took 0.9 s including the compile, 700 deep 71 s, 1000 deep more than the 120 s timeout (600 s
+/// in docs/stability.md), while later frames take milliseconds. The H100 renders the 1000-deep
+/// chain at once. Measured with `tools::stress::scenes::chain` on this machine's lavapipe.
+pub const CPU_DEVICE_STACK_LIMIT: u32 = 512;
+
+/// `data` in buffers of `per_chunk` records each (at least one buffer, for an empty array too),
+/// labelled with the array's name and, after the first, the chunk's number.
+fn upload_chunks<T: bytemuck::Pod>(gpu: &Gpu, data: &[T], per_chunk: u32, what: &str) -> Result<Vec<Buffer>, VkError> {
+    if data.is_empty() {
+        return Ok(vec![gpu.create_buffer_with(data, what)?]);
+    }
+    let label = |i: usize| if i == 0 { what.to_string() } else { format!("{what} {i}") };
+    data.chunks(per_chunk as usize).enumerate().map(|(i, c)| gpu.create_buffer_with(c, &label(i))).collect()
+}
+
+/// How many bindings of at most `binding_bytes` (and the device's limits) the array `data` needs,
+/// up to [`kernels::MAX_CHUNKS`], and the records per binding. An empty array still takes one.
+fn chunking<T>(
+    info: &crate::device::DeviceInfo,
+    binding_bytes: u64,
+    what: &'static str,
+    data: &[T],
+) -> Result<(u32, u32), VkRenderError> {
+    let bytes = std::mem::size_of_val(data) as u64;
+    let (limit_name, limit) = if info.max_storage_buffer_range <= info.max_memory_allocation {
+        ("maxStorageBufferRange", info.max_storage_buffer_range)
+    } else {
+        ("maxMemoryAllocationSize", info.max_memory_allocation)
+    };
+    let limit = limit.min(binding_bytes);
+    let per_chunk = (limit / size_of::<T>().max(1) as u64).clamp(1, u32::MAX as u64);
+    let chunks = (data.len() as u64).div_ceil(per_chunk).max(1);
+    if chunks > kernels::MAX_CHUNKS as u64 {
+        let fits = per_chunk * kernels::MAX_CHUNKS as u64;
+        return Err(VkRenderError::SplitTooLarge { what, bytes, chunks: kernels::MAX_CHUNKS, limit_name, limit, fits });
+    }
+    // One binding: no split, whatever the limit (the kernels then read the array as before).
+    if chunks == 1 {
+        return Ok((1, u32::MAX));
+    }
+    Ok((chunks as u32, per_chunk as u32))
+}
+
 /// Checks that a scene array fits one storage buffer binding and one allocation.
 fn fits<T>(info: &crate::device::DeviceInfo, what: &'static str, data: &[T]) -> Result<(), VkRenderError> {
     let bytes = std::mem::size_of_val(data) as u64;
@@ -837,6 +924,7 @@ mod tests {
             exact: false,
             intersect: Intersect::Watertight,
             fixed_offset: false,
+            split: crate::kernels::Split::NONE,
         }
     }
 
@@ -905,6 +993,7 @@ mod layout_contract {
             exact: false,
             intersect: Intersect::Watertight,
             fixed_offset: false,
+            split: crate::kernels::Split::NONE,
         };
         naga::front::wgsl::parse_str(&kernels::source(Stage::Bounce, &spec)).expect("the kernel parses")
     }

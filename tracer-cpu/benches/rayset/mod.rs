@@ -15,7 +15,7 @@ use std::time::Instant;
 use tracer_cpu::geometry::{Cost, Ray, Watertight, offset_origin};
 use tracer_cpu::packet::{self, LANES, Rays};
 use tracer_cpu::traverse::Stack;
-use tracer_cpu::{Method, Tracer, shade};
+use tracer_cpu::{Method, Tracer, Walk, shade};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
@@ -70,12 +70,13 @@ pub fn generate(scene: &SceneFile, width: u32, height: u32) -> Result<[RaySet; 3
     let frame = CameraSpec::from(cam).frame(width, height).map_err(|e| format!("camera: {e:?}"))?;
     let light = Vec3::from(scene.lights.first().ok_or("the scene has no light")?.position);
     let tracer = Tracer::new(scene);
+    let walk = tracer.walk(Method::Ordered).map_err(|e| e.to_string())?;
     let (w, h) = (width as usize, height as usize);
     let per_pixel: Vec<_> = (0..w * h)
         .into_par_iter()
         .map_init(Stack::default, |stack, i| {
             let ray = Ray::new(frame.eye, frame.direction((i % w) as u32, (i / w) as u32));
-            let hit = tracer.closest(Method::Ordered, &ray, 0.0, f32::INFINITY, stack, &mut Cost::default());
+            let hit = walk.closest(&ray, 0.0, f32::INFINITY, stack, &mut Cost::default());
             let Some(hit) = hit else { return (Some((ray, f32::INFINITY)), None, None) };
             let k = hit.tri as usize;
             let surf =
@@ -104,8 +105,8 @@ pub fn generate(scene: &SceneFile, width: u32, height: u32) -> Result<[RaySet; 3
 /// A way of tracing a ray set.
 #[derive(Clone, Copy)]
 pub enum Engine<'a> {
-    /// Ours, one ray at a time (`Method::Ordered` or `Method::Stackless`) with a triangle test.
-    Scalar(&'a Tracer<'a>, Method, Intersect),
+    /// Ours, one ray at a time (an ordered or a stackless walk) with a triangle test.
+    Scalar(Walk<'a>, Intersect),
     /// Ours, 8-wide AVX2 packets of 4 x 2 pixel blocks.
     Packet(&'a Tracer<'a>),
     /// Embree, `rtcIntersect1` / `rtcOccluded1`.
@@ -128,20 +129,14 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
     set.rays.par_chunks(2 * w).zip(out.par_chunks_mut(2 * w)).for_each_init(
         || (Stack::default(), Vec::with_capacity(128)),
         |(stack, pstack), (rays, out)| match engine {
-            Engine::Scalar(tracer, method, test) => {
+            Engine::Scalar(walk, test) => {
                 let mut cost = Cost::default();
                 for (r, o) in rays.iter().zip(out.iter_mut()) {
                     let Some((ray, t_max)) = r else { continue };
                     *o = if any {
-                        if tracer.occluded_with(test, method, ray, *t_max, stack, &mut cost) {
-                            0.0
-                        } else {
-                            f32::INFINITY
-                        }
+                        if walk.occluded_with(test, ray, *t_max, stack, &mut cost) { 0.0 } else { f32::INFINITY }
                     } else {
-                        tracer
-                            .closest_with(test, method, ray, 0.0, *t_max, stack, &mut cost)
-                            .map_or(f32::INFINITY, |h| h.t)
+                        walk.closest_with(test, ray, 0.0, *t_max, stack, &mut cost).map_or(f32::INFINITY, |h| h.t)
                     };
                 }
             }

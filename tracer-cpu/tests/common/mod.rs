@@ -31,26 +31,7 @@ pub fn sphere_scene() -> SceneFile {
     compile_toml("sphere", "[[object]]\ntype = \"sphere\"\nradius = 1.0\nsegments = 64\nrings = 32\n")
 }
 
-/// Deterministic xorshift numbers in [0, 1).
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next(&mut self) -> f32 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 40) as f32 / (1u64 << 24) as f32
-    }
-    pub fn unit(&mut self) -> Vec3 {
-        loop {
-            let v = Vec3::new(self.next(), self.next(), self.next()) * 2.0 - 1.0;
-            let l = v.length();
-            if l > 1e-3 && l <= 1.0 {
-                return v / l;
-            }
-        }
-    }
-}
+pub use tests::Rng;
 
 /// Random rays over a scene: from outside aimed at random points of the bounds, from inside in
 /// random directions, and axis-parallel rays (one or two zero direction components, including
@@ -61,26 +42,26 @@ pub fn random_rays(scene: &SceneFile, n: usize, seed: u64) -> Vec<(Vec3, Vec3)> 
     let centre = (lo + hi) * 0.5;
     let radius = (hi - lo).length() * 0.5;
     let mut rng = Rng(seed);
-    let inside = |rng: &mut Rng| lo + (hi - lo) * Vec3::new(rng.next(), rng.next(), rng.next());
+    let inside = |rng: &mut Rng| lo + (hi - lo) * Vec3::new(rng.unit(), rng.unit(), rng.unit());
     (0..n)
         .map(|i| match i % 5 {
             0 | 1 => {
-                let o = centre + rng.unit() * radius * 2.0;
+                let o = centre + Vec3::from(rng.direction()) * radius * 2.0;
                 let target = inside(&mut rng);
                 (o, (target - o).normalize())
             }
-            2 => (inside(&mut rng), rng.unit()),
+            2 => (inside(&mut rng), Vec3::from(rng.direction())),
             3 => {
                 let o = inside(&mut rng);
-                let axis = (rng.next() * 3.0) as usize % 3;
+                let axis = rng.below(3);
                 let mut d = Vec3::splat(-0.0);
-                d[axis] = if rng.next() < 0.5 { 1.0 } else { -1.0 };
+                d[axis] = if rng.unit() < 0.5 { 1.0 } else { -1.0 };
                 (o - d * radius * 2.0, d)
             }
             _ => {
-                let o = centre + rng.unit() * radius * 1.5;
+                let o = centre + Vec3::from(rng.direction()) * radius * 1.5;
                 let mut d = (inside(&mut rng) - o).normalize();
-                d[(rng.next() * 3.0) as usize % 3] = 0.0;
+                d[rng.below(3)] = 0.0;
                 (o, d.normalize_or(Vec3::X))
             }
         })

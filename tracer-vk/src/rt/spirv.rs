@@ -380,6 +380,7 @@ mod tests {
             exact: false,
             intersect: render_spec::Intersect::Watertight,
             fixed_offset: false,
+            split: crate::kernels::Split::NONE,
         };
         let m = naga::front::wgsl::parse_str(&kernels::source_half(Stage::Shade, &spec, Half::Emit)).unwrap();
         let mut l = naga::proc::Layouter::default();
