@@ -25,6 +25,8 @@ pub enum RenderError {
     AoSamples(u32),
     #[error("the ambient-occlusion length must be a finite fraction of the scene's diagonal above 0, not {0}")]
     AoLength(f32),
+    #[error("{renderer} does not implement the {mode} mode")]
+    ModeUnsupported { renderer: &'static str, mode: &'static str },
 }
 
 #[cfg(test)]
@@ -44,6 +46,7 @@ mod tests {
             RenderError::Offset(f32::NAN),
             RenderError::AoSamples(0),
             RenderError::AoLength(-1.0),
+            RenderError::ModeUnsupported { renderer: "the exact reference", mode: "ao" },
         ] {
             let s = e.to_string();
             assert!(!s.contains('\n') && !s.ends_with('.') && !s.starts_with(char::is_uppercase), "{s}");
