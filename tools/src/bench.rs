@@ -4,8 +4,9 @@
 //! chart can hold CPU and GPU rows of a scene side by side (`bench-chart`).
 
 use crate::output::{self, Kind, Output};
-use crate::render_args::{MAX_LIGHTS, lights_n, parse_count, parse_res, stored_camera};
+use crate::render_args::{IntersectArg, MAX_LIGHTS, lights_n, parse_count, parse_res, stored_camera};
 use bvh_format::SceneFile;
+use clap::ValueEnum;
 use render_spec::{Ao, CameraSpec, Image, Mode, Settings};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -35,6 +36,10 @@ pub struct MatrixArgs {
     /// Write the table as CSV here (and as Markdown next to it, .md).
     #[arg(long, default_value = "bench.csv", allow_hyphen_values = true)]
     pub csv: PathBuf,
+    /// Triangle test of every setting (`render --intersect`): two runs that differ only here
+    /// measure what the edge-consistent test costs against Möller-Trumbore.
+    #[arg(long, value_enum, default_value = "watertight")]
+    pub intersect: IntersectArg,
 }
 
 pub fn parse_frames(s: &str) -> Result<usize, String> {
@@ -387,6 +392,10 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
     let bar =
         crate::cli::Progress::new(total as u64, "{bar:40} {pos}/{len} settings ({elapsed}, {eta} left) {msg}", false);
     let device = bench.device();
+    let accuracy = render_spec::Accuracy { intersect: m.intersect.intersect(), ..Default::default() };
+    if !bench.honours(&accuracy) {
+        return Err(format!("this tracer has no {:?} triangle test", m.intersect));
+    }
     let mut rows = Vec::with_capacity(total);
     for path in &scenes {
         let name = path
@@ -413,7 +422,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
                             lights: lights_n(&scene, mode.lights, &camera),
                             max_indirections: scene.settings.max_indirections,
                             aovs: false,
-                            accuracy: Default::default(),
+                            accuracy,
                         };
                         let m = measure(bench, &mut renderer, &settings, warmup, frames)?;
                         rows.push(Row {
@@ -440,9 +449,10 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
     bar.finish();
     bench.finish()?;
     let preface = format!(
-        "Device: {device} (`{}`); {frames} frames per setting after {warmup} warm-up frames; {}.",
+        "Device: {device} (`{}`); {frames} frames per setting after {warmup} warm-up frames; {}; triangle test {}.",
         bench.tracer(),
-        bench.timing()
+        bench.timing(),
+        m.intersect.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default()
     );
     let md_path = write_tables(&m.csv, &preface, &rows)?;
     crate::say!("{}", markdown(&[preface], &rows));

@@ -116,6 +116,7 @@ fn every_option_refuses_bad_values_in_one_sentence_and_touches_nothing() {
     add(c, "trace-vk", &bench, "--workgroup", &["", "0x0", "64x64"]);
     add(c, "trace-vk", &bench, "--csv", &["", "missing/b.csv", "b.txt", "folder"]);
     add(c, "trace-vk", &bench, "--device", &["-1", "999"]);
+    add(c, "trace-vk", &bench, "--intersect", &["", "moller"]);
     add(c, "trace-vk", &["bench"], "", &["missing.bvh", "empty.bvh", "text.bvh", "folder.bvh"]);
 
     assert!(cases.len() > 250, "{} cases", cases.len());
