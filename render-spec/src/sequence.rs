@@ -187,9 +187,8 @@ mod tests {
     /// along the axes (both signs, the frame's branch) and oblique ones.
     #[test]
     fn cosine_directions_are_unit_cosine_distributed_and_about_the_normal() {
-        let normals = [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.6, 0.0, -0.8], [
-            0.48, 0.6, 0.64,
-        ]];
+        let normals =
+            [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.6, 0.0, -0.8], [0.48, 0.6, 0.64]];
         for n in normals {
             let count = 4096;
             let (mut cos, mut cos2, mut mean) = (0.0f64, 0.0f64, [0.0f64; 3]);

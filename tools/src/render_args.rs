@@ -314,7 +314,9 @@ pub fn parse_ao_samples(s: &str) -> Result<u32, String> {
 /// `--ao-length`: a finite fraction above 0, refused with the renderer's sentence.
 pub fn parse_ao_length(s: &str) -> Result<f32, String> {
     let length: f32 = s.trim().parse().map_err(|_| {
-        format!("{s:?} is not a number; the ambient-occlusion length is a fraction of the scene's diagonal, such as 0.1")
+        format!(
+            "{s:?} is not a number; the ambient-occlusion length is a fraction of the scene's diagonal, such as 0.1"
+        )
     })?;
     Ao { samples: 1, length }.check().map_err(|e| e.to_string())?;
     Ok(length)

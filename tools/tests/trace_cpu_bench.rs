@@ -75,7 +75,9 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
         // The room is closed: every primary ray hits, and casts 4 AO rays or one diffuse bounce.
         match mode {
             Mode::Cast => assert_eq!(r.rays[1..], [0, 0, 0, 0], "row {i}: ray casting traces primary rays only"),
-            Mode::Whitted => assert!(r.rays[1] > 0 && r.rays[2] > 0, "row {i}: the room has lights, a mirror and glass"),
+            Mode::Whitted => {
+                assert!(r.rays[1] > 0 && r.rays[2] > 0, "row {i}: the room has lights, a mirror and glass")
+            }
             Mode::Ao(_) => assert_eq!(r.rays[1..], [0, 0, 4 * r.rays[0], 0], "row {i}"),
             Mode::Diffuse => assert_eq!(r.rays[1..], [0, 0, 0, r.rays[0]], "row {i}"),
         }

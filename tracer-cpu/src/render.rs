@@ -353,10 +353,8 @@ fn block<L: Lanes, T: TraceLanes>(
     primary.t_max = [f32::INFINITY; LANES];
     primary.dir = directions(frame, x, y, samples[0]).to_arrays();
     // Row-major pixel indices in the image (at most 2^28 pixels: no overflow).
-    let mut seeds = Seeds {
-        pixel: std::array::from_fn(|i| ((band.y0 + lane_xy(i).1) * w + lane_xy(i).0) as u32),
-        sample: 0,
-    };
+    let mut seeds =
+        Seeds { pixel: std::array::from_fn(|i| ((band.y0 + lane_xy(i).1) * w + lane_xy(i).0) as u32), sample: 0 };
     let mut out = sh.block::<L, T>(&primary, &seeds, lanes);
     let mut colour = V3::<L>::from_arrays(&out.colour);
     for (k, &sample) in samples.iter().enumerate().skip(1) {

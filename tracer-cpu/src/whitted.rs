@@ -269,7 +269,7 @@ impl Shading<'_> {
 
     /// The rays of the incoherent modes from the surfaces `s` of the `hit` lanes: origins moved
     /// off the surface to the side of the (turned) geometric normal, and cosine-distributed
-    /// directions about that normal for sequence number `n(lane)` of the lane's pixel.
+    /// directions about that normal for sequence number `n` of each lane's pixel.
     #[inline(always)]
     fn incoherent_rays<L: Lanes>(
         &self,
@@ -277,7 +277,7 @@ impl Shading<'_> {
         hit: [bool; LANES],
         seeds: &Seeds,
         t_max: f32,
-        n: impl Fn(usize) -> u32,
+        n: u32,
     ) -> Rays {
         let normal = s.geometric.to_arrays();
         let mut rays = Rays {
@@ -287,10 +287,10 @@ impl Shading<'_> {
             valid: hit,
         };
         for i in (0..LANES).filter(|&i| hit[i]) {
-            let u = sequence::sample_2d(seeds.pixel[i], n(i));
+            let u = sequence::sample_2d(seeds.pixel[i], n);
             let d = sequence::cosine_direction([normal[0][i], normal[1][i], normal[2][i]], u);
-            for a in 0..3 {
-                rays.dir[a][i] = d[a];
+            for (dir, d) in rays.dir.iter_mut().zip(d) {
+                dir[i] = d;
             }
         }
         rays
@@ -310,9 +310,8 @@ impl Shading<'_> {
     ) -> L {
         let mut open = [0u32; LANES];
         for k in 0..ao.samples {
-            let rays = self.incoherent_rays(s, hit, seeds, self.ao_distance, |_| {
-                sequence::incoherent_sample(seeds.sample, ao.samples, k)
-            });
+            let n = sequence::incoherent_sample(seeds.sample, ao.samples, k);
+            let rays = self.incoherent_rays(s, hit, seeds, self.ao_distance, n);
             out.rays.ao += rays.count() as u64;
             let blocked = lanes.occluded(&rays, self.intersect);
             add_cost(&mut out.cost, &rays.valid, &blocked);
@@ -335,7 +334,7 @@ impl Shading<'_> {
         lanes: &mut T,
         out: &mut Block,
     ) -> V3<L> {
-        let rays = self.incoherent_rays(s, hit, seeds, f32::INFINITY, |_| seeds.sample);
+        let rays = self.incoherent_rays(s, hit, seeds, f32::INFINITY, seeds.sample);
         out.rays.diffuse += rays.count() as u64;
         let hits = lanes.closest(&rays, self.intersect);
         add_cost(&mut out.cost, &rays.valid, &hits);
@@ -345,7 +344,8 @@ impl Shading<'_> {
             return background;
         }
         let (b, tri) = self.surfaces::<L>(&rays, &hits, found);
-        let kd = V3::from_lanes(|i| Vec3::from(self.scene.materials[self.scene.triangles[tri[i]].material as usize].kd));
+        let kd =
+            V3::from_lanes(|i| Vec3::from(self.scene.materials[self.scene.triangles[tri[i]].material as usize].kd));
         let lit = shade::cast_of(kd, b.shading, V3::from_arrays(&rays.dir));
         V3::select(L::mask(found), lit, background)
     }

@@ -120,7 +120,13 @@ fn a_pixel_of_each_mode_is_the_definition_evaluated_by_hand() {
         for k in 0..ao.samples {
             let u = sample_2d(pixel, incoherent_sample(0, ao.samples, k));
             let d = Vec3::from(cosine_direction(surface.geometric.into(), u));
-            open += u32::from(!tracer.occluded(Method::Ordered, &Ray::new(from, d), length, &mut stack, &mut Cost::default()));
+            open += u32::from(!tracer.occluded(
+                Method::Ordered,
+                &Ray::new(from, d),
+                length,
+                &mut stack,
+                &mut Cost::default(),
+            ));
         }
         let v = shade::to_u8(Vec3::splat(open as f32 * ao.inverse()));
         assert_eq!(ao_image.rgb[pixel as usize], v, "AO pixel ({x}, {y}): {open} of {} open", ao.samples);

@@ -359,9 +359,15 @@ mod tests {
     fn every_kernel_translates_for_every_specialisation() {
         for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
             for (r, t) in [(false, false), (true, false), (false, true), (true, true)] {
-                for stage in
-                    [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert, Stage::Ao, Stage::Diffuse]
-                {
+                for stage in [
+                    Stage::Cast,
+                    Stage::Primary,
+                    Stage::Shade,
+                    Stage::Bounce,
+                    Stage::Convert,
+                    Stage::Ao,
+                    Stage::Diffuse,
+                ] {
                     let s = spec(method, r, t);
                     if let Err(e) = compile(stage, &s) {
                         panic!("{method:?} {stage:?} reflection {r} refraction {t}: {e:?}");
