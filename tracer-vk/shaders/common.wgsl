@@ -73,8 +73,9 @@ struct HitRec {
 }
 
 // A pixel's colour so far, the local term of its current hit summed over the lights shaded so far
-// (added to the colour, times the path weight, after the last light, as the CPU does), and the
-// sum of the colours of the pixel's finished samples.
+// (added to the colour, times the path weight, after the last light, as the CPU does; in AO mode
+// local.x counts the AO rays not blocked so far), and the sum of the colours of the pixel's
+// finished samples.
 struct Accum {
     colour: vec4<f32>,
     local: vec4<f32>,
@@ -89,7 +90,8 @@ struct Aov {
     tris: u32,
 }
 
-// Which light a shade pass handles, and which bounce a bounce pass is (a push constant).
+// Which light a shade pass handles, and which bounce a bounce pass (or which ray an AO pass) is
+// (a push constant).
 struct Pass {
     light: u32,
     depth: u32,

@@ -5,9 +5,9 @@
 // diffuse bounce (closest hit) from every primary hit and shade, then convert. Each pass reads
 // and writes per-pixel state (paths, hits, accum, aovs) in storage buffers.
 //
-// Every invocation of a workgroup calls `trace` the same number of times per stage (once, or once
-// per AO ray), with `active` false when its pixel lies outside the image or has nothing to trace:
-// SST walks the tree with the whole workgroup and needs every invocation at its barriers.
+// Every invocation of a workgroup calls `trace` exactly once per stage, with `active` false when
+// its pixel lies outside the image or has nothing to trace: SST walks the tree with the whole
+// workgroup and needs every invocation at its barriers.
 
 // Index of image pixel (x, y) in the per-pixel buffers, which hold the current tile.
 fn pixel_index(x: u32, y: u32) -> u32 {
@@ -244,30 +244,31 @@ fn leaving(live: bool, p: u32) -> Leaving {
     return l;
 }
 
-// Ambient occlusion (docs/shading.md): frame.samples.z rays of length frame.ao.x from every
-// primary hit through the any-hit traversal; the colour is the fraction that nothing blocks.
+// Ambient occlusion (docs/shading.md): AO ray pass_info.depth of frame.samples.z, of length
+// frame.ao.x, from every primary hit through the any-hit traversal; one pass per ray, the rays
+// not blocked so far counted in accum.local.x (an f32 holds the count exactly). The last pass
+// writes the fraction. (One pass per ray rather than a loop around `trace`: lavapipe dropped
+// workgroups of the subgroup-voting SST whose any-hit walk ran inside a loop.)
 fn stage_ao(x: u32, y: u32, valid: bool) {
     let p = select(0u, pixel_index(x, y), valid);
     let live = valid && paths[p].dir.w != 0.0;
     let start = leaving(live, p);
-    let seed = image_pixel(x, y);
-    var open = 0u;
-    // Every invocation runs every ray (SST's barriers), the misses with `live` false.
-    for (var k = 0u; k < frame.samples.z; k++) {
-        let u = sample_2d(seed, incoherent_sample(frame.samples.x, frame.samples.z, k));
-        let r = make_ray(start.origin, cosine_direction(start.normal, u));
-        if trace(r, 0.0, frame.ao.x, true, live).tri == NO_TRIANGLE {
-            open += 1u;
-        }
-    }
+    let k = pass_info.depth;
+    let u = sample_2d(image_pixel(x, y), incoherent_sample(frame.samples.x, frame.samples.z, k));
+    let r = make_ray(start.origin, cosine_direction(start.normal, u));
+    let blocked = trace(r, 0.0, frame.ao.x, true, live).tri != NO_TRIANGLE;
     if valid {
         count(SLOT_FINISHED);
     }
     if !live {
         return;
     }
-    count_n(SLOT_AO, frame.samples.z);
-    accum[p].colour = vec4<f32>(vec3<f32>(f32(open) * frame.ao.y), 0.0);
+    let open = select(accum[p].local.x, 0.0, k == 0u) + select(1.0, 0.0, blocked);
+    accum[p].local.x = open;
+    if k + 1u == frame.samples.z {
+        count_n(SLOT_AO, frame.samples.z);
+        accum[p].colour = vec4<f32>(vec3<f32>(open * frame.ao.y), 0.0);
+    }
     aovs[p].nodes += cost_nodes;
     aovs[p].tris += cost_tris;
 }

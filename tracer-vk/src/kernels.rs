@@ -53,7 +53,8 @@ pub enum Stage {
     Bounce,
     /// Whitted and the incoherent modes: accumulated radiance to 8 bits.
     Convert,
-    /// Ambient occlusion: the AO rays of every primary hit (any hit), and their fraction.
+    /// Ambient occlusion: one AO ray of every primary hit (any hit); after the last, their
+    /// fraction.
     Ao,
     /// The diffuse bounce of every primary hit (closest hit), shaded.
     Diffuse,

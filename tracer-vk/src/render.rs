@@ -587,8 +587,11 @@ impl<'g> Renderer<'g> {
                     pass(rec, Stage::Primary, 0, 0)?;
                     rec.mark("trace primary");
                     match mode {
-                        Mode::Ao(_) => {
-                            pass(rec, Stage::Ao, 0, 0)?;
+                        Mode::Ao(ao) => {
+                            // One pass per AO ray (the push constant's depth names it).
+                            for k in 0..ao.samples {
+                                pass(rec, Stage::Ao, 0, k)?;
+                            }
                             rec.mark("ambient occlusion");
                         }
                         Mode::Diffuse => {
