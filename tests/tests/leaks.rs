@@ -24,6 +24,7 @@ use bvh_format::{Camera, Material, SceneFile, Triangle};
 use glam::{DVec3, Vec3};
 use render_spec::{CameraSpec, Mode, NO_TRIANGLE, Settings};
 use std::collections::HashMap;
+use tools::stress::edge_grid::{Aim, camera_grid, scene_of};
 use tracer_cpu::geometry::{Ray, intersect, intersect_moller_trumbore};
 use tracer_cpu::reference::intersect64;
 use tracer_cpu::traverse::Stack;
@@ -33,83 +34,6 @@ use tracer_vk::kernels::Method as VkMethod;
 use tracer_vk::render::Renderer;
 
 const DISTANCES: [f32; 5] = [1.0, 10.0, 100.0, 1000.0, 10_000.0];
-
-fn scene_of(tris: Vec<[Vec3; 3]>, camera: Option<Camera>) -> SceneFile {
-    let n = tris.len();
-    let scene = Scene {
-        normals: tris.iter().map(|_| [Vec3::Z; 3]).collect(),
-        positions: tris,
-        material_ids: vec![0; n],
-        materials: vec![Material::default()],
-        material_names: vec![String::new()],
-        cameras: camera.into_iter().collect(),
-        ..Default::default()
-    };
-    bvh_build::compile(&scene, &Default::default(), Default::default()).expect("the mesh compiles")
-}
-
-/// Which pixel rays a camera grid aims at.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Aim {
-    /// The midpoint of a shared (horizontal) edge.
-    Edges,
-    /// A shared vertex.
-    Vertices,
-}
-
-/// A camera at distance `distance` from the origin looking at it, and an `n` x `n` image whose
-/// every pixel ray meets the grid at a shared edge's midpoint or at a shared vertex.
-///
-/// Vertex (i, j) lies at `eye + s_j D(x, y)` on the unnormalised camera ray `D` of image point
-/// (x, y) (pixel centres at +0.5), with the depth `s_j` of a plane through the origin tilted 35
-/// degrees about the camera's horizontal axis: constant along a row, so the midpoint of two
-/// neighbours in a row lies on the ray between them. For edges the vertices sit at pixel corners
-/// in x, so the midpoint of each horizontal edge is a pixel centre; for vertices at pixel centres.
-/// One extra row and column around the image keeps every aimed-at edge and vertex interior.
-/// Returns also, per pixel, the vertices its ray is aimed at (both ends of its edge, or its vertex).
-fn camera_grid(n: u32, distance: f32, aim: Aim) -> (SceneFile, CameraSpec, Vec<Vec<Vec3>>) {
-    let eye = Vec3::new(0.48, 0.6, 0.64) * distance;
-    let fov = 2.0 * (0.4 / distance).atan().to_degrees();
-    let cam = CameraSpec { eye, at: Vec3::ZERO, up: Vec3::Y, fov_deg: fov };
-    let frame = cam.frame(n, n).expect("the camera is valid");
-    let f = (cam.at - eye).normalize();
-    let r = f.cross(cam.up).normalize();
-    let u = r.cross(f);
-    let tilt = 35f32.to_radians();
-    let plane = -f * tilt.cos() + u * tilt.sin();
-    let ray = |x: f32, y: f32| frame.top_left + x * frame.h_step + y * frame.v_step;
-    let (x0, cols) = match aim {
-        Aim::Edges => (0.0, n + 1),
-        Aim::Vertices => (-0.5, n + 2),
-    };
-    let rows = n + 2;
-    let vertex = |i: u32, j: u32| {
-        let (x, y) = (x0 + i as f32, j as f32 - 0.5);
-        let s = plane.dot(cam.at - eye) / plane.dot(ray(0.0, y));
-        eye + s * ray(x, y)
-    };
-    let v: Vec<Vec<Vec3>> = (0..rows).map(|j| (0..cols).map(|i| vertex(i, j)).collect()).collect();
-    let mut tris = Vec::new();
-    for j in 0..rows as usize - 1 {
-        for i in 0..cols as usize - 1 {
-            let (a, b, c, d) = (v[j][i], v[j][i + 1], v[j + 1][i + 1], v[j + 1][i]);
-            if (i + j) % 2 == 0 {
-                tris.extend([[a, b, c], [a, c, d]]);
-            } else {
-                tris.extend([[a, b, d], [b, c, d]]);
-            }
-        }
-    }
-    let aimed = (0..n as usize)
-        .flat_map(|y| (0..n as usize).map(move |x| (x, y)))
-        .map(|(x, y)| match aim {
-            Aim::Edges => vec![v[y + 1][x], v[y + 1][x + 1]],
-            Aim::Vertices => vec![v[y + 1][x + 1]],
-        })
-        .collect();
-    let camera = Camera::new("grid", cam.eye.into(), cam.at.into(), cam.up.into(), cam.fov_deg);
-    (scene_of(tris, Some(camera)), cam, aimed)
-}
 
 /// Pixels whose primary ray hit nothing, as the `prim` output says.
 fn misses(prim: &[u32]) -> usize {
@@ -208,7 +132,7 @@ fn camera_grids_aimed_at_shared_edges_and_vertices_leak_nowhere_on_either_tracer
     );
     for aim in [Aim::Edges, Aim::Vertices] {
         for distance in DISTANCES {
-            let (scene, cam, aimed) = camera_grid(N, distance, aim);
+            let (scene, cam, aimed) = camera_grid(N, distance, aim).expect("the grid compiles");
             let fans = pixel_fans(&scene, &aimed);
             let (_, prim) = cpu_prims(&scene, cam, N, Method::Ordered);
             let leaks = misses(&prim);
@@ -424,7 +348,7 @@ fn rays_aimed_at_shared_edges_and_vertices_of_closed_meshes_do_not_leak() {
     let (mut mt_edges, mut mt_vertices) = (0, 0);
     println!("mesh | distance | aim | rays | leaks: traversals (2 methods) | around the target | Moller-Trumbore");
     for (name, tris) in meshes {
-        let scene = scene_of(tris, None);
+        let scene = scene_of(tris, None).expect("the mesh compiles");
         let t = targets(&scene.leaf_triangles());
         let edges: Vec<(Vec3, Vec<usize>)> = t.edges.iter().map(|(p, k)| (*p, k.to_vec())).collect();
         // Not beyond 100: from farther, f32 cannot aim a ray at a point near the origin to within
@@ -577,11 +501,15 @@ fn moller_trumbore_leaks_through_the_tracer_where_the_watertight_test_does_not()
         let car = bvh_build::import::load(&p, &Default::default()).expect("the toy car imports");
         let glass = car.material_names.iter().position(|n| n == "Glass").expect("the toy car has glass") as u32;
         let tris = (0..car.positions.len()).filter(|&k| car.material_ids[k] == glass).map(|k| car.positions[k]);
-        scene_of(tris.collect(), None)
+        scene_of(tris.collect(), None).expect("the mesh compiles")
     };
     let meshes = [
-        ("sphere", scene_of(shapes::sphere(Vec3::ZERO, 0.4, 96, 48).positions, None), 12),
-        ("torus", scene_of(shapes::torus(Vec3::ZERO, 0.3, 0.12, 128, 48).positions, None), 12),
+        ("sphere", scene_of(shapes::sphere(Vec3::ZERO, 0.4, 96, 48).positions, None).expect("the mesh compiles"), 12),
+        (
+            "torus",
+            scene_of(shapes::torus(Vec3::ZERO, 0.3, 0.12, 128, 48).positions, None).expect("the mesh compiles"),
+            12,
+        ),
         ("toycar.glb glass", glass, 48),
     ];
     let workers = std::thread::available_parallelism().map_or(2, |n| n.get());

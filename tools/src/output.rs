@@ -235,6 +235,10 @@ pub struct Frame<'a> {
     pub width: u32,
     pub height: u32,
     pub rgb: &'a [[u8; 3]],
+    /// The same pixels unquantised, where the tracer keeps them (the f64 reference's mean of its
+    /// samples): an EXR then holds these, not the 8-bit values, so an error metric against the
+    /// reference measures the render and not the reference's rounding.
+    pub linear: Option<&'a [[f32; 3]]>,
 }
 
 fn encode_rgb<W: Write + Seek>(w: &mut W, format: Format, f: &Frame<'_>) -> Result<(), String> {
@@ -254,10 +258,16 @@ fn encode_rgb<W: Write + Seek>(w: &mut W, format: Format, f: &Frame<'_>) -> Resu
 }
 
 /// The colour image as OpenEXR: linear float R, G, B. The tracers' colour is linear (no
-/// gamma, docs/shading.md), so this is the 8-bit value over 255.
+/// gamma, docs/shading.md), so this is the 8-bit value over 255, or the unquantised value where
+/// the frame has it.
 fn encode_exr_rgb<W: Write + Seek>(w: &mut W, f: &Frame<'_>) -> Result<(), String> {
     use exr::prelude::*;
-    let channel = |k: usize| FlatSamples::F32(f.rgb.iter().map(|p| f32::from(p[k]) / 255.0).collect());
+    let channel = |k: usize| {
+        FlatSamples::F32(match f.linear {
+            Some(linear) => linear.iter().map(|p| p[k]).collect(),
+            None => f.rgb.iter().map(|p| f32::from(p[k]) / 255.0).collect(),
+        })
+    };
     let channels =
         vec![AnyChannel::new("R", channel(0)), AnyChannel::new("G", channel(1)), AnyChannel::new("B", channel(2))];
     let layer = Layer::new(
@@ -292,7 +302,7 @@ pub fn write_chart(
     write_atomically(svg_path, |w| w.write_all(svg.as_bytes()).map_err(|e| e.to_string()))?;
     let rgb: Vec<[u8; 3]> = pixels.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     let out = Output { path: png_path.to_owned(), format: Format::Png };
-    write_image(&out, &Frame { width: size.0, height: size.1, rgb: &rgb })
+    write_image(&out, &Frame { width: size.0, height: size.1, rgb: &rgb, linear: None })
 }
 
 /// A false-colour ramp from dark blue (0) through cyan, green and yellow to red (1).
@@ -379,7 +389,7 @@ impl Heatmap {
 
 /// Writes a heatmap (with its legend) in the format its name gave.
 pub fn write_heatmap(out: &Output, h: &Heatmap) -> Result<(), OutputError> {
-    write_image(out, &Frame { width: h.width, height: h.height, rgb: &h.rgb })
+    write_image(out, &Frame { width: h.width, height: h.height, rgb: &h.rgb, linear: None })
 }
 
 /// One OpenEXR file with the channels `t`, `N.X`, `N.Y`, `N.Z` (f32), `prim`, `nodes`, `tris` (u32).

@@ -148,8 +148,15 @@ impl RenderOutputs {
     /// Writes every output of a rendered image (the colour image, then the heatmap and the AOVs
     /// where asked for) and returns the report lines of the heatmap and the AOVs, so that a caller
     /// prints only after every file is complete.
-    pub fn write(&self, image: &Image, heatmap_max: Option<u32>) -> Result<Vec<String>, String> {
-        let frame = output::Frame { width: image.width, height: image.height, rgb: &image.rgb };
+    /// Writes every output of `image`; `linear` is its unquantised colour where the tracer has it
+    /// (written to an EXR colour image instead of the 8-bit values).
+    pub fn write(
+        &self,
+        image: &Image,
+        linear: Option<&[[f32; 3]]>,
+        heatmap_max: Option<u32>,
+    ) -> Result<Vec<String>, String> {
+        let frame = output::Frame { width: image.width, height: image.height, rgb: &image.rgb, linear };
         output::write_image(&self.image, &frame).map_err(|e| e.to_string())?;
         let mut lines = Vec::new();
         if let Some(aov) = &image.aov {

@@ -9,6 +9,7 @@ mod rayset;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use rayset::{Engine, Kind, RaySet};
+use render_spec::Intersect;
 use std::time::Duration;
 use tracer_cpu::{Method, Tracer, packet};
 
@@ -21,7 +22,7 @@ fn primary_rays(c: &mut Criterion) {
     let embree = tracer_cpu::embree::Scene::new(&scene.leaf_triangles(), tracer_cpu::embree::Flags::Default)
         .expect("Embree builds the bunny");
 
-    let mut engines = vec![("ours-ordered", Engine::Scalar(&tracer, Method::Ordered))];
+    let mut engines = vec![("ours-ordered", Engine::Scalar(&tracer, Method::Ordered, Intersect::Watertight))];
     if packet::available() {
         engines.push(("ours-packet", Engine::Packet(&tracer)));
     }

@@ -23,6 +23,7 @@
 mod rayset;
 
 use rayset::{Engine, Kind, RaySet};
+use render_spec::Intersect;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -30,7 +31,10 @@ use tracer_cpu::embree::{self, Flags};
 use tracer_cpu::{Method, Tracer, packet};
 
 /// The tracers of the table, in column order.
-const ENGINES: [&str; 6] = ["ours ordered", "ours stackless", "ours packet", "Embree 1", "Embree 1 robust", "Embree 8"];
+/// "ours ordered MT" is the ordered traversal with Möller-Trumbore (`--intersect mt`), the test
+/// before issue 16, so the edge-consistent test's cost is measured beside Embree in one run.
+const ENGINES: [&str; 7] =
+    ["ours ordered", "ours stackless", "ours packet", "Embree 1", "Embree 1 robust", "Embree 8", "ours ordered MT"];
 const ORDERED: usize = 0;
 const PACKET: usize = 2;
 const EMBREE1: usize = 3;
@@ -166,12 +170,13 @@ fn main() {
         scene_lines.push(format!("{name} ({n_tris} triangles, {})", path.display()));
         let tracer = Tracer::new(&scene);
         let engines: [Option<Engine>; ENGINES.len()] = [
-            Some(Engine::Scalar(&tracer, Method::Ordered)),
-            scene.escape.is_some().then_some(Engine::Scalar(&tracer, Method::Stackless)),
+            Some(Engine::Scalar(&tracer, Method::Ordered, Intersect::Watertight)),
+            scene.escape.is_some().then_some(Engine::Scalar(&tracer, Method::Stackless, Intersect::Watertight)),
             packet::available().then_some(Engine::Packet(&tracer)),
             Some(Engine::Embree1(&em)),
             Some(Engine::Embree1(&em_robust)),
             Some(Engine::Embree8(&em)),
+            Some(Engine::Scalar(&tracer, Method::Ordered, Intersect::MollerTrumbore)),
         ];
 
         for &(w, h) in &opts.sizes {
@@ -269,7 +274,9 @@ and resolution and traced unchanged by every tracer on the scene file's triangle
 - Embree 1 / Embree 1 robust: Embree 3's `rtcIntersect1`/`rtcOccluded1` on a BVH Embree builds
   (default medium quality) over the same triangles (`v0`, `v0 + e1`, `v0 + e2`), default scene
   flags / `RTC_SCENE_FLAG_ROBUST`; Embree 8: `rtcIntersect8`/`rtcOccluded8` on the same 4 x 2
-  blocks (coherent context). Only traversal is timed, never a build.
+  blocks (coherent context); ours ordered MT: the ordered traversal with Möller-Trumbore
+  (`--intersect mt`, the test before the edge-consistent one). Only traversal is timed, never a
+  build.
 
 Threads: a rayon pool of the given size; the rays are handed out in chunks of two image rows.
 
@@ -302,7 +309,7 @@ fn markdown(
     let _ = writeln!(s, "- Command: `{}` ({seconds:.0} s in all)", command.join(" "));
     let _ = writeln!(
         s,
-        "- Each figure: rays traced / median time of one pass over the whole ray set. Passes of the six \
+        "- Each figure: rays traced / median time of one pass over the whole ray set. Passes of the seven \
          tracers are interleaved round by round (so load changes hit all alike), after one untimed pass \
          of each on all threads; at least {} rounds ({} for scenes over 500k triangles at 1920x1440) and \
          at least {MIN_SECONDS} s of passes per row, at most {MAX_ROUNDS} rounds",

@@ -1,7 +1,8 @@
 //! The Vulkan compute tracer: LST, SST and stackless traversal (docs/vulkan-tracer.md).
 //!
-//! - [`device`]: the Vulkan device layer (ash): devices, buffers, compute pipelines, recording
-//!   dispatches and reading back GPU timestamps.
+//! - [`device`]: the Vulkan device layer (ash), one concern per file: instance and device choice,
+//!   validation, memory and staging, compute pipelines, descriptors, command recording and GPU
+//!   timestamps.
 //! - [`shader`]: WGSL kernels to SPIR-V with naga, overrides resolved in the program.
 //! - [`no_contraction`]: the `--exact` pass, SPIR-V whose float operations may not be fused.
 //! - [`error`]: [`VkError`], one sentence per failure.
@@ -18,6 +19,9 @@ pub mod tiles;
 
 /// The ash version the raw handles ([`Gpu::ash_device`], [`Recorder::raw`]) come from.
 pub use ash;
-pub use device::{Buffer, DeviceInfo, DeviceKind, Gpu, Pipeline, Recorder, Timings, ValidationLog, list_devices};
+pub use device::{
+    Buffer, BufferDesc, DeviceInfo, DeviceKind, Gpu, Pipeline, PipelineDesc, Recorder, Timings, ValidationLog,
+    list_devices,
+};
 pub use error::VkError;
 pub use shader::{translate, translate_with_subgroups};

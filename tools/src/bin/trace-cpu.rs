@@ -97,12 +97,13 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     let bar = Progress::new(settings.height as u64, "{bar:40} {pos}/{len} rows ({elapsed}, {eta} left)", false);
     let t0 = Instant::now();
     let progress = |rows: u32| bar.inc(rows as u64);
-    let image = pool
+    let (image, linear) = pool
         .install(|| {
             if reference {
-                tracer_cpu::reference::render_with_progress(scene, &settings, &progress).map(|r| r.image)
+                tracer_cpu::reference::render_with_progress(scene, &settings, &progress)
+                    .map(|r| (r.image, Some(r.linear)))
             } else {
-                tracer_cpu::render_with_progress(&Tracer::new(scene), &settings, method, &progress)
+                tracer_cpu::render_with_progress(&Tracer::new(scene), &settings, method, &progress).map(|i| (i, None))
             }
         })
         .map_err(|e| e.to_string())?;
@@ -110,7 +111,7 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     bar.finish();
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
-    let written = outputs.write(&image, args.heatmap_max)?;
+    let written = outputs.write(&image, linear.as_deref(), args.heatmap_max)?;
     let mut lines = Vec::new();
     let r = image.rays;
     lines.push(format!(

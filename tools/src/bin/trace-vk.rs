@@ -135,7 +135,7 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
     let image = &out.image;
-    let written = outputs.write(image, args.heatmap_max)?;
+    let written = outputs.write(image, None, args.heatmap_max)?;
     let r = image.rays;
     let lines = vec![format!(
         "{}x{} {}{} with {}{} on {}: {} GPU{}, rays: {} ({}) -> {}",

@@ -6,6 +6,7 @@
 
 pub mod cases;
 pub mod check;
+pub mod edge_grid;
 pub mod report;
 pub mod scenes;
 

@@ -9,7 +9,7 @@
 use bvh_format::SceneFile;
 use glam::Vec3;
 use rayon::prelude::*;
-use render_spec::CameraSpec;
+use render_spec::{CameraSpec, Intersect};
 use std::path::Path;
 use std::time::Instant;
 use tracer_cpu::geometry::{Cost, Ray, Watertight, offset_origin};
@@ -104,8 +104,8 @@ pub fn generate(scene: &SceneFile, width: u32, height: u32) -> Result<[RaySet; 3
 /// A way of tracing a ray set.
 #[derive(Clone, Copy)]
 pub enum Engine<'a> {
-    /// Ours, one ray at a time (`Method::Ordered` or `Method::Stackless`).
-    Scalar(&'a Tracer<'a>, Method),
+    /// Ours, one ray at a time (`Method::Ordered` or `Method::Stackless`) with a triangle test.
+    Scalar(&'a Tracer<'a>, Method, Intersect),
     /// Ours, 8-wide AVX2 packets of 4 x 2 pixel blocks.
     Packet(&'a Tracer<'a>),
     /// Embree, `rtcIntersect1` / `rtcOccluded1`.
@@ -128,14 +128,20 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
     set.rays.par_chunks(2 * w).zip(out.par_chunks_mut(2 * w)).for_each_init(
         || (Stack::default(), Vec::with_capacity(128)),
         |(stack, pstack), (rays, out)| match engine {
-            Engine::Scalar(tracer, method) => {
+            Engine::Scalar(tracer, method, test) => {
                 let mut cost = Cost::default();
                 for (r, o) in rays.iter().zip(out.iter_mut()) {
                     let Some((ray, t_max)) = r else { continue };
                     *o = if any {
-                        if tracer.occluded(method, ray, *t_max, stack, &mut cost) { 0.0 } else { f32::INFINITY }
+                        if tracer.occluded_with(test, method, ray, *t_max, stack, &mut cost) {
+                            0.0
+                        } else {
+                            f32::INFINITY
+                        }
                     } else {
-                        tracer.closest(method, ray, 0.0, *t_max, stack, &mut cost).map_or(f32::INFINITY, |h| h.t)
+                        tracer
+                            .closest_with(test, method, ray, 0.0, *t_max, stack, &mut cost)
+                            .map_or(f32::INFINITY, |h| h.t)
                     };
                 }
             }
