@@ -123,26 +123,62 @@ impl Choice {
     }
 }
 
+/// Adds one primitive to a set of `3 K` bins and, if it is large, to the large bin.
+#[inline(always)]
+fn bin_one(axes: &mut [Bin], large: &mut Bin, k: usize, grid: &Grid, p: &PrimRef) {
+    let pb = p.aabb();
+    let b = grid.bins_of((pb.min + pb.max) * 0.5);
+    for (axis, i) in b.into_iter().enumerate() {
+        let bin = &mut axes[axis * k + i];
+        bin.bounds.grow(&pb);
+        bin.count += 1;
+    }
+    // Large triangles are rare, hence a branch.
+    if p.area >= grid.big {
+        large.bounds.grow(&pb);
+        large.count += 1;
+    }
+}
+
+/// Primitives from which [`BinnedSah::bin_into`] uses a second set of bins: below, clearing it
+/// costs more than it saves.
+const TWO_SETS: usize = 256;
+
+/// Bins of one node: two sets of `3 K` and the large bin.
+fn bin_len(k: usize) -> usize {
+    6 * k + 1
+}
+
 impl BinnedSah {
-    /// Adds `prims` to `bins`: `3 K` bins (K per axis), then one gathering the large triangles.
+    /// Adds `prims` to `bins`: `3 K` bins (K per axis), then one gathering the large triangles,
+    /// then (from [`TWO_SETS`] primitives) a second set of `3 K` bins for every other primitive.
+    /// Neighbouring primitives tend to fall into the same bin, and with one set each would wait
+    /// for the previous one's update of that bin to come back from memory; two sets halve those
+    /// chains. The sets are summed into the first at the end (min, max and counts are exact in
+    /// any order, so the bins do not depend on this).
     fn bin_into(&self, prims: &[PrimRef], grid: &Grid, bins: &mut [Bin]) {
         let k = self.bins;
-        let (x, rest) = bins.split_at_mut(k);
-        let (y, rest) = rest.split_at_mut(k);
-        let (z, large) = rest.split_at_mut(k);
-        for p in prims {
-            let pb = p.aabb();
-            let b = grid.bins_of((pb.min + pb.max) * 0.5);
-            for (axis_bins, i) in [(&mut *x, b[0]), (&mut *y, b[1]), (&mut *z, b[2])] {
-                let bin = &mut axis_bins[i];
-                bin.bounds.grow(&pb);
-                bin.count += 1;
+        let (first, second) = bins.split_at_mut(3 * k + 1);
+        let (axes, large) = first.split_at_mut(3 * k);
+        let large = &mut large[0];
+        if prims.len() < TWO_SETS {
+            for p in prims {
+                bin_one(axes, large, k, grid, p);
             }
-            // Large triangles are rare, hence a branch.
-            if p.area >= grid.big {
-                large[0].bounds.grow(&pb);
-                large[0].count += 1;
-            }
+            return;
+        }
+        let other = &mut second[..3 * k];
+        other.fill(EMPTY_BIN);
+        let mut pairs = prims.chunks_exact(2);
+        for pair in &mut pairs {
+            bin_one(axes, large, k, grid, &pair[0]);
+            bin_one(other, large, k, grid, &pair[1]);
+        }
+        for p in pairs.remainder() {
+            bin_one(axes, large, k, grid, p);
+        }
+        for (a, b) in axes.iter_mut().zip(other.iter()) {
+            a.add(b);
         }
     }
 
@@ -219,7 +255,8 @@ impl BinnedSah {
 
     fn split_with(&self, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool, bins: &mut [Bin]) -> Option<Split> {
         let grid = Grid::new(nb, self.bins)?;
-        bins.fill(EMPTY_BIN);
+        // The second set is cleared by bin_into when used.
+        bins[..3 * self.bins + 1].fill(EMPTY_BIN);
         self.bin_into(prims, &grid, bins);
         let choice = self.choose(bins, prims.len(), nb, may_leaf, || small_bounds(prims, grid.big))?;
         let (mut left, mut right) = choice.children();
@@ -335,8 +372,8 @@ impl Splitter for BinnedSah {
                     &mut own
                 }
             };
-            bins.resize(3 * self.bins + 1, EMPTY_BIN);
-            self.split_with(prims, nb, may_leaf, &mut bins[..3 * self.bins + 1])
+            bins.resize(bin_len(self.bins), EMPTY_BIN);
+            self.split_with(prims, nb, may_leaf, &mut bins[..bin_len(self.bins)])
         })
     }
 
@@ -355,8 +392,9 @@ impl Splitter for BinnedSah {
         let chunks: Vec<Vec<Bin>> = prims
             .par_chunks(CHUNK)
             .map(|chunk| {
-                let mut bins = vec![EMPTY_BIN; 3 * k + 1];
+                let mut bins = vec![EMPTY_BIN; bin_len(k)];
                 self.bin_into(chunk, &grid, &mut bins);
+                bins.truncate(3 * k + 1);
                 bins
             })
             .collect();

@@ -84,7 +84,7 @@ impl AreaScale {
 /// reorder these records themselves rather than an index array into them, so that binning and
 /// partitioning stream through memory instead of gathering from it.
 #[repr(C)]
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, bytemuck::Zeroable)]
 pub struct PrimRef {
     pub min: [f32; 3],
     pub id: u32,
@@ -94,8 +94,6 @@ pub struct PrimRef {
 }
 
 impl PrimRef {
-    const ZERO: PrimRef = PrimRef { min: [0.0; 3], id: 0, max: [0.0; 3], area: 0.0 };
-
     #[inline(always)]
     pub fn aabb(&self) -> Aabb {
         Aabb { min: Vec3A::from(self.min), max: Vec3A::from(self.max) }
@@ -201,7 +199,8 @@ pub const PARALLEL_NODE: usize = 1 << 15;
 
 /// One node of the build, in a gapped depth-first array: a subtree of `c` primitives owns `2c - 1`
 /// slots, its root first, its left subtree next, and its right subtree at `index`.
-#[derive(Clone, Copy, Default)]
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Zeroable)]
 struct Slot {
     min: [f32; 3],
     max: [f32; 3],
@@ -246,10 +245,13 @@ fn build_with<S: Splitter>(refs: &mut [PrimRef], ctx: Ctx<'_, S>, escape: bool) 
     use rayon::prelude::*;
     let n = refs.len();
     assert!(n > 0 && n < u32::MAX as usize / 2, "the compiler rejects empty and oversized scenes before building");
-    let mut slots = vec![Slot::default(); 2 * n - 1];
+    // Zeroed allocations come from the allocator as untouched pages, which the threads then fault
+    // in where they first write; `vec![x; n]` of a struct would write every byte on this thread
+    // first (hundreds of MiB for a million triangles, a serial part the cores cannot share).
+    let mut slots: Vec<Slot> = bytemuck::zeroed_vec(2 * n - 1);
     let mut order = vec![0u32; n];
     // The second buffer that large nodes are partitioned into; small trees never need it.
-    let mut spare = if n > ctx.parallel_node { vec![PrimRef::ZERO; n] } else { Vec::new() };
+    let mut spare: Vec<PrimRef> = if n > ctx.parallel_node { bytemuck::zeroed_vec(n) } else { Vec::new() };
     let root = bounds_parallel(refs);
     build_node(&ctx, Prims { refs, spare: &mut spare, order: &mut order }, 0, &mut slots, 0, root, 0);
     drop(spare);
@@ -369,7 +371,7 @@ fn node_of(s: &Slot, children: usize) -> Node {
 /// the depth-first (left first) order of their parents. The pairs below a node are therefore
 /// contiguous, which lets subtrees be written in parallel into their own parts of the array.
 fn child_pair(slots: &[Slot]) -> Vec<Node> {
-    let mut nodes = vec![Node::default(); slots[0].nodes as usize];
+    let mut nodes: Vec<Node> = bytemuck::zeroed_vec(slots[0].nodes as usize);
     let (root, below) = nodes.split_first_mut().expect("a tree has a root");
     *root = node_of(&slots[0], 1);
     if slots[0].count == 0 {
@@ -409,7 +411,7 @@ fn pairs(slots: &[Slot], s: usize, out: &mut [Node], base: usize) {
 /// The escape-pointer layout: nodes in depth-first order (left first), an inner node pointing
 /// past its subtree.
 fn depth_first(slots: &[Slot]) -> Vec<Node> {
-    let mut nodes = vec![Node::default(); slots[0].nodes as usize];
+    let mut nodes: Vec<Node> = bytemuck::zeroed_vec(slots[0].nodes as usize);
     preorder(slots, 0, &mut nodes, 0);
     nodes
 }

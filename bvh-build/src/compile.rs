@@ -6,9 +6,9 @@ use crate::binned::BinnedSah;
 use crate::build::{self, Costs};
 use crate::scene::Scene;
 use crate::sweep::SweepSah;
+use crate::weld::weld;
 use bvh_format::{BuildParams, FLAT, IndexedTriangle, SceneFile, Strategy};
 use glam::Vec3;
-use std::collections::HashMap;
 use std::sync::atomic::AtomicUsize;
 
 /// Which node layouts to store.
@@ -103,6 +103,20 @@ pub fn compile_with_progress(
     layouts: Layouts,
     progress: Option<&AtomicUsize>,
 ) -> Result<SceneFile, BuildError> {
+    let file = compile_for_writing(scene, params, layouts, progress)?;
+    file.validate().map_err(BuildError::Invalid)?;
+    Ok(file)
+}
+
+/// [`compile_with_progress`] without its validation, for a caller that hands the file straight to
+/// `bvh_format::write_to` (or `write`), which validates it before writing a byte: one validation
+/// on the way to disk instead of two (about 130 ms for a million triangles on the H100 host).
+pub fn compile_for_writing(
+    scene: &Scene,
+    params: &BuildParams,
+    layouts: Layouts,
+    progress: Option<&AtomicUsize>,
+) -> Result<SceneFile, BuildError> {
     if !layouts.child_pair && !layouts.escape {
         return Err(BuildError::Params("at least one node layout must be chosen".to_owned()));
     }
@@ -128,7 +142,6 @@ pub fn compile_with_progress(
         cameras: scene.cameras.clone(),
         lights: scene.lights.clone(),
     };
-    file.validate().map_err(BuildError::Invalid)?;
     Ok(file)
 }
 
@@ -144,42 +157,39 @@ struct IndexedGeometry {
 /// so that a leaf's vertices lie close together. Welding is what makes the tracers' edge test
 /// consistent: the two triangles of an edge read the same two stored vertices. Triangles whose
 /// vertex normals all equal their geometric normal are stored flat (no normals); a scene of only
-/// flat triangles stores none.
+/// flat triangles stores none. Parallel, with the result of a serial pass ([`crate::weld`]).
 fn index_geometry(scene: &Scene, order: &[u32]) -> IndexedGeometry {
-    // Bit patterns as keys, with -0 made +0 (`+ 0.0`) so that equal coordinates weld.
-    fn key(v: Vec3) -> [u32; 3] {
-        (v + Vec3::ZERO).to_array().map(f32::to_bits)
-    }
-    fn weld(map: &mut HashMap<[u32; 3], u32>, out: &mut Vec<[f32; 3]>, v: Vec3) -> u32 {
-        *map.entry(key(v)).or_insert_with(|| {
-            out.push((v + Vec3::ZERO).to_array());
-            out.len() as u32 - 1
-        })
-    }
-    let mut positions = HashMap::new();
-    let mut vertices = Vec::new();
+    use rayon::prelude::*;
+    let corners: Vec<Vec3> = order.par_iter().flat_map_iter(|&i| scene.positions[i as usize]).collect();
+    let welded = weld(&corners);
+    drop(corners);
     let triangles = order
-        .iter()
-        .map(|&i| IndexedTriangle {
-            vertices: scene.positions[i as usize].map(|p| weld(&mut positions, &mut vertices, p)),
-            material: scene.material_ids[i as usize],
-        })
+        .par_iter()
+        .zip(welded.indices.par_chunks_exact(3))
+        .map(|(&i, v)| IndexedTriangle { vertices: [v[0], v[1], v[2]], material: scene.material_ids[i as usize] })
         .collect();
-    let mut normal_map = HashMap::new();
-    let mut normals = Vec::new();
-    let normal_indices: Vec<[u32; 3]> = order
-        .iter()
-        .map(|&i| {
-            let ns = scene.normals[i as usize];
-            if is_flat(scene.positions[i as usize], ns) {
-                FLAT
-            } else {
-                ns.map(|n| weld(&mut normal_map, &mut normals, n))
-            }
-        })
-        .collect();
-    let normal_indices = if normals.is_empty() { Vec::new() } else { normal_indices };
-    IndexedGeometry { vertices, triangles, normals, normal_indices }
+    let flat: Vec<bool> =
+        order.par_iter().map(|&i| is_flat(scene.positions[i as usize], scene.normals[i as usize])).collect();
+    let shaded: Vec<Vec3> =
+        order.par_iter().zip(&flat).filter(|&(_, &f)| !f).flat_map_iter(|(&i, _)| scene.normals[i as usize]).collect();
+    let welded_normals = weld(&shaded);
+    drop(shaded);
+    let normal_indices = if welded_normals.vertices.is_empty() {
+        Vec::new()
+    } else {
+        // The k-th shaded triangle's normals are the k-th triple of the welded indices.
+        let mut triples = welded_normals.indices.chunks_exact(3);
+        flat.iter()
+            .map(|&f| {
+                if f {
+                    FLAT
+                } else {
+                    triples.next().map(|t| [t[0], t[1], t[2]]).expect("one triple per shaded triangle")
+                }
+            })
+            .collect()
+    };
+    IndexedGeometry { vertices: welded.vertices, triangles, normals: welded_normals.vertices, normal_indices }
 }
 
 /// Whether all three vertex normals are the triangle's own geometric normal (to rounding), so that

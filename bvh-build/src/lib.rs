@@ -14,9 +14,11 @@ pub mod import;
 pub mod peers;
 pub mod scene;
 pub mod sweep;
+mod weld;
 
 pub use compile::{
-    Layouts, MAX_BINS, build_tree, build_tree_with_progress, check_params, compile, compile_with_progress,
+    Layouts, MAX_BINS, build_tree, build_tree_with_progress, check_params, compile, compile_for_writing,
+    compile_with_progress,
 };
 pub use import::{ImportError, ImportOptions};
 pub use scene::Scene;

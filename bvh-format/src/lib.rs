@@ -21,7 +21,7 @@ pub use types::{
     BuildParams, CAMERA_NAME_LEN, Camera, FLAT, IndexedTriangle, Light, Material, Node, SceneSettings, Strategy,
     Triangle,
 };
-pub use write::{write, write_file};
+pub use write::{WriteError, write, write_file, write_to};
 
 /// A whole scene as stored in one file: indexed geometry in BVH leaf order, shading data, the tree
 /// in one or both layouts, and default cameras and lights.

@@ -16,33 +16,45 @@ pub(crate) fn encode_names(names: &[String]) -> Vec<u8> {
     names.join("\0").into_bytes()
 }
 
-/// Serialises a scene. The scene is validated first, so the writer never produces a file that the
-/// reader would reject.
-pub fn write(scene: &SceneFile) -> Result<Vec<u8>, FormatError> {
+/// A validated scene laid out as a file: the header and section table, then each section's bytes
+/// at its offset (zeros between them), `len` bytes in all.
+struct Plan<'a> {
+    head: Vec<u8>,
+    sections: Vec<(u64, std::borrow::Cow<'a, [u8]>)>,
+    len: u64,
+}
+
+/// Validates `scene` and lays it out; the writer never produces a file that the reader would reject.
+fn plan(scene: &SceneFile) -> Result<Plan<'_>, FormatError> {
     scene.validate()?;
     let stats = scene.stats();
     let names = encode_names(&scene.material_names);
+    let names_len = names.len() as u64;
 
-    let mut sections: Vec<(SectionKind, u64, &[u8])> = vec![
-        (SectionKind::Vertices, scene.vertices.len() as u64, bytemuck::cast_slice(&scene.vertices)),
-        (SectionKind::Triangles, scene.triangles.len() as u64, bytemuck::cast_slice(&scene.triangles)),
-        (SectionKind::Normals, scene.normals.len() as u64, bytemuck::cast_slice(&scene.normals)),
-        (SectionKind::NormalIndices, scene.normal_indices.len() as u64, bytemuck::cast_slice(&scene.normal_indices)),
-        (SectionKind::Materials, scene.materials.len() as u64, bytemuck::cast_slice(&scene.materials)),
-        (SectionKind::MaterialNames, names.len() as u64, &names),
-        (SectionKind::InputIndex, scene.input_index.len() as u64, bytemuck::cast_slice(&scene.input_index)),
+    let mut sections: Vec<(SectionKind, u64, std::borrow::Cow<'_, [u8]>)> = vec![
+        (SectionKind::Vertices, scene.vertices.len() as u64, bytemuck::cast_slice(&scene.vertices).into()),
+        (SectionKind::Triangles, scene.triangles.len() as u64, bytemuck::cast_slice(&scene.triangles).into()),
+        (SectionKind::Normals, scene.normals.len() as u64, bytemuck::cast_slice(&scene.normals).into()),
+        (
+            SectionKind::NormalIndices,
+            scene.normal_indices.len() as u64,
+            bytemuck::cast_slice(&scene.normal_indices).into(),
+        ),
+        (SectionKind::Materials, scene.materials.len() as u64, bytemuck::cast_slice(&scene.materials).into()),
+        (SectionKind::MaterialNames, names_len, names.into()),
+        (SectionKind::InputIndex, scene.input_index.len() as u64, bytemuck::cast_slice(&scene.input_index).into()),
     ];
     let mut flags = 0;
     if let Some(n) = &scene.child_pair {
         flags |= FLAG_CHILD_PAIR;
-        sections.push((SectionKind::NodesChildPair, n.len() as u64, bytemuck::cast_slice(n)));
+        sections.push((SectionKind::NodesChildPair, n.len() as u64, bytemuck::cast_slice(n).into()));
     }
     if let Some(n) = &scene.escape {
         flags |= FLAG_ESCAPE;
-        sections.push((SectionKind::NodesEscape, n.len() as u64, bytemuck::cast_slice(n)));
+        sections.push((SectionKind::NodesEscape, n.len() as u64, bytemuck::cast_slice(n).into()));
     }
-    sections.push((SectionKind::Cameras, scene.cameras.len() as u64, bytemuck::cast_slice(&scene.cameras)));
-    sections.push((SectionKind::Lights, scene.lights.len() as u64, bytemuck::cast_slice(&scene.lights)));
+    sections.push((SectionKind::Cameras, scene.cameras.len() as u64, bytemuck::cast_slice(&scene.cameras).into()));
+    sections.push((SectionKind::Lights, scene.lights.len() as u64, bytemuck::cast_slice(&scene.lights).into()));
 
     let table_end = (HEADER_SIZE + SECTION_ENTRY_SIZE * sections.len()) as u64;
     let mut offset = align_up(table_end);
@@ -91,15 +103,56 @@ pub fn write(scene: &SceneFile) -> Result<Vec<u8>, FormatError> {
     };
     header.header_crc = header_crc(&header, bytemuck::cast_slice(&table));
 
-    let mut out = Vec::with_capacity(offset as usize);
-    out.extend_from_slice(bytemuck::bytes_of(&header));
-    out.extend_from_slice(bytemuck::cast_slice(&table));
-    for ((_, _, bytes), entry) in sections.iter().zip(&table) {
-        out.resize(entry.offset as usize, 0);
+    let mut head = Vec::with_capacity(table_end as usize);
+    head.extend_from_slice(bytemuck::bytes_of(&header));
+    head.extend_from_slice(bytemuck::cast_slice(&table));
+    let sections = sections.into_iter().zip(&table).map(|((_, _, bytes), entry)| (entry.offset, bytes)).collect();
+    Ok(Plan { head, sections, len: offset })
+}
+
+/// Serialises a scene. The scene is validated first, so the writer never produces a file that the
+/// reader would reject.
+pub fn write(scene: &SceneFile) -> Result<Vec<u8>, FormatError> {
+    let plan = plan(scene)?;
+    let mut out = Vec::with_capacity(plan.len as usize);
+    out.extend_from_slice(&plan.head);
+    for (offset, bytes) in &plan.sections {
+        out.resize(*offset as usize, 0);
         out.extend_from_slice(bytes);
     }
-    out.resize(offset as usize, 0);
+    out.resize(plan.len as usize, 0);
     Ok(out)
+}
+
+/// Why [`write_to`] wrote no complete file.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    #[error("it would not be a valid scene file: {0}")]
+    Invalid(#[from] FormatError),
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+}
+
+/// [`write`] straight into `out`, section by section, without assembling the file in memory
+/// first (a copy of the whole file, 110 MB for a million triangles). Validates first, and writes
+/// nothing if the scene is invalid. Returns the number of bytes written.
+pub fn write_to(scene: &SceneFile, out: &mut impl std::io::Write) -> Result<u64, WriteError> {
+    let plan = plan(scene)?;
+    emit(&plan, out)?;
+    Ok(plan.len)
+}
+
+/// Writes a laid-out file: the head, then each section after zeros up to its offset.
+fn emit(plan: &Plan<'_>, out: &mut impl std::io::Write) -> std::io::Result<()> {
+    const ZEROS: [u8; ALIGN as usize] = [0; ALIGN as usize];
+    out.write_all(&plan.head)?;
+    let mut at = plan.head.len() as u64;
+    for (offset, bytes) in &plan.sections {
+        out.write_all(&ZEROS[..(offset - at) as usize])?;
+        out.write_all(bytes)?;
+        at = offset + bytes.len() as u64;
+    }
+    out.write_all(&ZEROS[..(plan.len - at) as usize])
 }
 
 /// CRC-32 over the header with its checksum field zeroed, then the section table.
@@ -115,13 +168,20 @@ pub(crate) fn header_crc(header: &Header, table: &[u8]) -> u32 {
 /// Writes a scene to `path` through a temporary file in the same folder, renamed into place only
 /// when complete, so an interrupted write never leaves a damaged file under the final name.
 pub fn write_file(scene: &SceneFile, path: &std::path::Path) -> Result<(), FileError> {
-    let bytes = write(scene).map_err(|source| FileError::InvalidScene { path: path.display().to_string(), source })?;
+    // Validated before the temporary file exists, so an invalid scene leaves nothing behind.
+    let plan = plan(scene).map_err(|source| FileError::InvalidScene { path: path.display().to_string(), source })?;
     let werr = |source| FileError::Write { path: path.display().to_string(), source };
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(".partial");
     let tmp = std::path::PathBuf::from(tmp);
+    let written = (|| {
+        let mut w = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+        emit(&plan, &mut w)?;
+        w.into_inner().map_err(|e| e.into_error())?;
+        std::fs::rename(&tmp, path)
+    })();
     // A failed write (a full disk) or rename removes the temporary file as well.
-    std::fs::write(&tmp, &bytes).and_then(|()| std::fs::rename(&tmp, path)).map_err(|e| {
+    written.map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
         werr(e)
     })

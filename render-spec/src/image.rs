@@ -16,6 +16,36 @@ pub struct Aovs {
     pub tris: Vec<u32>,
 }
 
+/// How the primary hits of two renders of one frame differ (see [`Aovs::prim_diff`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PrimDiff {
+    /// Pixels whose primary ray hit another triangle at the same distance, within a relative
+    /// 1e-4: an exact tie or a shared edge, where two tracers may round differently.
+    pub ties: usize,
+    /// Pixels whose primary ray hit another triangle at another distance, or hit in one render
+    /// and missed in the other.
+    pub differs: usize,
+}
+
+impl Aovs {
+    /// Compares the primary hits pixel by pixel with another render of the same frame.
+    pub fn prim_diff(&self, other: &Aovs) -> PrimDiff {
+        let mut d = PrimDiff::default();
+        for ((&p, &q), (&a, &b)) in self.prim.iter().zip(&other.prim).zip(self.t.iter().zip(&other.t)) {
+            if p == q {
+                continue;
+            }
+            let both_hit = p != crate::NO_TRIANGLE && q != crate::NO_TRIANGLE;
+            if both_hit && (a - b).abs() <= 1e-4 * a.abs().max(b.abs()) {
+                d.ties += 1;
+            } else {
+                d.differs += 1;
+            }
+        }
+        d
+    }
+}
+
 /// Rays traced, by kind.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RayCounts {

@@ -18,9 +18,8 @@
 //! bounded; the same rays through the pair (or fan) of triangles at the target with the old
 //! Moller-Trumbore test leak, so that these tests can fail.
 
-use bvh_build::Scene;
 use bvh_build::import::shapes;
-use bvh_format::{Camera, Material, SceneFile, Triangle};
+use bvh_format::{SceneFile, Triangle};
 use glam::{DVec3, Vec3};
 use render_spec::{CameraSpec, Mode, NO_TRIANGLE, Settings};
 use std::collections::HashMap;

@@ -14,10 +14,10 @@ pub const EXACT_SUFFIX: &str = "+exact";
 
 /// A traversal by the name `trace-vk --method` takes.
 pub fn method_of(name: &str) -> Result<Method, String> {
-    [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup]
-        .into_iter()
-        .find(|m| m.name() == name)
-        .ok_or_else(|| format!("{name:?} is not a GPU method (lst, stackless, sst, sst-subgroup)"))
+    Method::ALL.into_iter().find(|m| m.name() == name).ok_or_else(|| {
+        let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+        format!("{name:?} is not a GPU method ({})", names.join(", "))
+    })
 }
 
 /// Fails when the validation layer reported anything.

@@ -320,3 +320,36 @@ fn bench_checks_its_table_before_work() {
     }
     assert_eq!(snapshot(&dir), before);
 }
+
+/// `trace-vk devices` says for every device whether rt-pipeline runs there, and `render --method
+/// rt-pipeline` on device 0 agrees: refused before any output is written, in one sentence naming
+/// what is missing (lavapipe), or rendered (a device with the ray-tracing extensions).
+#[test]
+fn devices_say_where_rt_pipeline_runs_and_render_agrees() {
+    let dir = scratch("rt-pipeline");
+    let out = assert_ok(&run(&dir, "trace-vk", &["devices"]), "trace-vk devices");
+    let lines: Vec<&str> = out.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert!(!lines.is_empty());
+    for l in &lines {
+        assert!(l.ends_with("rt-pipeline: supported") || l.contains("rt-pipeline: no (lacks VK_KHR_"), "{l}");
+    }
+    if lines[0].contains("llvmpipe") {
+        assert!(lines[0].contains("rt-pipeline: no (lacks VK_KHR_acceleration_structure"), "{}", lines[0]);
+    }
+    let room = room(&dir);
+    let args = ["render", &room, "--device", "0", "--method", "rt-pipeline", "--res", "16x12", "-o", "rt.png"];
+    let o = run(&dir, "trace-vk", &args);
+    match lines[0].split_once("rt-pipeline: no (lacks ") {
+        Some((_, missing)) => {
+            let missing = missing.trim_end_matches(')');
+            let line = assert_one_sentence_error(&o, missing);
+            assert!(line.starts_with("error: --method rt-pipeline needs "), "{line}");
+            assert!(!dir.join("rt.png").exists(), "a refused run wrote its image");
+        }
+        None => {
+            let said = assert_ok(&o, "rt-pipeline on a device that supports it");
+            assert!(said.contains("rt-pipeline: the driver built its structures in "), "{said}");
+            assert_eq!(image::image_dimensions(dir.join("rt.png")).unwrap(), (16, 12));
+        }
+    }
+}

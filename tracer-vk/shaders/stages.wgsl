@@ -54,6 +54,9 @@ fn stage_cast(x: u32, y: u32, valid: bool) {
     let p = pixel_index(x, y);
     let r = make_ray(frame.eye.xyz, primary_dir(x, y));
     let h = trace(r, 0.0, F32_MAX, false, valid);
+//#if RT_EMIT
+    return; // rt_pipeline.wgsl: this half only writes the ray
+//#endif
     if !valid {
         return;
     }
@@ -76,6 +79,9 @@ fn stage_primary(x: u32, y: u32, valid: bool) {
     let p = pixel_index(x, y);
     let r = make_ray(frame.eye.xyz, primary_dir(x, y));
     let h = trace(r, 0.0, F32_MAX, false, valid);
+//#if RT_EMIT
+    return; // rt_pipeline.wgsl: this half only writes the ray
+//#endif
     if !valid {
         return;
     }
@@ -129,6 +135,9 @@ fn stage_shade(x: u32, y: u32, valid: bool) {
         }
     }
     let blocked = trace(shadow, 0.0, shadow_t, true, wants_shadow).tri != NO_TRIANGLE;
+//#if RT_EMIT
+    return; // rt_pipeline.wgsl: this half only writes the ray
+//#endif
     if valid {
         count(SLOT_FINISHED);
     }
@@ -195,6 +204,9 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
     }
     let nr = make_ray(o, dir);
     let nh = trace(nr, 0.0, F32_MAX, false, go);
+//#if RT_EMIT
+    return; // rt_pipeline.wgsl: this half only writes the ray
+//#endif
     if valid {
         count(SLOT_FINISHED);
     }

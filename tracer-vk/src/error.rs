@@ -39,6 +39,10 @@ pub enum VkError {
     /// buffer, ...): a bug in the caller, reported instead of handed to the driver.
     #[error("{0}")]
     Usage(String),
+    /// The device lacks what a method needs (rt-pipeline's extensions or limits): one sentence
+    /// naming what is missing.
+    #[error("{0}")]
+    Unsupported(String),
     #[error("the Vulkan call {what} failed with {}", result_text(*result))]
     Vulkan { what: &'static str, result: i32 },
 }
@@ -98,6 +102,7 @@ mod tests {
             VkError::OutOfDeviceMemory { label: "nodes".into(), bytes: 1 << 30 },
             VkError::DeviceLost,
             VkError::Timeout { seconds: 120 },
+            VkError::Unsupported(crate::rt::refusal("llvmpipe", "VK_KHR_acceleration_structure")),
             VkError::Shader { label: "k".into(), message: "error: expected `;`\n  ┌─ wgsl:1:1\n".into() },
             VkError::Vulkan { what: "vkCreateBuffer", result: vk::Result::ERROR_INITIALIZATION_FAILED.as_raw() },
         ];

@@ -14,6 +14,7 @@ const COMMON: &str = include_str!("../shaders/common.wgsl");
 const LST: &str = include_str!("../shaders/lst.wgsl");
 const STACKLESS: &str = include_str!("../shaders/stackless.wgsl");
 const SST: &str = include_str!("../shaders/sst.wgsl");
+const RT_PIPELINE: &str = include_str!("../shaders/rt_pipeline.wgsl");
 const STAGES: &str = include_str!("../shaders/stages.wgsl");
 
 /// GPU traversal methods (thesis 4.3).
@@ -27,17 +28,38 @@ pub enum Method {
     Sst,
     /// SST voting with subgroup operations instead of a workgroup-memory reduction.
     SstSubgroup,
+    /// The vendor's traversal: VK_KHR_ray_tracing_pipeline on the driver's acceleration structures
+    /// ([`crate::rt`]), the stages' shading unchanged (rt_pipeline.wgsl).
+    RtPipeline,
 }
 
 impl Method {
+    /// Every method, in the order `trace-vk` lists them.
+    pub const ALL: [Method; 5] = [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup, Method::RtPipeline];
+
     pub fn name(self) -> &'static str {
         match self {
             Method::Lst => "lst",
             Method::Stackless => "stackless",
             Method::Sst => "sst",
             Method::SstSubgroup => "sst-subgroup",
+            Method::RtPipeline => "rt-pipeline",
         }
     }
+
+    /// Whether the method walks one of the file's trees (rt-pipeline builds the driver's own).
+    pub fn reads_file_tree(self) -> bool {
+        self != Method::RtPipeline
+    }
+}
+
+/// Which half of a stage an rt-pipeline kernel is (rt_pipeline.wgsl): the one that writes the
+/// pixel's ray before the driver traces it, or the one that reads its hit and shades. The other
+/// methods' kernels are whole stages, [`Half::Collect`] by convention.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Half {
+    Emit,
+    Collect,
 }
 
 /// The kernels of the stream pipeline.
@@ -256,11 +278,20 @@ pub const PASS_BYTES: u32 = 16;
 
 /// The complete WGSL source of one kernel.
 pub fn source(stage: Stage, spec: &Specialisation) -> String {
-    let features = spec.features();
+    source_half(stage, spec, Half::Collect)
+}
+
+/// The complete WGSL source of one kernel; `half` matters for rt-pipeline only.
+pub fn source_half(stage: Stage, spec: &Specialisation, half: Half) -> String {
+    let mut features = spec.features();
     let traversal = match spec.method {
         Method::Lst => LST,
         Method::Stackless => STACKLESS,
         Method::Sst | Method::SstSubgroup => SST,
+        Method::RtPipeline => {
+            features.push(if half == Half::Emit { "RT_EMIT" } else { "RT_COLLECT" });
+            RT_PIPELINE
+        }
     };
     // Every kernel runs its WG_X x WG_Y pixel block as a line of WG_X * WG_Y invocations. naga
     // accepts the subgroup builtins only in one-dimensional workgroups, and lavapipe (whose
@@ -274,13 +305,23 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
     } else {
         ("", "")
     };
+    let call = if spec.method == Method::RtPipeline {
+        // The pixel's ray and hit records; none outside the tile, where pixel_index would name
+        // another pixel's.
+        format!(
+            "let valid = x < frame.tile.x + frame.tile.z && y < frame.tile.y + frame.tile.w;\n    \
+             rt_slot = select(RT_NO_SLOT, pixel_index(x, y), valid);\n    {}(x, y, valid);",
+            stage.entry()
+        )
+    } else {
+        format!("{}(x, y, x < frame.tile.x + frame.tile.z && y < frame.tile.y + frame.tile.w);", stage.entry())
+    };
     let entry = format!(
         "@compute @workgroup_size(WG_X * WG_Y)\n\
          fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32{params}) {{\n\
          \x20   lid = li;\n{subgroup_setup}\
          \x20   let x = frame.tile.x + wg.x * WG_X + li % WG_X;\n    let y = frame.tile.y + wg.y * WG_Y + li / WG_X;\n\
-         \x20   {}(x, y, x < frame.tile.x + frame.tile.z && y < frame.tile.y + frame.tile.w);\n}}\n",
-        stage.entry()
+         \x20   {call}\n}}\n"
     );
     let text = format!(
         "{}\n{}\n{}\n{}",
@@ -290,6 +331,38 @@ pub fn source(stage: Stage, spec: &Specialisation) -> String {
         entry
     );
     if spec.exact { text } else { with_device_rounding(&text) }
+}
+
+/// rt-pipeline's traversal done by LST in a compute kernel, one invocation per pixel's ray record
+/// (`stand_in` in rt_pipeline.wgsl): for testing the split stages on a device without ray
+/// tracing. `spec` is the renderer's (any method); the kernel walks the child-pair tree.
+pub fn stand_in_source(spec: &Specialisation) -> String {
+    let spec = Specialisation { method: Method::Lst, ..*spec };
+    let mut features = spec.features();
+    features.push("RT_STAND_IN");
+    let text = format!(
+        "{}\n{}\n{}\n\
+         @compute @workgroup_size(WG_X * WG_Y)\n\
+         fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32) {{\n\
+         \x20   lid = li;\n\
+         \x20   let x = frame.tile.x + wg.x * WG_X + li % WG_X;\n    let y = frame.tile.y + wg.y * WG_Y + li / WG_X;\n\
+         \x20   if x < frame.tile.x + frame.tile.z && y < frame.tile.y + frame.tile.w {{\n\
+         \x20       stand_in((y - frame.tile.y) * frame.tile.z + (x - frame.tile.x));\n    }}\n}}\n",
+        prelude(&spec),
+        strip_features(LST, &features),
+        strip_features(RT_PIPELINE, &features),
+    );
+    if spec.exact { text } else { with_device_rounding(&text) }
+}
+
+/// Translates [`stand_in_source`].
+pub fn compile_stand_in(spec: &Specialisation) -> Result<Vec<u32>, VkError> {
+    let words = shader::translate(&stand_in_source(spec), "rt-pipeline stand-in traversal", &[])?;
+    if spec.exact {
+        crate::no_contraction::forbid_contraction(&words, "rt-pipeline stand-in traversal")
+    } else {
+        Ok(words)
+    }
 }
 
 /// What every kernel starts with: the contract's constants, the counter slots, the per-scene
@@ -326,11 +399,20 @@ pub fn sst_shared_bytes(spec: &Specialisation) -> u64 {
 
 /// Translates one kernel to SPIR-V.
 pub fn compile(stage: Stage, spec: &Specialisation) -> Result<Vec<u32>, VkError> {
-    let label = format!("{} {:?} kernel", spec.method.name(), stage);
+    compile_half(stage, spec, Half::Collect)
+}
+
+/// Translates one kernel to SPIR-V; `half` matters for rt-pipeline only.
+pub fn compile_half(stage: Stage, spec: &Specialisation, half: Half) -> Result<Vec<u32>, VkError> {
+    let label = match (spec.method, half) {
+        (Method::RtPipeline, Half::Emit) => format!("{} {:?} kernel (ray half)", spec.method.name(), stage),
+        _ => format!("{} {:?} kernel", spec.method.name(), stage),
+    };
+    let text = source_half(stage, spec, half);
     let words = if spec.method == Method::SstSubgroup {
-        shader::translate_with_subgroups(&source(stage, spec), &label, &[])?
+        shader::translate_with_subgroups(&text, &label, &[])?
     } else {
-        shader::translate(&source(stage, spec), &label, &[])?
+        shader::translate(&text, &label, &[])?
     };
     if spec.exact { crate::no_contraction::forbid_contraction(&words, &label) } else { Ok(words) }
 }
@@ -358,7 +440,7 @@ mod tests {
 
     #[test]
     fn every_kernel_translates_for_every_specialisation() {
-        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
+        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup, Method::RtPipeline] {
             for (r, t) in [(false, false), (true, false), (false, true), (true, true)] {
                 for stage in [
                     Stage::Cast,
@@ -372,6 +454,11 @@ mod tests {
                     let s = spec(method, r, t);
                     if let Err(e) = compile(stage, &s) {
                         panic!("{method:?} {stage:?} reflection {r} refraction {t}: {e:?}");
+                    }
+                    if method == Method::RtPipeline
+                        && let Err(e) = compile_half(stage, &s, Half::Emit)
+                    {
+                        panic!("{method:?} {stage:?} ray half, reflection {r} refraction {t}: {e:?}");
                     }
                 }
             }
@@ -467,6 +554,30 @@ mod tests {
             assert!(!plain.contains("fn split"), "{method:?}");
             let exact = source(Stage::Bounce, &Specialisation { exact: true, ..spec(method, true, true) });
             assert!(exact.contains("fn div_rn(") && exact.contains("div_rn(1.0, length3(v))"), "{method:?}");
+        }
+    }
+
+    /// rt-pipeline's first half of a stage writes the ray and stops there; its second half reads
+    /// the hit; the other methods' kernels have neither.
+    #[test]
+    fn the_rt_pipeline_halves_split_every_tracing_stage_at_its_trace() {
+        let s = spec(Method::RtPipeline, true, true);
+        for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce] {
+            let emit = source_half(stage, &s, Half::Emit);
+            let collect = source_half(stage, &s, Half::Collect);
+            assert!(emit.contains("rt_rays[rt_slot] = RtRay(") && !emit.contains("return rt_hits[rt_slot];"));
+            assert!(collect.contains("return rt_hits[rt_slot];") && !collect.contains("rt_rays[rt_slot] ="));
+            // The stage function of the emit half returns right after its trace() call.
+            let body = &emit[emit.find(&format!("fn {}(", stage.entry())).expect("the stage")..];
+            let after = &body[body.find("= trace(").expect("the stage traces")..];
+            let next = after.lines().nth(1).expect("a line after the trace").trim();
+            assert!(next.starts_with("return;"), "{stage:?}: `{next}` follows the trace in the ray half");
+            assert!(!collect.contains("this half only writes the ray"));
+            assert!(emit.contains("rt_slot = select(RT_NO_SLOT, pixel_index(x, y), valid);"));
+        }
+        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
+            let text = source(Stage::Bounce, &spec(method, true, true));
+            assert!(!text.contains("rt_slot") && !text.contains("this half only writes the ray"), "{method:?}");
         }
     }
 

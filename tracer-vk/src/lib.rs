@@ -14,6 +14,7 @@ pub mod error;
 pub mod kernels;
 pub mod no_contraction;
 pub mod render;
+pub mod rt;
 pub mod shader;
 pub mod tiles;
 

@@ -10,7 +10,8 @@
 
 use crate::device::{Buffer, Gpu, Pipeline};
 use crate::error::VkError;
-use crate::kernels::{self, Method, Specialisation, Stage, counters};
+use crate::kernels::{self, Half, Method, Specialisation, Stage, counters};
+use crate::rt::RtTracer;
 use crate::tiles::{self, Tile};
 use bvh_format::{Light, SceneFile};
 use bytemuck::{Pod, Zeroable};
@@ -32,6 +33,12 @@ pub fn allowed_workgroups(limit: u32) -> Vec<(u32, u32)> {
     let sides = || (0..=limit.ilog2()).map(|k| 1u32 << k);
     sides().flat_map(|w| sides().map(move |h| (w, h))).filter(|&(w, h)| workgroup_allowed(w, h, limit)).collect()
 }
+
+/// rt-pipeline's passes are timed in three parts: the stage's first half (writing the rays), the
+/// driver's traversal, and the stage's second half under the stage's own label. These label the
+/// first two, summed over a frame's passes in [`Output::passes`].
+pub const RT_RAY_HALVES: &str = "rt-pipeline ray halves";
+pub const RT_TRAVERSAL: &str = "rt-pipeline traversal";
 
 /// Bounces in the first submission of a tile (every shipped scene needs at most 5); each later
 /// submission doubles the bounces done so far. Between submissions the live paths are counted.
@@ -127,6 +134,17 @@ struct Targets {
     accum: Buffer,
     aovs: Buffer,
     image: Buffer,
+    /// rt-pipeline: the ray and hit records the split stages exchange with the traversal.
+    rt_records: Option<[Buffer; 2]>,
+}
+
+/// Who traces rt-pipeline's ray records.
+enum RtTraversal {
+    /// The driver: acceleration structures and a ray-tracing pipeline.
+    Driver(Box<RtTracer>),
+    /// LST in a compute kernel (made with the other kernels), for testing the split stages on a
+    /// device without ray tracing.
+    StandIn(Option<Pipeline>),
 }
 
 /// A scene on the GPU, ready to render frames with one traversal method.
@@ -141,6 +159,10 @@ pub struct Renderer<'g> {
     materials: Buffer,
     input_index: Buffer,
     pipelines: HashMap<Stage, Pipeline>,
+    /// rt-pipeline: the first halves of the stages that trace (rt_pipeline.wgsl), and the driver's
+    /// structures and pipeline.
+    ray_halves: HashMap<Stage, Pipeline>,
+    rt: Option<RtTraversal>,
     targets: Option<Targets>,
     /// A tile holds at most this many pixels (besides the device's own limits).
     tile_pixels: u64,
@@ -248,7 +270,35 @@ impl<'g> Renderer<'g> {
         method: Method,
         workgroup: (u32, u32),
     ) -> Result<Self, VkRenderError> {
+        Self::make(gpu, scene, method, workgroup, false)
+    }
+
+    /// rt-pipeline's stages, split around the trace as on a device with ray tracing, with LST's
+    /// traversal in a compute kernel in place of the driver's (the scene needs its child-pair
+    /// tree): tests the split stages and their records on any device. Its images are LST's.
+    pub fn rt_stand_in(gpu: &'g Gpu, scene: &'g SceneFile, workgroup: (u32, u32)) -> Result<Self, VkRenderError> {
+        Self::make(gpu, scene, Method::RtPipeline, workgroup, true)
+    }
+
+    fn make(
+        gpu: &'g Gpu,
+        scene: &'g SceneFile,
+        method: Method,
+        workgroup: (u32, u32),
+        stand_in: bool,
+    ) -> Result<Self, VkRenderError> {
+        // Refused before anything is uploaded, in one sentence naming what the device lacks.
+        if method == Method::RtPipeline && !stand_in {
+            crate::rt::properties(gpu)?;
+        }
+        // rt-pipeline reads no tree of the file; the binding gets one unused node.
+        let placeholder = [bvh_format::Node::zeroed()];
         let nodes = match method {
+            Method::RtPipeline if !stand_in => &placeholder[..],
+            Method::RtPipeline => scene
+                .child_pair
+                .as_deref()
+                .ok_or(RenderError::MissingLayout { method: "LST (rt-pipeline's stand-in)", layout: "child-pair" })?,
             Method::Lst | Method::Sst | Method::SstSubgroup => scene
                 .child_pair
                 .as_deref()
@@ -300,6 +350,11 @@ impl<'g> Renderer<'g> {
         fits(info, "normals", &arrays.normals)?;
         fits(info, "materials", &scene.materials)?;
         fits(info, "input indices", &scene.input_index)?;
+        let rt = match (method, stand_in) {
+            (Method::RtPipeline, false) => Some(RtTraversal::Driver(Box::new(RtTracer::new(gpu, &arrays.tris)?))),
+            (Method::RtPipeline, true) => Some(RtTraversal::StandIn(None)),
+            _ => None,
+        };
         Ok(Self {
             gpu,
             scene,
@@ -311,6 +366,8 @@ impl<'g> Renderer<'g> {
             materials: gpu.create_buffer_with(&scene.materials, "materials")?,
             input_index: gpu.create_buffer_with(&scene.input_index, "input index")?,
             pipelines: HashMap::new(),
+            ray_halves: HashMap::new(),
+            rt,
             targets: None,
             tile_pixels: tiles::device_tile_pixels(info),
         })
@@ -318,6 +375,14 @@ impl<'g> Renderer<'g> {
 
     pub fn specialisation(&self) -> &Specialisation {
         &self.spec
+    }
+
+    /// rt-pipeline: what the driver's acceleration-structure build took.
+    pub fn structure_build(&self) -> Option<crate::rt::accel::BuildReport> {
+        match &self.rt {
+            Some(RtTraversal::Driver(t)) => Some(t.build_report()),
+            _ => None,
+        }
     }
 
     /// Builds the kernels without contracting any float operations (`--exact`): on a GPU whose
@@ -337,6 +402,10 @@ impl<'g> Renderer<'g> {
         if self.spec != spec {
             self.spec = spec;
             self.pipelines.clear();
+            self.ray_halves.clear();
+            if let Some(RtTraversal::StandIn(p)) = &mut self.rt {
+                *p = None;
+            }
         }
     }
 
@@ -348,14 +417,33 @@ impl<'g> Renderer<'g> {
     }
 
     fn pipeline(&mut self, stage: Stage) -> Result<(), VkError> {
-        if !self.pipelines.contains_key(&stage) {
-            let mut spirv = kernels::compile(stage, &self.spec)?;
-            let label = format!("{} {stage:?}", self.spec.method.name());
+        let rt = self.rt.is_some();
+        // rt-pipeline's kernels also bind the ray and hit records.
+        let bindings = if rt { BINDINGS + 2 } else { BINDINGS };
+        if let Some(RtTraversal::StandIn(p @ None)) = &mut self.rt {
+            let spirv = kernels::compile_stand_in(&self.spec)?;
+            *p = Some(self.gpu.pipeline(&spirv, bindings, kernels::PASS_BYTES, "rt-pipeline stand-in traversal")?);
+        }
+        let halves: &[Half] =
+            if rt && stage != Stage::Convert { &[Half::Emit, Half::Collect] } else { &[Half::Collect] };
+        for &half in halves {
+            let map = if half == Half::Emit { &self.ray_halves } else { &self.pipelines };
+            if map.contains_key(&stage) {
+                continue;
+            }
+            let mut spirv = kernels::compile_half(stage, &self.spec, half)?;
+            let label = match half {
+                Half::Emit => format!("{} {stage:?} (ray half)", self.spec.method.name()),
+                Half::Collect => format!("{} {stage:?}", self.spec.method.name()),
+            };
             if self.spec.exact && self.gpu.info().denorm_preserve_f32 {
                 spirv = crate::no_contraction::preserve_denormals(&spirv, &label)?;
             }
-            let p = self.gpu.pipeline(&spirv, BINDINGS, kernels::PASS_BYTES, &label)?;
-            self.pipelines.insert(stage, p);
+            let p = self.gpu.pipeline(&spirv, bindings, kernels::PASS_BYTES, &label)?;
+            match half {
+                Half::Emit => self.ray_halves.insert(stage, p),
+                Half::Collect => self.pipelines.insert(stage, p),
+            };
         }
         Ok(())
     }
@@ -374,7 +462,19 @@ impl<'g> Renderer<'g> {
             accum: g.create_buffer(pixels * ACCUM_BYTES, "accumulated colour")?,
             aovs: g.create_buffer(pixels * AOV_BYTES, "AOVs")?,
             image: g.create_buffer(pixels * IMAGE_BYTES, "image")?,
+            rt_records: match &self.rt {
+                None => None,
+                Some(_) => Some([
+                    g.create_buffer(pixels * crate::rt::spirv::RAY_BYTES as u64, "rt-pipeline ray records")?,
+                    g.create_buffer(pixels * crate::rt::spirv::HIT_BYTES as u64, "rt-pipeline hit records")?,
+                ]),
+            },
         });
+        if let (Some(RtTraversal::Driver(rt)), Some(t)) = (&self.rt, &self.targets)
+            && let Some([rays, hits]) = &t.rt_records
+        {
+            rt.bind_records(rays, hits);
+        }
         Ok(())
     }
 
@@ -547,8 +647,8 @@ impl<'g> Renderer<'g> {
         let t = self.targets.as_ref().expect("the targets were made before the tiles");
         let (wx, wy) = self.spec.workgroup;
         let groups = [tile.width.div_ceil(wx), tile.height.div_ceil(wy), 1];
-        // In the order of BINDING_NAMES.
-        let buffers: [&Buffer; BINDINGS as usize] = [
+        // In the order of BINDING_NAMES, then rt-pipeline's records.
+        let mut buffers: Vec<&Buffer> = vec![
             frame_buf,
             &self.nodes,
             &self.tris,
@@ -564,7 +664,12 @@ impl<'g> Renderer<'g> {
             &t.image,
             counters,
         ];
+        if let Some(records) = &t.rt_records {
+            buffers.extend(records);
+        }
         let p = &self.pipelines;
+        let rays = &self.ray_halves;
+        let rt = self.rt.as_ref();
         let shade_passes = light_count.max(1);
         let mut first = 0;
         loop {
@@ -574,7 +679,22 @@ impl<'g> Renderer<'g> {
             let timings = g.run(|rec| {
                 let mut pass = |rec: &mut crate::device::Recorder, stage: Stage, light: u32, depth: u32| {
                     dispatches += 1;
-                    rec.dispatch(&p[&stage], &buffers, &PassData::bytes(light, depth), groups)
+                    let push = PassData::bytes(light, depth);
+                    // rt-pipeline: the stage's first half writes the rays, the driver traces them,
+                    // the second half is the stage with their hits.
+                    if let (Some(rt), Some(emit)) = (rt, rays.get(&stage)) {
+                        rec.dispatch(emit, &buffers, &push, groups)?;
+                        rec.mark(RT_RAY_HALVES);
+                        match rt {
+                            RtTraversal::Driver(t) => t.record_trace(rec, tile.width, tile.height),
+                            RtTraversal::StandIn(p) => {
+                                let p = p.as_ref().expect("the stand-in was made with the kernels");
+                                rec.dispatch(p, &buffers, &push, groups)?;
+                            }
+                        }
+                        rec.mark(RT_TRAVERSAL);
+                    }
+                    rec.dispatch(&p[&stage], &buffers, &push, groups)
                 };
                 rec.zero(counters);
                 rec.mark("start");
@@ -694,6 +814,7 @@ impl SceneArrays {
 pub fn upload_bytes(scene: &SceneFile, method: Method) -> u64 {
     let nodes = match method {
         Method::Stackless => scene.escape.as_ref(),
+        Method::RtPipeline => None,
         _ => scene.child_pair.as_ref(),
     };
     let a = SceneArrays::new(scene);

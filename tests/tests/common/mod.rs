@@ -4,13 +4,17 @@
 #![allow(dead_code)] // each test file uses its own part
 
 use bvh_format::SceneFile;
-use render_spec::{Image, NO_TRIANGLE};
+use render_spec::{Image, Settings};
 use std::path::Path;
 use tracer_vk::Gpu;
 
-/// A scene of `scenes/`, compiled with default settings.
+/// A scene of `scenes/` (or of $SCENES_DIR, for a test binary run on another machine), compiled
+/// with default settings.
 pub fn compile(name: &str) -> SceneFile {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes").join(name);
+    let dir = std::env::var_os("SCENES_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes"));
+    let p = dir.join(name);
     let scene = bvh_build::import::load(&p, &Default::default()).expect("the scene imports");
     bvh_build::compile(&scene, &Default::default(), Default::default()).expect("the scene compiles")
 }
@@ -20,6 +24,20 @@ pub fn gpu() -> Gpu {
     match Gpu::new(None, true) {
         Ok(g) => g,
         Err(e) => panic!("the GPU tests need a Vulkan device: {e}"),
+    }
+}
+
+/// A frame of `scene` from its stored `camera` with the scene's lights and indirections, AOVs kept.
+pub fn frame_settings(scene: &SceneFile, camera: &str, width: u32, height: u32, mode: render_spec::Mode) -> Settings {
+    Settings {
+        width,
+        height,
+        camera: render_spec::CameraSpec::from(scene.camera(camera).expect("the camera exists")),
+        mode,
+        lights: scene.lights.clone(),
+        max_indirections: scene.settings.max_indirections,
+        aovs: true,
+        accuracy: render_spec::Accuracy::default(),
     }
 }
 
@@ -48,20 +66,8 @@ pub fn diff(cpu: &Image, gpu: &Image) -> Diff {
     // (both backends round differently there); anything else is a real disagreement.
     let aov = cpu.aov.as_ref().expect("the CPU render keeps AOVs");
     let gpu = gpu.aov.as_ref().expect("the GPU render keeps AOVs");
-    let (mut differs, mut ties) = (0, 0);
-    for i in 0..n {
-        if aov.prim[i] == gpu.prim[i] {
-            continue;
-        }
-        let (a, b) = (aov.t[i], gpu.t[i]);
-        let both_hit = aov.prim[i] != NO_TRIANGLE && gpu.prim[i] != NO_TRIANGLE;
-        if both_hit && (a - b).abs() <= 1e-4 * a.abs().max(b.abs()) {
-            ties += 1;
-        } else {
-            differs += 1;
-        }
-    }
-    Diff { within_one: within as f64 / n as f64, flip_mean, prim_differs: differs, prim_ties: ties }
+    let prims = aov.prim_diff(gpu);
+    Diff { within_one: within as f64 / n as f64, flip_mean, prim_differs: prims.differs, prim_ties: prims.ties }
 }
 
 /// Asserts that a GPU frame (with AOVs) is the CPU's image: colours within 1/255 almost

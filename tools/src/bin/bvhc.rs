@@ -5,7 +5,6 @@ use bvh_build::Layouts;
 use bvh_build::import::{self, ImportOptions};
 use bvh_format::{BuildParams, SceneFile, Strategy};
 use clap::{Parser, Subcommand, ValueEnum};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -148,21 +147,28 @@ fn compile(args: &CompileArgs) -> Result<(), String> {
     let building = Progress::new(n as u64, "building {bar:40} {pos}/{len} triangles placed ({elapsed})", args.quiet);
     let file = building
         .around(
-            || bvh_build::compile_with_progress(&scene, &params, layouts, Some(&placed)),
+            || bvh_build::compile_for_writing(&scene, &params, layouts, Some(&placed)),
             |bar| bar.set_position(placed.load(Ordering::Relaxed) as u64),
         )
         .map_err(|e| e.to_string())?;
     let t_build = t1.elapsed();
 
     let t2 = Instant::now();
-    let bytes = bvh_format::write(&file).map_err(|e| e.to_string())?;
     let out = &checked[0];
-    output::write_atomically(&out.path, |w| w.write_all(&bytes).map_err(|e| e.to_string()))
-        .map_err(|e| e.to_string())?;
+    // Validated by the writer (compile_for_writing leaves that to it) before the first byte, and
+    // streamed section by section into the file rather than assembled in memory first.
+    let mut bytes = 0;
+    output::write_atomically(&out.path, |w| {
+        bytes = bvh_format::write_to(&file, w).map_err(|e| match e {
+            bvh_format::WriteError::Invalid(e) => bvh_build::BuildError::Invalid(e).to_string(),
+            bvh_format::WriteError::Io(e) => e.to_string(),
+        })?;
+        Ok(())
+    })
+    .map_err(|e| e.to_string())?;
     let t_write = t2.elapsed();
     if !args.quiet {
         let s = file.stats();
-        let bytes = bytes.len() as u64;
         say!(
             "{} -> {}: {} triangles, {} nodes, depth {}, SAH cost {:.3}, {}",
             args.input.display(),

@@ -8,7 +8,9 @@ use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
 use tools::vk_bench::{VkBench, check_validation};
 use tracer_vk::kernels::Method;
+use tracer_vk::render::RT_TRAVERSAL;
 use tracer_vk::render::Renderer;
+use tracer_vk::rt::Support;
 use tracer_vk::{Gpu, list_devices};
 
 #[derive(Parser)]
@@ -77,6 +79,9 @@ enum MethodArg {
     Sst,
     /// SST whose majority vote uses subgroup operations instead of a workgroup-memory reduction.
     SstSubgroup,
+    /// The GPU vendor's traversal (VK_KHR_ray_tracing_pipeline on the driver's own acceleration
+    /// structures) with the same shading; where `trace-vk devices` says the device supports it.
+    RtPipeline,
 }
 
 fn parse_device(s: &str) -> Result<usize, String> {
@@ -96,7 +101,7 @@ fn devices() -> Result<(), String> {
     let list = list_devices().map_err(|e| e.to_string())?;
     for d in list {
         say!(
-            "{}: {} ({:?}, Vulkan {}.{}.{}, {}), subgroup {}, shared memory {} KiB, storage buffer range {} MiB, device-local memory {} MiB",
+            "{}: {} ({:?}, Vulkan {}.{}.{}, {}), subgroup {}, shared memory {} KiB, storage buffer range {} MiB, device-local memory {} MiB, rt-pipeline: {}",
             d.index,
             d.name,
             d.kind,
@@ -107,7 +112,11 @@ fn devices() -> Result<(), String> {
             d.subgroup_size,
             d.max_shared_memory / 1024,
             d.max_storage_buffer_range >> 20,
-            d.device_local_bytes >> 20
+            d.device_local_bytes >> 20,
+            match &d.rt_pipeline {
+                Support::Supported(_) => "supported".to_string(),
+                Support::Missing(what) => format!("no (lacks {what})"),
+            }
         );
     }
     Ok(())
@@ -117,13 +126,27 @@ fn open(device: &DeviceArgs) -> Result<Gpu, String> {
     Gpu::new(device.device, device.validate).map_err(|e| e.to_string())
 }
 
+/// The device, refused at once when `methods` include one it cannot run (rt-pipeline).
+fn open_for(device: &DeviceArgs, methods: &[Method]) -> Result<Gpu, String> {
+    let gpu = open(device)?;
+    if methods.contains(&Method::RtPipeline) {
+        tracer_vk::rt::properties(&gpu).map_err(|e| e.to_string())?;
+    }
+    Ok(gpu)
+}
+
 fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &DeviceArgs) -> Result<(), String> {
     let outputs = args.check()?;
+    let method = method_of(method);
+    // A device without rt-pipeline refuses it before the scene is read.
+    let early = if method == Method::RtPipeline { Some(open_for(device, &[method])?) } else { None };
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
-    let method = method_of(method);
-    let gpu = open(device)?;
+    let gpu = match early {
+        Some(gpu) => gpu,
+        None => open(device)?,
+    };
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
     renderer.set_exact(args.exact);
     let pixels = u64::from(settings.width) * u64::from(settings.height);
@@ -137,7 +160,7 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let image = &out.image;
     let written = outputs.write(image, None, args.heatmap_max)?;
     let r = image.rays;
-    let lines = vec![format!(
+    let mut lines = vec![format!(
         "{}x{} {}{} with {}{} on {}: {} GPU{}, rays: {} ({}) -> {}",
         image.width,
         image.height,
@@ -152,6 +175,19 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
         rays_per_second(r.total(), out.gpu_ms / 1e3),
         outputs.image.path.display()
     )];
+    if let Some(b) = renderer.structure_build() {
+        let traversal: f64 = out.passes.iter().filter(|(l, _)| l == RT_TRAVERSAL).map(|(_, ms)| ms).sum();
+        lines.push(format!(
+            "rt-pipeline: the driver built its structures in {} (bottom level {}, top level {}) into {} MiB with {} MiB of scratch; its traversal took {} of the frame's {}",
+            duration((b.bottom_ms + b.top_ms) / 1e3),
+            duration(b.bottom_ms / 1e3),
+            duration(b.top_ms / 1e3),
+            (b.bottom_bytes + b.top_bytes) >> 20,
+            b.scratch_bytes >> 20,
+            duration(traversal / 1e3),
+            duration(out.gpu_ms / 1e3)
+        ));
+    }
     for line in lines.into_iter().chain(written) {
         say!("{line}");
     }
@@ -164,12 +200,14 @@ fn method_of(m: MethodArg) -> Method {
         MethodArg::Stackless => Method::Stackless,
         MethodArg::Sst => Method::Sst,
         MethodArg::SstSubgroup => Method::SstSubgroup,
+        MethodArg::RtPipeline => Method::RtPipeline,
     }
 }
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
     let methods: Vec<&str> = b.methods.iter().map(|&m| method_of(m).name()).collect();
-    let bench = VkBench { gpu: open(&b.device)?, workgroup: b.workgroup, exact: b.exact };
+    let all: Vec<Method> = b.methods.iter().map(|&m| method_of(m)).collect();
+    let bench = VkBench { gpu: open_for(&b.device, &all)?, workgroup: b.workgroup, exact: b.exact };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;
     Ok(())
 }

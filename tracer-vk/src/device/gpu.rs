@@ -250,6 +250,16 @@ impl Gpu {
         &self.inner.device
     }
 
+    /// The instance, for the extension function tables rt-pipeline loads.
+    pub(crate) fn instance(&self) -> &ash::Instance {
+        &self.inner.instance
+    }
+
+    /// The device's memory types, for the buffers rt-pipeline allocates itself.
+    pub(crate) fn memory_properties(&self) -> &vk::PhysicalDeviceMemoryProperties {
+        &self.inner.memory
+    }
+
     pub fn set_timeout(&mut self, timeout: Duration) {
         self.timeout = timeout;
     }

@@ -74,4 +74,7 @@ pub struct DeviceInfo {
     pub timestamps: bool,
     pub vendor_id: u32,
     pub device_id: u32,
+    /// Whether `--method rt-pipeline` runs here (the ray-tracing extensions and features, which
+    /// the device is opened with whenever it has them: crate::rt explains why).
+    pub rt_pipeline: crate::rt::Support,
 }

@@ -164,6 +164,8 @@ fn candidates(instance: &ash::Instance, instance_api: u32) -> Result<Vec<Candida
                 timestamps: timestamp_bits > 0,
                 vendor_id: p.vendor_id,
                 device_id: p.device_id,
+                // SAFETY: `physical` belongs to `instance`.
+                rt_pipeline: unsafe { crate::rt::query_support(instance, physical, api) },
             },
         });
     }
@@ -193,8 +195,17 @@ pub(super) fn open_device(
     let priorities = [1.0f32];
     let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(chosen.family).queue_priorities(&priorities)];
     // Compute on storage buffers needs no optional features; none are enabled so that every
-    // Vulkan 1.1 device qualifies.
-    let info = vk::DeviceCreateInfo::default().queue_create_infos(&queues);
+    // Vulkan 1.1 device qualifies. rt-pipeline's are, where the device has them (crate::rt).
+    let mut info = vk::DeviceCreateInfo::default().queue_create_infos(&queues);
+    let rt_extensions = crate::rt::EXTENSIONS.map(|e| e.as_ptr());
+    let mut rt = crate::rt::Features::wanted();
+    if chosen.info.rt_pipeline.is_supported() {
+        info = info
+            .enabled_extension_names(&rt_extensions)
+            .push_next(&mut rt.v12)
+            .push_next(&mut rt.accel)
+            .push_next(&mut rt.pipeline);
+    }
     // SAFETY: valid create info for a device of this instance.
     let device = unsafe { instance.create_device(chosen.physical, &info, None) }.map_err(|e| match e {
         vk::Result::ERROR_OUT_OF_DEVICE_MEMORY => VkError::OutOfDeviceMemory { label: "device".into(), bytes: 0 },
