@@ -269,6 +269,9 @@ fn stage_ao(x: u32, y: u32, valid: bool) {
     let u = sample_2d(image_pixel(x, y), incoherent_sample(frame.samples.x, frame.samples.z, k));
     let r = make_ray(start.origin, cosine_direction(start.normal, u));
     let blocked = trace(r, 0.0, frame.ao.x, true, live).tri != NO_TRIANGLE;
+//#if RT_EMIT
+    return; // rt_pipeline.wgsl: this half only writes the ray
+//#endif
     if valid {
         count(SLOT_FINISHED);
     }
@@ -295,6 +298,9 @@ fn stage_diffuse(x: u32, y: u32, valid: bool) {
     let u = sample_2d(image_pixel(x, y), frame.samples.x);
     let r = make_ray(start.origin, cosine_direction(start.normal, u));
     let h = trace(r, 0.0, F32_MAX, false, live);
+//#if RT_EMIT
+    return; // rt_pipeline.wgsl: this half only writes the ray
+//#endif
     if valid {
         count(SLOT_FINISHED);
     }

@@ -562,7 +562,7 @@ mod tests {
     #[test]
     fn the_rt_pipeline_halves_split_every_tracing_stage_at_its_trace() {
         let s = spec(Method::RtPipeline, true, true);
-        for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce] {
+        for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Ao, Stage::Diffuse] {
             let emit = source_half(stage, &s, Half::Emit);
             let collect = source_half(stage, &s, Half::Collect);
             assert!(emit.contains("rt_rays[rt_slot] = RtRay(") && !emit.contains("return rt_hits[rt_slot];"));
