@@ -80,7 +80,13 @@ fn the_split_stages_with_lst_in_place_of_the_driver_give_lsts_images() {
                 assert_eq!(a.t, b.t, "{what}: distances");
                 assert_eq!(a.normal, b.normal, "{what}: normals");
                 assert_eq!(split.rays, lst.rays, "{what}: rays of every kind");
-                assert!(lst.rays.primary > 0 && (mode == Mode::Cast || lst.rays.shadow > 0), "{what}: {:?}", lst.rays);
+                let traced = match mode {
+                    Mode::Cast => true,
+                    Mode::Whitted => lst.rays.shadow > 0,
+                    Mode::Ao(_) => lst.rays.ao > 0,
+                    Mode::Diffuse => lst.rays.diffuse > 0,
+                };
+                assert!(lst.rays.primary > 0 && traced, "{what}: {:?}", lst.rays);
                 // The passes are timed in parts: the ray halves, the traversal, the hit halves.
                 for part in [tracer_vk::render::RT_RAY_HALVES, tracer_vk::render::RT_TRAVERSAL] {
                     assert!(out.passes.iter().any(|(l, _)| l == part), "{what}: no {part} in {:?}", out.passes);
