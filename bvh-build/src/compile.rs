@@ -126,10 +126,11 @@ pub fn compile_for_writing(
     }
     let tree = tree_with(&scene.positions, params, progress, layouts.escape)?;
     let geometry = index_geometry(scene, &tree.order);
-    let file = SceneFile {
+    let mut file = SceneFile {
         build: *params,
         settings: scene.settings,
         origin: scene.origin.to_array(),
+        scale_log2: 0,
         vertices: geometry.vertices,
         triangles: geometry.triangles,
         normals: geometry.normals,
@@ -142,6 +143,8 @@ pub fn compile_for_writing(
         cameras: scene.cameras.clone(),
         lights: scene.lights.clone(),
     };
+    // After the build: a power of two changes no SAH decision, and this way no copy is made.
+    crate::unit::rescale(&mut file)?;
     Ok(file)
 }
 

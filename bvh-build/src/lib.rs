@@ -14,6 +14,7 @@ pub mod import;
 pub mod peers;
 pub mod scene;
 pub mod sweep;
+pub mod unit;
 mod weld;
 
 pub use compile::{
@@ -38,4 +39,12 @@ pub enum BuildError {
     Params(String),
     #[error("the compiled scene failed validation: {0}")]
     Invalid(bvh_format::FormatError),
+    #[error(
+        "the scene's largest coordinate is {largest:e}, below the smallest normal f32 (1.2e-38), so its coordinates have already lost precision; scale the scene up"
+    )]
+    Unrepresentable { largest: f32 },
+    #[error(
+        "{what} lies {distance:e} units from the scene's origin, beyond f32's range once the scene (largest coordinate {largest:e}) is stored in units of 2^{scale_log2}; move it nearer"
+    )]
+    BeyondRange { what: String, distance: f32, largest: f32, scale_log2: i32 },
 }

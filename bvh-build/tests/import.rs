@@ -468,6 +468,58 @@ fn malformed_gltf_inputs_are_errors() {
     assert!(msg.contains("missing.bin") && msg.contains("buffer 0"), "{msg}");
 }
 
+#[test]
+fn load_bytes_reads_referenced_files_through_the_callers_reader() {
+    // A glTF whose buffer is an external file, served from memory; and the same with a short
+    // file, a percent escape that is not UTF-8 (the gltf crate's loader panics on it) and a GLB
+    // buffer without a binary chunk.
+    let embedded = gltf(&TRI, &[0, 1, 2], None, r#"{"mesh": 0}"#, "0", "");
+    let start = embedded.find("data:").unwrap();
+    let end = start + embedded[start..].find('"').unwrap();
+    let payload: Vec<u8> = {
+        // Decode the test's own base64 back into bytes.
+        let a = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+        let digits: Vec<u32> = embedded[start..end]
+            .split(',')
+            .nth(1)
+            .unwrap()
+            .bytes()
+            .filter(|&c| c != b'=')
+            .map(|c| a.iter().position(|&x| x == c).unwrap() as u32)
+            .collect();
+        let mut out = Vec::new();
+        for q in digits.chunks(4) {
+            let n = q.iter().enumerate().fold(0, |n, (k, &d)| n | d << (18 - 6 * k));
+            out.extend(&n.to_be_bytes()[1..q.len()]);
+        }
+        out
+    };
+    let external = |uri: &str| format!("{}{uri}{}", &embedded[..start], &embedded[end..]);
+    let served = |bytes: Vec<u8>| {
+        move |p: &Path| {
+            assert_eq!(p, Path::new("models/mesh data.bin"), "the buffer is looked up beside the glTF file");
+            Ok(bytes.clone())
+        }
+    };
+    let load_with = |text: &str, read: &dyn Fn(&Path) -> std::io::Result<Vec<u8>>| {
+        bvh_build::import::load_bytes(Path::new("models/a.gltf"), text.as_bytes(), &opts(), read)
+    };
+    let s = load_with(&external("mesh%20data.bin"), &served(payload.clone())).unwrap();
+    assert_eq!(s.positions, vec![TRI.map(Vec3::from)]);
+    let msg = load_with(&external("mesh%20data.bin"), &served(payload[..10].to_vec())).unwrap_err().to_string();
+    assert!(msg.contains("buffer 0 holds 10 bytes, fewer than the"), "{msg}");
+    let refuse = |_: &Path| Err(std::io::Error::other("no files here"));
+    let msg = load_with(&external("%FF%FE.bin"), &refuse).unwrap_err().to_string();
+    assert!(
+        msg.contains("models/a.gltf") && msg.contains("buffer 0 refers to") && msg.contains("no files here"),
+        "{msg}"
+    );
+    let no_chunk = embedded.replace(&embedded[start - 10..end + 1], "");
+    assert!(!no_chunk.contains("uri"), "{no_chunk}");
+    let msg = load_with(&no_chunk, &refuse).unwrap_err().to_string();
+    assert!(msg.contains("buffer 0 refers to a binary chunk that the file does not have"), "{msg}");
+}
+
 // ---------------------------------------------------------------------------------------------
 // Scene descriptions
 
@@ -663,6 +715,18 @@ fn description_errors_are_clear() {
         ("[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\naxis = [0, 1, 0]\n", "angle"),
         ("[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\ntranslate = [inf, 0, 0]\n", "translation"),
         ("[[object]]\ntype = \"sphere\"\nradius = 1\nsegments = 100000\nrings = 100000\n", "triangles"),
+        // A sphere at the limit (2 * 2048 * 1024 = 2^22 triangles) after a box's 12.
+        (
+            "[[object]]\ntype = \"box\"\nsize = [1, 1, 1]\n[[object]]\ntype = \"sphere\"\nradius = 1\nsegments = 2048\nrings = 1025\n",
+            "object 2 (sphere): it would have 4194304 triangles, more than the 4194292 left",
+        ),
+        // Counts whose triangle count wraps past u64 to under the limit (it used to generate 2^63
+        // triangles).
+        ("[[object]]\ntype = \"sphere\"\nradius = 1\nsegments = 4294901791\nrings = 2147516402\n", "triangles"),
+        (
+            "[[object]]\ntype = \"torus\"\nmajor = 2\nminor = 1\nsegments = 4294901791\nsides = 2147516401\n",
+            "triangles",
+        ),
         ("[material.m]\nkr = 0.5\nkt = 0.5\n", "not both"),
         ("[material.m]\nkt = 1.5\n", "between 0 and 1"),
         (

@@ -5,7 +5,7 @@ use crate::types::{Camera, IndexedTriangle, Light, Material, Node};
 use bytemuck::{Pod, Zeroable};
 
 pub const MAGIC: [u8; 8] = *b"BVHSCENE";
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 /// Every section starts at a multiple of this.
 pub const ALIGN: u64 = 16;
 
@@ -50,7 +50,9 @@ pub struct Header {
     /// World position of the scene's local origin; every stored position is relative to it
     /// (finite; see [`crate::SceneFile::origin`]).
     pub origin: [f64; 3],
-    pub _reserved: u32,
+    /// Power of two of the stored unit in world units (see [`crate::SceneFile::scale_log2`]);
+    /// within [`crate::MAX_SCALE_LOG2`] of zero.
+    pub scale_log2: i32,
     /// CRC-32 of the header (with this field zero) followed by the section table.
     pub header_crc: u32,
 }

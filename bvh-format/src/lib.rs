@@ -23,6 +23,10 @@ pub use types::{
 };
 pub use write::{WriteError, write, write_file, write_to};
 
+/// Largest magnitude of [`SceneFile::scale_log2`] a file may hold: a rescaled f32 scene spans at
+/// most 2^277 (subnormal to largest), so no compiler needs more.
+pub const MAX_SCALE_LOG2: i32 = 300;
+
 /// A whole scene as stored in one file: indexed geometry in BVH leaf order, shading data, the tree
 /// in one or both layouts, and default cameras and lights.
 #[derive(Clone, Debug, PartialEq)]
@@ -35,6 +39,14 @@ pub struct SceneFile {
     /// Tracers work in these local coordinates throughout; only positions given in world
     /// coordinates (a command line's camera or lights) pass through [`SceneFile::local`].
     pub origin: [f64; 3],
+    /// The stored unit is `2^scale_log2` world units: a world position is
+    /// `origin + 2^scale_log2 * local`. The compiler stores a scene much smaller or larger than a
+    /// few units rescaled by a power of two (exact in binary floating point), so that the
+    /// tracers' self-intersection offsets, which are tuned to scenes of a few units, hold at any
+    /// scale. Distances a user gives in world units (the fixed `--offset`) and distances the
+    /// tracers report (the `t` AOV) pass through [`SceneFile::local_distance`] and
+    /// [`SceneFile::world_distance`].
+    pub scale_log2: i32,
     /// Vertex positions, shared by the triangles that meet at them.
     pub vertices: Vec<[f32; 3]>,
     /// Triangles in the order the leaves reference them: vertex indices and material.
@@ -99,12 +111,29 @@ impl SceneFile {
 
     /// A world position in the scene's local coordinates (rounded once, from f64).
     pub fn local(&self, world: [f64; 3]) -> [f32; 3] {
-        [0, 1, 2].map(|a| (world[a] - self.origin[a]) as f32)
+        let unit = self.unit();
+        [0, 1, 2].map(|a| ((world[a] - self.origin[a]) / unit) as f32)
     }
 
     /// A local position in world coordinates.
     pub fn world(&self, local: [f32; 3]) -> [f64; 3] {
-        [0, 1, 2].map(|a| self.origin[a] + f64::from(local[a]))
+        let unit = self.unit();
+        [0, 1, 2].map(|a| self.origin[a] + f64::from(local[a]) * unit)
+    }
+
+    /// The stored unit in world units, `2^scale_log2` (exact).
+    pub fn unit(&self) -> f64 {
+        2f64.powi(self.scale_log2)
+    }
+
+    /// A distance in world units as the tracers measure it (rounded once, from f64).
+    pub fn local_distance(&self, world: f64) -> f32 {
+        (world / self.unit()) as f32
+    }
+
+    /// A distance the tracers measured, in world units (exact).
+    pub fn world_distance(&self, local: f32) -> f64 {
+        f64::from(local) * self.unit()
     }
 
     /// A camera by name.

@@ -170,6 +170,7 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
             max_indirections: header.max_indirections,
         },
         origin: header.origin,
+        scale_log2: header.scale_log2,
         vertices: pod(required(SectionKind::Vertices)?),
         triangles: pod(required(SectionKind::Triangles)?),
         normals: pod(required(SectionKind::Normals)?),
@@ -244,6 +245,9 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     }
     if !s.origin.iter().all(|v| v.is_finite()) {
         return Err(FormatError::BadHeader("its origin offset is not finite"));
+    }
+    if s.scale_log2.unsigned_abs() > crate::MAX_SCALE_LOG2.unsigned_abs() {
+        return Err(FormatError::BadHeader("its scale exponent is out of range"));
     }
     check_finite(SectionKind::Vertices, &s.vertices)?;
     check_finite(SectionKind::Normals, &s.normals)?;

@@ -99,6 +99,7 @@ fn plan(scene: &SceneFile) -> Result<Plan<'_>, FormatError> {
         ambient: scene.settings.ambient,
         background: scene.settings.background,
         origin: scene.origin,
+        scale_log2: scene.scale_log2,
         ..Header::default()
     };
     header.header_crc = header_crc(&header, bytemuck::cast_slice(&table));

@@ -84,6 +84,7 @@ mod tests {
             build: Default::default(),
             settings: Default::default(),
             origin: [0.0; 3],
+            scale_log2: 0,
             vertices: vec![],
             triangles: vec![],
             normals: vec![],

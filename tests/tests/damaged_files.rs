@@ -207,21 +207,22 @@ fn wrong_magic_and_version() {
         b[i] ^= 0x20;
         assert_eq!(rejected(&b), FormatError::BadMagic);
     }
-    for version in [3u32, 7, u32::MAX] {
+    for version in [4u32, 7, u32::MAX] {
         let mut b = bytes.clone();
         b[8..12].copy_from_slice(&version.to_le_bytes());
-        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 2 });
+        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 3 });
         // A correct checksum does not make an unknown version readable.
         reseal_header(&mut b);
-        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 2 });
+        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 3 });
     }
-    // A file of an older version (version 1 stored one vertex and two edges per triangle) is
-    // named as such, with what to do about it.
-    for version in [0u32, 1] {
+    // A file of an older version (version 1 stored one vertex and two edges per triangle;
+    // version 2 had no scale exponent, so a tiny or huge scene in it renders with offsets that
+    // do not fit it) is named as such, with what to do about it.
+    for version in [0u32, 1, 2] {
         let mut b = bytes.clone();
         b[8..12].copy_from_slice(&version.to_le_bytes());
         let e = rejected(&b);
-        assert_eq!(e, FormatError::OldVersion { found: version, supported: 2 });
+        assert_eq!(e, FormatError::OldVersion { found: version, supported: 3 });
         assert!(e.to_string().contains("recompile it from its source with `bvhc compile`"), "{e}");
     }
 }
@@ -652,6 +653,15 @@ fn forged_origin_and_header_bounds() {
         })
     });
     assert!(matches!(e, FormatError::BadHeader(m) if m.contains("origin")), "{e:?}");
+    for scale_log2 in [bvh_format::MAX_SCALE_LOG2 + 1, -bvh_format::MAX_SCALE_LOG2 - 1, i32::MIN, i32::MAX] {
+        let e = forge(|b| {
+            edit_header(b, |mut h| {
+                h.scale_log2 = scale_log2;
+                h
+            })
+        });
+        assert!(matches!(e, FormatError::BadHeader(m) if m.contains("scale exponent")), "{scale_log2}: {e:?}");
+    }
     let e = forge(|b| {
         edit_header(b, |mut h| {
             h.bounds_max[1] += 1.0;

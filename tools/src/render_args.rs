@@ -149,12 +149,15 @@ impl RenderOutputs {
     /// where asked for) and returns the report lines of the heatmap and the AOVs, so that a caller
     /// prints only after every file is complete.
     /// Writes every output of `image`; `linear` is its unquantised colour where the tracer has it
-    /// (written to an EXR colour image instead of the 8-bit values).
+    /// (written to an EXR colour image instead of the 8-bit values). The `t` AOV is written in
+    /// world units (the tracers measure in the scene's stored unit, see
+    /// [`SceneFile::scale_log2`]).
     pub fn write(
         &self,
         image: &Image,
         linear: Option<&[[f32; 3]]>,
         heatmap_max: Option<u32>,
+        scene: &SceneFile,
     ) -> Result<Vec<String>, String> {
         let frame = output::Frame { width: image.width, height: image.height, rgb: &image.rgb, linear };
         output::write_image(&self.image, &frame).map_err(|e| e.to_string())?;
@@ -166,6 +169,14 @@ impl RenderOutputs {
                 lines.push(heatmap_line(&h, out));
             }
             if let Some(out) = &self.aov {
+                let world;
+                let aov = if scene.scale_log2 == 0 {
+                    aov
+                } else {
+                    let t = aov.t.iter().map(|&t| scene.world_distance(t) as f32).collect();
+                    world = render_spec::Aovs { t, ..aov.clone() };
+                    &world
+                };
                 output::write_aov(out, image.width, image.height, aov).map_err(|e| e.to_string())?;
                 lines.push(format!("AOVs (t, N.X, N.Y, N.Z, prim, nodes, tris) -> {}", out.path.display()));
             }
@@ -350,19 +361,21 @@ impl RenderArgs {
             lights: self.lights(scene, &camera),
             max_indirections: self.indirections(scene),
             aovs: self.aov.is_some() || self.heatmap.is_some(),
-            accuracy: self.accuracy(),
+            accuracy: self.accuracy(scene),
         })
     }
 
-    /// The accuracy settings; what is not given is today's contract ([`Accuracy::default`]).
-    pub fn accuracy(&self) -> Accuracy {
+    /// The accuracy settings; what is not given is today's contract ([`Accuracy::default`]). A
+    /// fixed offset is given in world units and handed to the tracers in the scene's stored unit.
+    pub fn accuracy(&self, scene: &SceneFile) -> Accuracy {
         let default = Accuracy::default();
-        Accuracy {
+        let given = Accuracy {
             intersect: self.intersect.intersect(),
             offset: self.offset,
             spp: self.spp,
             cutoff: self.cutoff.unwrap_or(default.cutoff),
-        }
+        };
+        in_scene_unit(given, scene)
     }
 
     pub fn mode(&self) -> Mode {
@@ -482,16 +495,25 @@ pub fn lights_n(scene: &SceneFile, n: usize, camera: &CameraSpec) -> Vec<Light> 
     lights
 }
 
+/// Accuracy settings given in world units (a fixed `--offset` distance) in the scene's stored unit
+/// ([`SceneFile::scale_log2`]), as the tracers take them.
+pub fn in_scene_unit(a: Accuracy, scene: &SceneFile) -> Accuracy {
+    match a.offset {
+        Offset::Fixed(d) => Accuracy { offset: Offset::Fixed(scene.local_distance(f64::from(d))), ..a },
+        Offset::ScaleAware => a,
+    }
+}
+
 /// The accuracy settings that differ from the default, for the report line both tracers print
 /// (empty for the default).
-pub fn accuracy_note(a: &Accuracy) -> String {
+pub fn accuracy_note(a: &Accuracy, scene: &SceneFile) -> String {
     let d = Accuracy::default();
     let mut parts = Vec::new();
     if a.intersect != d.intersect {
         parts.push("Möller-Trumbore triangle test".to_owned());
     }
     if let Offset::Fixed(x) = a.offset {
-        parts.push(format!("fixed offset {x:e}"));
+        parts.push(format!("fixed offset {:e}", scene.world_distance(x) as f32));
     }
     if a.spp != d.spp {
         parts.push(format!("{} samples per pixel", a.spp));

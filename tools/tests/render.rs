@@ -321,6 +321,52 @@ fn bench_checks_its_table_before_work() {
     assert_eq!(snapshot(&dir), before);
 }
 
+/// A scene stored in a unit of its own (2^-20 of the world here, see `bvh_build::unit`): the
+/// camera, light and fixed offset given on the command line in world units, and the `t` AOV
+/// written in world units, give the image and distances of the same scene at 2^3 (stored in the
+/// same unit 2^3, so the two files differ only in their exponent): bit for bit.
+#[test]
+fn world_units_on_the_command_line_and_in_the_aov_go_through_the_stored_unit() {
+    let dir = scratch("stored-unit");
+    let mut t = Vec::new();
+    let mut png = Vec::new();
+    for (name, s) in [("big", 8.0f64), ("tiny", 2f64.powi(-20))] {
+        let desc = dir.join(format!("{name}.toml"));
+        std::fs::write(&desc, tools::stress::scenes::mirror_room_scaled([0.0; 3], s)).unwrap();
+        let w = |v: [f64; 3]| format!("{:?},{:?},{:?}", v[0] * s, v[1] * s, v[2] * s);
+        let light = format!("{},1,1,1", w([2.0, 6.0, 3.0]));
+        let offset = format!("{:?}", 2f64.powi(-7) * s);
+        let (eye, at) = (w([1.0, 3.0, 7.0]), w([0.0, 1.0, -1.0]));
+        let args = [
+            "render",
+            desc.to_str().unwrap(),
+            "--eye",
+            &eye,
+            "--at",
+            &at,
+            "--light",
+            &light,
+            "--offset",
+            &offset,
+            "--res",
+            "24x16",
+            "-o",
+            &format!("{name}.png"),
+            "--aov",
+            &format!("{name}.exr"),
+        ];
+        let out = assert_ok(&run(&dir, "trace-cpu", &args), name);
+        let given: f32 = offset.parse().unwrap();
+        assert!(out.contains(&format!("fixed offset {given:e}")), "{name}: the report names the world offset: {out}");
+        let (_, _, aov) = tools::output::read_aov(&dir.join(format!("{name}.exr"))).unwrap();
+        t.push(aov.t.iter().map(|&v| f64::from(v) / s).collect::<Vec<_>>());
+        png.push(std::fs::read(dir.join(format!("{name}.png"))).unwrap());
+    }
+    assert_eq!(png[0], png[1], "the images differ");
+    assert!(t[0].iter().any(|v| v.is_finite()));
+    assert_eq!(t[0], t[1], "the t AOV, divided by the scale, differs");
+}
+
 /// `trace-vk devices` says for every device whether rt-pipeline runs there, and `render --method
 /// rt-pipeline` on device 0 agrees: refused before any output is written, in one sentence naming
 /// what is missing (lavapipe), or rendered (a device with the ray-tracing extensions).

@@ -6,7 +6,7 @@
 //! its own order (the mesh file's order, or the shape's order documented in [`super::shapes`]).
 
 use super::geometry::{self, Affine};
-use super::{DEFAULT_MATERIAL_NAME, ImportError, ImportOptions, Kind, defaults, load_mesh_file, shapes};
+use super::{DEFAULT_MATERIAL_NAME, ImportError, ImportOptions, Kind, ReadFile, defaults, load_mesh_file, shapes};
 use crate::scene::Scene;
 use bvh_format::{CAMERA_NAME_LEN, Camera, Light, Material, SceneSettings};
 use glam::{DMat4, DQuat, DVec3, Vec3};
@@ -202,28 +202,33 @@ pub const SPHERE_SEGMENTS: u32 = 32;
 pub const SPHERE_RINGS: u32 = 16;
 pub const TORUS_SEGMENTS: u32 = 48;
 pub const TORUS_SIDES: u32 = 16;
-/// Most triangles one generated shape may have, so that a typo cannot exhaust memory.
+/// Most triangles the generated shapes of one description may have together, so that a typo
+/// (or a few dozen bytes of hostile input) cannot exhaust memory or take minutes.
 pub const MAX_SHAPE_TRIANGLES: u64 = 1 << 22;
 
 /// Reads a scene description and everything it references.
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
-    let bytes = super::read_file(path)?;
-    let text = String::from_utf8(bytes)
+    load_bytes(path, &super::read_file(path)?, opts, &|file| std::fs::read(file))
+}
+
+/// [`load`] of `bytes` read from `path`; `read` reads the mesh files it places.
+pub fn load_bytes(path: &Path, bytes: &[u8], opts: &ImportOptions, read: ReadFile<'_>) -> Result<Scene, ImportError> {
+    let text = std::str::from_utf8(bytes)
         .map_err(|_| ImportError::Description { path: path.to_owned(), message: "it is not UTF-8 text".to_owned() })?;
-    let desc: Description = toml::from_str(&text)
-        .map_err(|e| ImportError::Description { path: path.to_owned(), message: toml_message(&text, &e) })?;
+    let desc: Description = toml::from_str(text)
+        .map_err(|e| ImportError::Description { path: path.to_owned(), message: toml_message(text, &e) })?;
     let objects = desc
         .object
         .iter()
         .enumerate()
         .map(|(k, table)| {
             toml::Value::Table(table.get_ref().clone()).try_into::<Object>().map_err(|e| {
-                let message = object_message(&text, k, table.span().start, &e);
+                let message = object_message(text, k, table.span().start, &e);
                 ImportError::Description { path: path.to_owned(), message }
             })
         })
         .collect::<Result<Vec<Object>, _>>()?;
-    Builder::new(path, opts, &desc)?.build(&desc, &objects)
+    Builder::new(path, opts, read, &desc)?.build(&desc, &objects)
 }
 
 /// An error in object `k` (whose `[[object]]` header starts at `header`) as one line: the line
@@ -264,6 +269,7 @@ fn toml_message(text: &str, e: &toml::de::Error) -> String {
 struct Builder<'a> {
     path: &'a Path,
     dir: PathBuf,
+    read: ReadFile<'a>,
     opts: ImportOptions,
     scene: Scene,
     /// Description materials, validated, by name.
@@ -279,6 +285,8 @@ struct Builder<'a> {
     placed: Vec<Placed>,
     /// World bounds of all objects, in f64.
     world: Option<(DVec3, DVec3)>,
+    /// Triangles of the generated shapes so far, against [`MAX_SHAPE_TRIANGLES`].
+    generated: u64,
 }
 
 struct Placed {
@@ -298,10 +306,11 @@ fn finite(v: &[f32]) -> bool {
 }
 
 impl<'a> Builder<'a> {
-    fn new(path: &'a Path, opts: &ImportOptions, desc: &Description) -> Result<Self, ImportError> {
+    fn new(path: &'a Path, opts: &ImportOptions, read: ReadFile<'a>, desc: &Description) -> Result<Self, ImportError> {
         let mut b = Builder {
             path,
             dir: path.parent().unwrap_or(Path::new("")).to_owned(),
+            read,
             opts: ImportOptions { smooth_normals: desc.smooth_normals.unwrap_or(opts.smooth_normals) },
             scene: Scene::default(),
             defined: BTreeMap::new(),
@@ -309,6 +318,7 @@ impl<'a> Builder<'a> {
             meshes: HashMap::new(),
             placed: Vec::new(),
             world: None,
+            generated: 0,
         };
         for (name, m) in &desc.material {
             let mat = material(m).map_err(|msg| b.err(format!("material '{name}': {msg}")))?;
@@ -446,6 +456,7 @@ impl<'a> Builder<'a> {
                     None => self.intern(DEFAULT_MATERIAL_NAME, super::default_material()),
                 };
                 let n = mesh.triangle_count();
+                self.generated += n as u64;
                 self.scene.positions.extend(mesh.positions);
                 self.scene.normals.extend(mesh.normals);
                 self.scene.material_ids.extend(std::iter::repeat_n(id, n));
@@ -476,13 +487,16 @@ impl<'a> Builder<'a> {
         if kind == Kind::Description {
             return Err(self.err(format!("{label}: a description cannot include another description")));
         }
-        if let Err(source) = std::fs::metadata(&file) {
-            return Err(ImportError::MissingMesh { path: self.path.to_owned(), mesh: file, source });
-        }
         let smooth = m.smooth_normals.unwrap_or(self.opts.smooth_normals);
         let key = (file.clone(), smooth);
         if !self.meshes.contains_key(&key) {
-            let (part, _cameras) = load_mesh_file(&file, kind, &ImportOptions { smooth_normals: smooth })?;
+            let bytes = (self.read)(&file).map_err(|source| ImportError::MissingMesh {
+                path: self.path.to_owned(),
+                mesh: file.clone(),
+                source,
+            })?;
+            let opts = ImportOptions { smooth_normals: smooth };
+            let (part, _cameras) = load_mesh_file(&file, &bytes, kind, &opts, self.read)?;
             self.scene.warnings.extend(part.warnings.iter().cloned());
             self.meshes.insert(key.clone(), part);
         }
@@ -552,9 +566,15 @@ impl<'a> Builder<'a> {
             let v = v.unwrap_or(default);
             if v < min { Err(format!("{what} must be at least {min}")) } else { Ok(v) }
         };
-        let limit = |n: u64| -> Result<(), String> {
-            if n > MAX_SHAPE_TRIANGLES {
-                Err(format!("it would have {n} triangles, more than the {MAX_SHAPE_TRIANGLES} allowed"))
+        // Saturating: u32 counts can multiply past u64 and wrap to a small number.
+        let limit = |factors: [u32; 2]| -> Result<(), String> {
+            let n = factors.iter().fold(2u64, |n, &f| n.saturating_mul(u64::from(f)));
+            let left = MAX_SHAPE_TRIANGLES.saturating_sub(self.generated);
+            if n > left {
+                Err(format!(
+                    "it would have {n} triangles, more than the {left} left of the {MAX_SHAPE_TRIANGLES} that the \
+                     generated shapes of a description may have together"
+                ))
             } else {
                 Ok(())
             }
@@ -576,7 +596,7 @@ impl<'a> Builder<'a> {
                 positive(&[s.radius], "radius")?;
                 let segments = count(s.segments, SPHERE_SEGMENTS, 3, "segments")?;
                 let rings = count(s.rings, SPHERE_RINGS, 2, "rings")?;
-                limit(2 * u64::from(segments) * u64::from(rings - 1))?;
+                limit([segments, rings - 1])?;
                 shapes::sphere(centre(s.centre)?, s.radius, segments, rings)
             }
             Object::Torus(t) => {
@@ -586,7 +606,7 @@ impl<'a> Builder<'a> {
                 }
                 let segments = count(t.segments, TORUS_SEGMENTS, 3, "segments")?;
                 let sides = count(t.sides, TORUS_SIDES, 3, "sides")?;
-                limit(2 * u64::from(segments) * u64::from(sides))?;
+                limit([segments, sides])?;
                 shapes::torus(centre(t.centre)?, t.major, t.minor, segments, sides)
             }
             Object::Mesh(_) => shapes::Mesh::default(),

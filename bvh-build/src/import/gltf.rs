@@ -12,7 +12,7 @@
 
 use super::geometry::{self, Affine, EmitError, Normals};
 use super::materials::{self, PbrParams};
-use super::{DEFAULT_MATERIAL_NAME, ImportError, ImportOptions, guarded, read_file};
+use super::{DEFAULT_MATERIAL_NAME, ImportError, ImportOptions, ReadFile, guarded, read_file};
 use crate::scene::Scene;
 use ::gltf::accessor::{DataType, Dimensions};
 use ::gltf::mesh::{Mode, Semantic};
@@ -23,32 +23,25 @@ use rayon::prelude::*;
 use std::path::Path;
 
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<(Scene, Vec<Camera>), ImportError> {
-    let bytes = read_file(path)?;
+    load_bytes(path, &read_file(path)?, opts, &|file| std::fs::read(file))
+}
+
+/// [`load`] of `bytes` read from `path` (a `.gltf` or `.glb`); `read` reads the external
+/// buffers it refers to.
+pub fn load_bytes(
+    path: &Path,
+    bytes: &[u8],
+    opts: &ImportOptions,
+    read: ReadFile<'_>,
+) -> Result<(Scene, Vec<Camera>), ImportError> {
     let err = |message: String| ImportError::Gltf { path: path.to_owned(), message };
     let parser_failed = || err("the glTF parser failed on this input".to_owned());
-    let ::gltf::Gltf { document, blob } = guarded(|| ::gltf::Gltf::from_slice_without_validation(&bytes))
+    let ::gltf::Gltf { document, blob } = guarded(|| ::gltf::Gltf::from_slice_without_validation(bytes))
         .ok_or_else(parser_failed)?
         .map_err(|e| err(e.to_string()))?;
     guarded(|| validate(&document)).ok_or_else(parser_failed)?.map_err(err)?;
     let base = path.parent().unwrap_or(Path::new(""));
-    // The gltf crate's error for a missing buffer file does not name it.
-    for buffer in document.buffers() {
-        if let buffer::Source::Uri(uri) = buffer.source()
-            && !uri.starts_with("data:")
-        {
-            let file = base.join(percent_decode(uri));
-            if let Err(e) = std::fs::metadata(&file) {
-                return Err(err(format!(
-                    "buffer {} refers to {}, which cannot be read ({e})",
-                    buffer.index(),
-                    file.display()
-                )));
-            }
-        }
-    }
-    let buffers = guarded(|| ::gltf::import_buffers(&document, Some(base), blob))
-        .ok_or_else(parser_failed)?
-        .map_err(|e| err(format!("its buffers cannot be loaded ({e})")))?;
+    let buffers = load_buffers(&document, blob, base, read).map_err(err)?;
 
     let mut reader = Reader {
         path,
@@ -86,6 +79,46 @@ pub fn load(path: &Path, opts: &ImportOptions) -> Result<(Scene, Vec<Camera>), I
     let centre = scene.bounds().map(|(lo, hi)| ((lo + hi) * 0.5).as_dvec3());
     let cameras = camera_nodes.iter().filter_map(|(node, world)| camera(node, world, centre)).collect();
     Ok((scene, cameras))
+}
+
+/// The data of every buffer: the GLB binary chunk, a `data:` URI, or a file beside the glTF file
+/// read through `read` (the crate's own loader panics on a percent escape that is not UTF-8 and
+/// reads the file system itself).
+fn load_buffers(
+    document: &Document,
+    mut blob: Option<Vec<u8>>,
+    base: &Path,
+    read: ReadFile<'_>,
+) -> Result<Vec<buffer::Data>, String> {
+    let mut out = Vec::new();
+    for buffer in document.buffers() {
+        let i = buffer.index();
+        let data = match buffer.source() {
+            buffer::Source::Bin => {
+                blob.take().ok_or_else(|| format!("buffer {i} refers to a binary chunk that the file does not have"))?
+            }
+            source @ buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                guarded(|| buffer::Data::from_source(source, None))
+                    .ok_or_else(|| format!("the data URI of buffer {i} cannot be decoded"))?
+                    .map_err(|e| format!("the data URI of buffer {i} cannot be decoded ({e})"))?
+                    .0
+            }
+            buffer::Source::Uri(uri) => {
+                let file = base.join(percent_decode(uri));
+                read(&file)
+                    .map_err(|e| format!("buffer {i} refers to {}, which cannot be read ({e})", file.display()))?
+            }
+        };
+        if data.len() < buffer.length() {
+            return Err(format!(
+                "buffer {i} holds {} bytes, fewer than the {} it declares",
+                data.len(),
+                buffer.length()
+            ));
+        }
+        out.push(buffer::Data(data));
+    }
+    Ok(out)
 }
 
 /// The crate's validation (every reference in range, every enum known), less one rule: the

@@ -61,6 +61,8 @@ pub enum ImportError {
     Empty { path: PathBuf },
     #[error("{}: {message}", path.display())]
     Defaults { path: PathBuf, message: String },
+    #[error("{}: the material name {name:?} holds a NUL byte, which a scene file cannot store", path.display())]
+    MaterialName { path: PathBuf, name: String },
 }
 
 /// Reads a scene, choosing the reader by extension (`.obj`, `.gltf`, `.glb`, `.toml`; any case).
@@ -70,10 +72,22 @@ pub enum ImportError {
 /// and default settings, with `max_indirections` 2 when a material reflects or refracts and 0
 /// otherwise. A description sets all of these itself (see `docs/scene-description.md`).
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
-    match Kind::of(path)? {
-        Kind::Description => description::load(path, opts),
+    Kind::of(path)?;
+    load_bytes(path, &read_file(path)?, opts, &|file| std::fs::read(file))
+}
+
+/// Reads a file that a scene refers to: an OBJ's material library, a glTF buffer, a mesh of a
+/// description. [`load`] reads the file system.
+pub type ReadFile<'a> = &'a dyn Fn(&Path) -> std::io::Result<Vec<u8>>;
+
+/// [`load`] of a file already in memory: `path` names it (its extension picks the reader, its
+/// folder is where the files it refers to lie) and `read` reads those files, so that a caller
+/// can serve them from memory or refuse them (the fuzz targets in `bvh-build/fuzz` do).
+pub fn load_bytes(path: &Path, bytes: &[u8], opts: &ImportOptions, read: ReadFile<'_>) -> Result<Scene, ImportError> {
+    let scene = match Kind::of(path)? {
+        Kind::Description => description::load_bytes(path, bytes, opts, read)?,
         kind => {
-            let (mut scene, file_cameras) = load_mesh_file(path, kind, opts)?;
+            let (mut scene, file_cameras) = load_mesh_file(path, bytes, kind, opts, read)?;
             let (lo, hi) = scene.bounds().ok_or_else(|| ImportError::Empty { path: path.to_owned() })?;
             scene.cameras = defaults::cameras(lo, hi);
             scene.cameras.extend(file_cameras);
@@ -84,9 +98,14 @@ pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
                 max_indirections: if scene.materials.iter().any(|m| m.kr > 0.0 || m.kt > 0.0) { 2 } else { 0 },
                 ..SceneSettings::default()
             };
-            Ok(scene)
+            scene
         }
+    };
+    // The scene file separates material names by NUL bytes (MTL and glTF names may hold one).
+    if let Some(name) = scene.material_names.iter().find(|n| n.contains('\0')) {
+        return Err(ImportError::MaterialName { path: path.to_owned(), name: name.clone() });
     }
+    Ok(scene)
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -108,16 +127,19 @@ impl Kind {
     }
 }
 
-/// Triangles and materials of one OBJ or glTF file (no cameras, lights or settings in the
-/// scene), plus the file's own cameras. Errs when the file holds no triangles.
+/// Triangles and materials of one OBJ or glTF file, `bytes` read from `path` (no cameras, lights
+/// or settings in the scene), plus the file's own cameras. Errs when the file holds no
+/// triangles.
 pub(crate) fn load_mesh_file(
     path: &Path,
+    bytes: &[u8],
     kind: Kind,
     opts: &ImportOptions,
+    read: ReadFile<'_>,
 ) -> Result<(Scene, Vec<Camera>), ImportError> {
     let (scene, cameras) = match kind {
-        Kind::Obj => (obj::load(path, opts)?, Vec::new()),
-        Kind::Gltf => gltf::load(path, opts)?,
+        Kind::Obj => (obj::load_bytes(path, bytes, opts, read)?, Vec::new()),
+        Kind::Gltf => gltf::load_bytes(path, bytes, opts, read)?,
         Kind::Description => {
             return Err(ImportError::Description {
                 path: path.to_owned(),

@@ -6,7 +6,7 @@
 //! gives the default material.
 
 use super::geometry::{self, EmitError, Normals};
-use super::{DEFAULT_MATERIAL_NAME, ImportError, ImportOptions, guarded, materials, read_file};
+use super::{DEFAULT_MATERIAL_NAME, ImportError, ImportOptions, ReadFile, guarded, materials, read_file};
 use crate::scene::Scene;
 use glam::Vec3;
 use std::cell::RefCell;
@@ -14,9 +14,13 @@ use std::io::Cursor;
 use std::path::Path;
 
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
-    let bytes = read_file(path)?;
+    load_bytes(path, &read_file(path)?, opts, &|file| std::fs::read(file))
+}
+
+/// [`load`] of `bytes` read from `path`; `read` reads the material libraries it names.
+pub fn load_bytes(path: &Path, bytes: &[u8], opts: &ImportOptions, read: ReadFile<'_>) -> Result<Scene, ImportError> {
     let err = |message: String| ImportError::Obj { path: path.to_owned(), message };
-    let short_faces = check_lines(path, &bytes)?;
+    let short_faces = check_lines(path, bytes)?;
 
     let dir = path.parent().unwrap_or(Path::new(""));
     // tobj's loader callback cannot return our error, so the reason is kept aside.
@@ -32,13 +36,13 @@ pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
         ..Default::default()
     };
     let parsed = guarded(|| {
-        tobj::load_obj_buf(&mut Cursor::new(&bytes), &load_opts, |mtl_path| {
+        tobj::load_obj_buf(&mut Cursor::new(bytes), &load_opts, |mtl_path| {
             let full = dir.join(mtl_path);
             let fail = |msg: String| {
                 mtl_error.borrow_mut().get_or_insert(msg);
                 tobj::LoadError::MaterialParseError
             };
-            match std::fs::read(&full) {
+            match read(&full) {
                 Ok(text) => match normalize_mtl(&text) {
                     Ok(text) => tobj::load_mtl_buf(&mut Cursor::new(text))
                         .map_err(|e| fail(format!("its material library {} is malformed ({e})", full.display()))),

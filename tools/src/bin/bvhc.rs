@@ -240,6 +240,14 @@ fn human_bytes(b: u64) -> String {
     }
 }
 
+/// A world position with `digits` decimals, in scientific notation where fixed notation would
+/// hide it (a scene 1e-7 wide, or 1e9).
+fn point(p: [f64; 3], digits: usize) -> String {
+    let wide = p.iter().any(|v| *v != 0.0 && !(1e-2..1e7).contains(&v.abs()));
+    let c = |v: f64| if wide { format!("{v:.digits$e}") } else { format!("{v:.digits$}") };
+    format!("({}, {}, {})", c(p[0]), c(p[1]), c(p[2]))
+}
+
 fn info(file: &Path) -> Result<(), String> {
     let (scene, sections, compiled) = load_any(file)?;
     let s = scene.stats();
@@ -252,7 +260,7 @@ fn info(file: &Path) -> Result<(), String> {
     say!("  triangles       {} ({} with vertex normals)", scene.triangles.len(), smooth);
     say!("  vertices        {} ({} normals)", scene.vertices.len(), scene.normals.len());
     say!("  materials       {}", scene.materials.len());
-    say!("  bounds          ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4})", lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+    say!("  bounds          {} .. {}", point(lo, 4), point(hi, 4));
     let o = scene.origin;
     say!(
         "  origin offset   ({}, {}, {}){}",
@@ -261,6 +269,13 @@ fn info(file: &Path) -> Result<(), String> {
         o[2],
         if o == [0.0; 3] { "" } else { " (stored positions are relative to it; shown here in world coordinates)" }
     );
+    if scene.scale_log2 != 0 {
+        say!(
+            "  stored unit     2^{} = {:e} world units (the scene is stored rescaled by a power of two so that the tracers' self-intersection offsets fit it; shown here in world units)",
+            scene.scale_log2,
+            scene.unit()
+        );
+    }
     say!("  layouts         {}", layout_names(&scene));
     say!(
         "  build           {}{}, traversal cost {}, intersection cost {}, max leaf size {}",
@@ -306,14 +321,10 @@ fn info(file: &Path) -> Result<(), String> {
     for c in &scene.cameras {
         let (eye, at) = (scene.world(c.eye), scene.world(c.at));
         say!(
-            "    {:<16} eye ({:.3}, {:.3}, {:.3}) at ({:.3}, {:.3}, {:.3}) fov {}",
+            "    {:<16} eye {} at {} fov {}",
             format!("\"{}\"", c.name().unwrap_or("?")),
-            eye[0],
-            eye[1],
-            eye[2],
-            at[0],
-            at[1],
-            at[2],
+            point(eye, 3),
+            point(at, 3),
             c.fov_deg
         );
     }
@@ -321,11 +332,9 @@ fn info(file: &Path) -> Result<(), String> {
     for (i, l) in scene.lights.iter().enumerate() {
         let p = scene.world(l.position);
         say!(
-            "    light {:<10} at ({:.3}, {:.3}, {:.3}) colour ({:.2}, {:.2}, {:.2})",
+            "    light {:<10} at {} colour ({:.2}, {:.2}, {:.2})",
             i + 1,
-            p[0],
-            p[1],
-            p[2],
+            point(p, 3),
             l.colour[0],
             l.colour[1],
             l.colour[2]

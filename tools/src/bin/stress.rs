@@ -111,10 +111,12 @@ fn sweep(cli: &Cli) -> Result<(), String> {
         .filter(|r| r.tally.silent_failure() && r.axis != AXES[1])
         .map(|r| format!("{} {}: {} {}", r.axis, r.label, r.method.name(), report::cell(&r.tally)))
         .collect();
+    let axes: String = cli.axis.iter().map(|a| format!(" --axis {a:?}")).collect();
     let command = format!(
-        "cargo run --release -p tools --bin stress --{}{}",
+        "cargo run --release -p tools --bin stress --{}{}{axes} --timeout {}",
         if cli.quick { " --quick" } else { "" },
-        if cli.cpu_only { " --cpu-only" } else { "" }
+        if cli.cpu_only { " --cpu-only" } else { "" },
+        cli.timeout
     );
     let mut md = std::fs::read_to_string(&cli.out).ok().map(|s| head_of(&s)).unwrap_or_default();
     md += &format!(

@@ -111,7 +111,7 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     bar.finish();
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
-    let written = outputs.write(&image, linear.as_deref(), args.heatmap_max)?;
+    let written = outputs.write(&image, linear.as_deref(), args.heatmap_max, scene)?;
     let mut lines = Vec::new();
     let r = image.rays;
     lines.push(format!(
@@ -119,7 +119,7 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
         image.width,
         image.height,
         settings.mode.name(),
-        tools::render_args::accuracy_note(&settings.accuracy),
+        tools::render_args::accuracy_note(&settings.accuracy, scene),
         if reference { "the f64 reference".to_owned() } else { format!("{:?}", method.resolve(scene)) },
         pool.current_num_threads(),
         duration(seconds),

@@ -158,14 +158,14 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
 
     // Every file first, the report after: a reader that stops early cannot cut the writing short.
     let image = &out.image;
-    let written = outputs.write(image, None, args.heatmap_max)?;
+    let written = outputs.write(image, None, args.heatmap_max, scene)?;
     let r = image.rays;
     let mut lines = vec![format!(
         "{}x{} {}{} with {}{} on {}: {} GPU{}, rays: {} ({}) -> {}",
         image.width,
         image.height,
         settings.mode.name(),
-        tools::render_args::accuracy_note(&settings.accuracy),
+        tools::render_args::accuracy_note(&settings.accuracy, scene),
         method.name(),
         if args.exact { " (exact)" } else { "" },
         gpu.info().name,

@@ -383,7 +383,7 @@ fn evaluate<B: Bench>(c: &Context<'_>, t: &Tracer<'_, B>, gpu: bool) -> Result<V
                     ));
                     let settings = Settings {
                         max_indirections: v.indirections.unwrap_or(f.base.max_indirections),
-                        accuracy: v.accuracy,
+                        accuracy: crate::render_args::in_scene_unit(v.accuracy, c.scene),
                         ..f.base.clone()
                     };
                     let m = measure(t.bench, &mut renderer, &settings, t.warmup, t.frames)?;
@@ -396,7 +396,10 @@ fn evaluate<B: Bench>(c: &Context<'_>, t: &Tracer<'_, B>, gpu: bool) -> Result<V
                         None => {
                             let s = Settings {
                                 aovs: true,
-                                accuracy: Accuracy { spp: 1, cutoff: 0.0, ..v.accuracy },
+                                accuracy: crate::render_args::in_scene_unit(
+                                    Accuracy { spp: 1, cutoff: 0.0, ..v.accuracy },
+                                    c.scene,
+                                ),
                                 ..f.base.clone()
                             };
                             hit_renders.push((key, t.bench.image(&mut renderer, &s)?));

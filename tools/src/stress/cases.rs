@@ -17,7 +17,7 @@ pub enum Extent {
 }
 
 /// The axes, in the order of the report.
-pub const AXES: [&str; 11] = [
+pub const AXES: [&str; 12] = [
     "distance",
     "distance, f32 world coordinates (no rebasing)",
     "scale",
@@ -29,6 +29,7 @@ pub const AXES: [&str; 11] = [
     "leaf size",
     "indirections (hall of mirrors)",
     "glass in glass",
+    "subnormal ray directions",
 ];
 
 fn compile(scene: &Scene) -> SceneFile {
@@ -111,7 +112,7 @@ pub fn all(extent: Extent) -> Vec<Case> {
     }
 
     // Scale: the mirror room scaled by 10^k about the origin.
-    let ks: Vec<i32> = if quick { vec![-8, 0, 8] } else { (-8..=8).collect() };
+    let ks: Vec<i32> = if quick { vec![-8, -5, 0, 7, 8] } else { (-8..=8).collect() };
     for k in ks {
         let scene = description(&scenes::mirror_room_scaled([0.0; 3], 10f64.powi(k)));
         let s = shot(&scene, first_camera(&scene), w, h);
@@ -229,6 +230,25 @@ pub fn all(extent: Extent) -> Vec<Case> {
         // One ray exactly through the centre (the fan's shared vertex).
         shots.push(shot(&scene, first_camera(&scene), 1, 1));
         out.push(case(AXES[6], (k + 1) as f64, label, scene, shots));
+    }
+
+    // Subnormal ray direction components: reflections off a mirror tilted by a subnormal angle
+    // (a camera's own rays never have them: its right and up vectors fill the other components),
+    // running along the shared edges of a wall. Compared with the f64 reference's image, so that
+    // a leak or a wrong reflection on every method is seen. At the smallest subnormal tilt the
+    // reflection's x component rounds to zero (2 eps d.z is below half of it).
+    let tilts: &[(f32, &str)] = if quick {
+        &[(1e-39, "1e-39"), (1e-44, "1e-44")]
+    } else {
+        &[(1e-39, "1e-39"), (-1e-39, "-1e-39"), (1e-44, "1e-44"), (f32::from_bits(1), "1.4e-45")]
+    };
+    for &(eps, label) in tilts {
+        let scene = compile(&scenes::subnormal_mirror(eps));
+        let s = shot(&scene, first_camera(&scene), 1, if quick { 16 } else { 48 });
+        let expected = tracer_cpu::reference::render(&scene, &s).expect("the reference renders").image;
+        let mut c = case(AXES[11], f64::from(eps.abs()), label.to_owned(), scene, vec![s]);
+        c.expect = Expect::Images(vec![expected]);
+        out.push(c);
     }
 
     // Tree depth: hand-assembled chains (the compiler caps the depth it builds). Run last: a

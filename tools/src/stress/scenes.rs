@@ -140,6 +140,34 @@ pub fn grid(n: u32) -> Vec<[Vec3; 3]> {
     out
 }
 
+/// A mirror tilted by `eps` about the y axis (the plane z = eps x, whose normal (-eps, 0, 1) has
+/// a subnormal x component for a subnormal `eps`), seen by a camera in the plane x = 0 through a
+/// frame one pixel wide, so that every primary ray has x = 0 and every reflected ray a subnormal
+/// x component (2 eps d.z): its inverse is infinite in f32. The reflected rays run up a grid of
+/// unit squares in the plane y = 6 whose shared edges lie on x = 0, exactly where they travel.
+pub fn subnormal_mirror(eps: f32) -> Scene {
+    let mut tris = vec![
+        [Vec3::new(-2.0, -1.0, -2.0 * eps), Vec3::new(2.0, -1.0, 2.0 * eps), Vec3::new(2.0, 8.0, 2.0 * eps)],
+        [Vec3::new(-2.0, -1.0, -2.0 * eps), Vec3::new(2.0, 8.0, 2.0 * eps), Vec3::new(-2.0, 8.0, -2.0 * eps)],
+    ];
+    // The wall: grid(4) in the plane y = 6, x in [-2, 2], z in [0, 16], facing -y.
+    tris.extend(grid(4).into_iter().map(|t| {
+        let [a, b, c] = t.map(|p| Vec3::new(p.x - 2.0, 6.0, 4.0 * p.y));
+        [a, c, b]
+    }));
+    let mirror = Material { kd: [0.02; 3], ks: [0.0; 3], kr: 0.9, ..Material::default() };
+    let wall = Material { kd: [0.9, 0.8, 0.3], ..Material::default() };
+    let materials = (0..tris.len()).map(|i| if i < 2 { mirror } else { wall }).collect();
+    let mut scene = triangles(
+        tris,
+        camera([0.0, 0.5, 1.0], [0.0, 4.0, 0.0], [0.0, 1.0, 0.0], 60.0),
+        vec![Light::new([0.0, 3.0, 6.0], [1.0; 3])],
+        materials,
+    );
+    scene.settings.max_indirections = 2;
+    scene
+}
+
 /// A closed box of `n` x `n` squares per face around [0, n]^3, each face two triangles per square:
 /// a watertight mesh that no ray from inside may leave.
 pub fn closed_box(n: u32) -> Vec<[Vec3; 3]> {
@@ -329,6 +357,7 @@ fn hand_built(positions: Vec<[Vec3; 3]>, nodes: Vec<Node>, camera: Camera) -> Sc
         build: BuildParams { max_leaf_size: n, ..BuildParams::default() },
         settings: SceneSettings::default(),
         origin: [0.0; 3],
+        scale_log2: 0,
         vertices: positions.iter().flatten().map(|p| p.to_array()).collect(),
         triangles: (0..n).map(|i| IndexedTriangle { vertices: [3 * i, 3 * i + 1, 3 * i + 2], material: 0 }).collect(),
         normals: Vec::new(),
