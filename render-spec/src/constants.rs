@@ -51,6 +51,17 @@ pub const POW_LOG2: [f32; 9] =
 #[allow(clippy::approx_constant)]
 pub const POW_EXP2: [f32; 7] = [1.0, 0.6931472, 0.2402265, 0.05550327, 0.009618057, 0.0013400428, 0.00015461445];
 
+/// Taylor coefficients of `sin(pi/2 x) = x * sum QUARTER_SIN[k] x^(2k)` and
+/// `cos(pi/2 x) = sum QUARTER_COS[k] x^(2k)` for `x` in `[0, 1]`, the quarter turn of
+/// [`crate::sequence::cosine_direction`]'s azimuth (within 1e-8 before rounding; a driver's `sin` and
+/// `cos` are approximations of their own, these are additions and multiplications only).
+#[allow(clippy::excessive_precision, clippy::approx_constant)]
+pub const QUARTER_SIN: [f32; 7] =
+    [1.5707964, -0.6459641, 0.079692625, -0.004681754, 0.00016044118, -3.5988433e-6, 5.6921728e-8];
+#[allow(clippy::excessive_precision, clippy::approx_constant)]
+pub const QUARTER_COS: [f32; 8] =
+    [1.0, -1.2337005, 0.2536695, -0.020863481, 0.00091926026, -2.5202042e-5, 4.7108747e-7, -6.3866032e-9];
+
 /// A constant's value, typed as the kernels declare it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Value {
@@ -87,6 +98,21 @@ pub const SHARED: &[(&str, Value)] = &[
     ("POW_EXP2_4", Value::F32(POW_EXP2[4])),
     ("POW_EXP2_5", Value::F32(POW_EXP2[5])),
     ("POW_EXP2_6", Value::F32(POW_EXP2[6])),
+    ("QUARTER_SIN_0", Value::F32(QUARTER_SIN[0])),
+    ("QUARTER_SIN_1", Value::F32(QUARTER_SIN[1])),
+    ("QUARTER_SIN_2", Value::F32(QUARTER_SIN[2])),
+    ("QUARTER_SIN_3", Value::F32(QUARTER_SIN[3])),
+    ("QUARTER_SIN_4", Value::F32(QUARTER_SIN[4])),
+    ("QUARTER_SIN_5", Value::F32(QUARTER_SIN[5])),
+    ("QUARTER_SIN_6", Value::F32(QUARTER_SIN[6])),
+    ("QUARTER_COS_0", Value::F32(QUARTER_COS[0])),
+    ("QUARTER_COS_1", Value::F32(QUARTER_COS[1])),
+    ("QUARTER_COS_2", Value::F32(QUARTER_COS[2])),
+    ("QUARTER_COS_3", Value::F32(QUARTER_COS[3])),
+    ("QUARTER_COS_4", Value::F32(QUARTER_COS[4])),
+    ("QUARTER_COS_5", Value::F32(QUARTER_COS[5])),
+    ("QUARTER_COS_6", Value::F32(QUARTER_COS[6])),
+    ("QUARTER_COS_7", Value::F32(QUARTER_COS[7])),
 ];
 
 /// The WGSL declarations of [`SHARED`], for the kernels to be prepended with.

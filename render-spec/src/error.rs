@@ -21,6 +21,12 @@ pub enum RenderError {
     Cutoff(f32),
     #[error("a fixed ray offset must be a finite distance of at least 0, not {0}")]
     Offset(f32),
+    #[error("{0} ambient-occlusion rays per hit are not a whole number from 1 to {max}", max = crate::settings::MAX_AO_SAMPLES)]
+    AoSamples(u32),
+    #[error("the ambient-occlusion length must be a finite fraction of the scene's diagonal above 0, not {0}")]
+    AoLength(f32),
+    #[error("{renderer} does not implement the {mode} mode")]
+    ModeUnsupported { renderer: &'static str, mode: &'static str },
 }
 
 #[cfg(test)]
@@ -38,6 +44,9 @@ mod tests {
             RenderError::SamplesPerPixel(2),
             RenderError::Cutoff(-1.0),
             RenderError::Offset(f32::NAN),
+            RenderError::AoSamples(0),
+            RenderError::AoLength(-1.0),
+            RenderError::ModeUnsupported { renderer: "the exact reference", mode: "ao" },
         ] {
             let s = e.to_string();
             assert!(!s.contains('\n') && !s.ends_with('.') && !s.starts_with(char::is_uppercase), "{s}");

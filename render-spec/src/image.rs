@@ -52,11 +52,15 @@ pub struct RayCounts {
     pub primary: u64,
     pub shadow: u64,
     pub secondary: u64,
+    /// Ambient-occlusion rays ([`crate::Mode::Ao`]).
+    pub ao: u64,
+    /// Diffuse bounces ([`crate::Mode::Diffuse`]).
+    pub diffuse: u64,
 }
 
 impl RayCounts {
     pub fn total(&self) -> u64 {
-        self.primary + self.shadow + self.secondary
+        self.primary + self.shadow + self.secondary + self.ao + self.diffuse
     }
 }
 
@@ -67,6 +71,8 @@ impl std::ops::Add for RayCounts {
             primary: self.primary + o.primary,
             shadow: self.shadow + o.shadow,
             secondary: self.secondary + o.secondary,
+            ao: self.ao + o.ao,
+            diffuse: self.diffuse + o.diffuse,
         }
     }
 }

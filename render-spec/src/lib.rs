@@ -25,4 +25,4 @@ pub use constants::NO_TRIANGLE;
 pub use error::RenderError;
 pub use image::{Aovs, Image, PrimDiff, RayCounts};
 pub use power::phong_pow;
-pub use settings::{MAX_INDIRECTIONS, Mode, Settings};
+pub use settings::{Ao, MAX_AO_SAMPLES, MAX_INDIRECTIONS, Mode, Settings};

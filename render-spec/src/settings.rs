@@ -5,13 +5,91 @@ use crate::accuracy::Accuracy;
 use crate::camera::{CameraError, CameraSpec, Frame};
 use bvh_format::Light;
 
-/// Ray casting or Whitted ray tracing (docs/shading.md).
+/// Ray casting, Whitted ray tracing, or one of the incoherent modes (docs/shading.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Mode {
     /// One white light at the eye, Lambert only, no shadow or secondary rays.
     Cast,
     /// Coloured point lights with shadow rays, Phong, reflection and refraction.
     Whitted,
+    /// Ambient occlusion: the fraction of cosine-distributed rays of a fixed length that leave
+    /// each primary hit unblocked.
+    Ao(Ao),
+    /// One cosine-distributed bounce of full length per primary hit.
+    Diffuse,
+}
+
+impl Mode {
+    /// The name `--mode` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Cast => "cast",
+            Mode::Whitted => "whitted",
+            Mode::Ao(_) => "ao",
+            Mode::Diffuse => "diffuse",
+        }
+    }
+}
+
+/// The rays of ambient occlusion (`--ao-samples`, `--ao-length`).
+#[derive(Clone, Copy, Debug)]
+pub struct Ao {
+    /// Rays per primary hit, 1 to [`MAX_AO_SAMPLES`].
+    pub samples: u32,
+    /// Their length as a fraction of the diagonal of the scene's bounding box (finite, above 0).
+    pub length: f32,
+}
+
+/// The most AO rays per primary hit.
+pub const MAX_AO_SAMPLES: u32 = 1024;
+
+impl Default for Ao {
+    /// 8 rays of 10% of the scene's diagonal, issue 10's setting.
+    fn default() -> Self {
+        Self { samples: 8, length: 0.1 }
+    }
+}
+
+/// Equal when both fields have the same bits (a setting, not a number to compare).
+impl PartialEq for Ao {
+    fn eq(&self, o: &Self) -> bool {
+        self.samples == o.samples && self.length.to_bits() == o.length.to_bits()
+    }
+}
+
+impl Eq for Ao {}
+
+impl std::hash::Hash for Ao {
+    fn hash<H: std::hash::Hasher>(&self, h: &mut H) {
+        (self.samples, self.length.to_bits()).hash(h)
+    }
+}
+
+impl Ao {
+    /// Checks the ray count and the length.
+    pub fn check(&self) -> Result<(), RenderError> {
+        if self.samples == 0 || self.samples > MAX_AO_SAMPLES {
+            return Err(RenderError::AoSamples(self.samples));
+        }
+        if !(self.length.is_finite() && self.length > 0.0) {
+            return Err(RenderError::AoLength(self.length));
+        }
+        Ok(())
+    }
+
+    /// The rays' length in scene units: [`Self::length`] times the diagonal of the box
+    /// `lo..hi` (the scene's bounds), in f64, rounded once to f32 (the largest finite f32 where
+    /// it would overflow). Both tracers take this value from here.
+    pub fn distance(&self, lo: [f32; 3], hi: [f32; 3]) -> f32 {
+        let diagonal = (0..3).map(|a| (hi[a] as f64 - lo[a] as f64).powi(2)).sum::<f64>().sqrt();
+        ((self.length as f64 * diagonal) as f32).min(f32::MAX)
+    }
+
+    /// The f32 value of `1 / samples`, by which the open rays are multiplied (a GPU's division
+    /// need not be correctly rounded, so the host computes it).
+    pub fn inverse(&self) -> f32 {
+        1.0 / self.samples.max(1) as f32
+    }
 }
 
 /// The most indirections a frame may ask for. Paths end earlier in every scene whose reflective
@@ -47,6 +125,9 @@ impl Settings {
             return Err(RenderError::TooManyIndirections(self.max_indirections));
         }
         self.accuracy.check()?;
+        if let Mode::Ao(ao) = self.mode {
+            ao.check()?;
+        }
         self.camera.frame(self.width, self.height).map_err(|e| match e {
             CameraError::Degenerate => RenderError::DegenerateCamera,
             CameraError::FieldOfView => RenderError::FieldOfView(self.camera.fov_deg),
@@ -56,5 +137,28 @@ impl Settings {
     /// Pixels of the image.
     pub fn pixels(&self) -> u64 {
         self.width as u64 * self.height as u64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ao_settings_are_checked_and_measured_on_the_scene() {
+        assert_eq!(Ao::default().check(), Ok(()));
+        for samples in [0, MAX_AO_SAMPLES + 1, u32::MAX] {
+            assert_eq!(Ao { samples, length: 0.1 }.check(), Err(RenderError::AoSamples(samples)));
+        }
+        for length in [0.0, -0.1, f32::NAN, f32::INFINITY] {
+            assert!(matches!(Ao { samples: 1, length }.check(), Err(RenderError::AoLength(_))), "{length}");
+        }
+        let ao = Ao { samples: 4, length: 0.5 };
+        assert_eq!(ao.distance([0.0; 3], [3.0, 4.0, 12.0]), 6.5);
+        assert_eq!(ao.distance([1.0; 3], [1.0; 3]), 0.0);
+        assert_eq!(Ao { samples: 1, length: 1e30 }.distance([-1e30; 3], [1e30; 3]), f32::MAX);
+        assert_eq!(ao.inverse(), 0.25);
+        assert_eq!(Mode::Ao(ao), Mode::Ao(Ao { samples: 4, length: 0.5 }));
+        assert_ne!(Mode::Ao(ao), Mode::Ao(Ao { samples: 4, length: 0.25 }));
     }
 }

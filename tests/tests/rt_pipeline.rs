@@ -50,7 +50,7 @@ fn the_renderer_refuses_rt_pipeline_exactly_where_the_device_lacks_it() {
 
 /// rt-pipeline's stages split around the trace, with LST in place of the driver's traversal, give
 /// LST's images bit for bit: every colour, primary triangle, distance and normal and the same rays
-/// of every kind, over whole frames and small tiles, cast and Whitted. This runs the ray and hit
+/// of every kind, over whole frames and small tiles, cast, Whitted, AO and diffuse. This runs the ray and hit
 /// records, the halves and their slots on any device (lavapipe here); only the driver's traversal
 /// itself needs the H100.
 #[test]
@@ -58,7 +58,7 @@ fn the_split_stages_with_lst_in_place_of_the_driver_give_lsts_images() {
     let gpu = gpu();
     for (scene_name, camera, w, h) in [("room.toml", "close-up", 96, 72), ("bunny.toml", "medium", 96, 72)] {
         let scene = compile(scene_name);
-        for mode in [Mode::Cast, Mode::Whitted] {
+        for mode in [Mode::Cast, Mode::Whitted, Mode::Ao(render_spec::Ao::default()), Mode::Diffuse] {
             let settings = common::frame_settings(&scene, camera, w, h, mode);
             // Exact kernels (no contraction): two kernels holding the same LST code then round
             // alike on any device, also where the compiler would fuse differently in each.
@@ -80,7 +80,13 @@ fn the_split_stages_with_lst_in_place_of_the_driver_give_lsts_images() {
                 assert_eq!(a.t, b.t, "{what}: distances");
                 assert_eq!(a.normal, b.normal, "{what}: normals");
                 assert_eq!(split.rays, lst.rays, "{what}: rays of every kind");
-                assert!(lst.rays.primary > 0 && (mode == Mode::Cast || lst.rays.shadow > 0), "{what}: {:?}", lst.rays);
+                let traced = match mode {
+                    Mode::Cast => true,
+                    Mode::Whitted => lst.rays.shadow > 0,
+                    Mode::Ao(_) => lst.rays.ao > 0,
+                    Mode::Diffuse => lst.rays.diffuse > 0,
+                };
+                assert!(lst.rays.primary > 0 && traced, "{what}: {:?}", lst.rays);
                 // The passes are timed in parts: the ray halves, the traversal, the hit halves.
                 for part in [tracer_vk::render::RT_RAY_HALVES, tracer_vk::render::RT_TRAVERSAL] {
                     assert!(out.passes.iter().any(|(l, _)| l == part), "{what}: no {part} in {:?}", out.passes);

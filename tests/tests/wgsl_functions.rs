@@ -1,6 +1,7 @@
 //! The shared formulas, one function at a time, in the manner of tinybvh's reference tests: a
 //! WGSL harness calls the kernels' own slab test, triangle test, origin offset, surface normal,
-//! reflection, refraction, Phong term, adaptive bounce test and primary ray direction on edge-case inputs on the Vulkan
+//! reflection, refraction, Phong term, adaptive bounce test, primary ray direction, sample sequence and
+//! cosine-distributed direction on edge-case inputs on the Vulkan
 //! device at hand (lavapipe in CI), and every result must equal the Rust function of the CPU
 //! tracer bit for bit. Whole images agree only where a pixel happens to exercise a difference;
 //! these cases aim at the corners: axis-parallel rays with +0 and -0, origins in a box's face,
@@ -79,6 +80,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         case 8u: {
             a = vec4<f32>(primary_dir(u32(arg(i, 0u).x), u32(arg(i, 0u).y)), 0.0);
+        }
+        case 9u: {
+            // Words as 16-bit halves (exact in f32): pixel, sample; then rays, ray.
+            let w = vec4<u32>(arg(i, 0u));
+            let n = incoherent_sample((w.z << 16u) | w.w, u32(arg(i, 1u).x), u32(arg(i, 1u).y));
+            a = vec4<f32>(sample_2d((w.x << 16u) | w.y, n), 0.0, 0.0);
+        }
+        case 10u: {
+            a = vec4<f32>(cosine_direction(arg(i, 0u).xyz, arg(i, 1u).xy), 0.0);
         }
         default: {}
     }
@@ -430,11 +440,65 @@ fn run(gpu: &Gpu, pipeline: &tracer_vk::Pipeline, cases: &Cases, frame: &[u8], t
     failures
 }
 
+/// The sequence of the incoherent modes (render_spec::sequence::sample_2d of incoherent_sample):
+/// pixels and sample numbers at the ends of the u32 range and where the products wrap.
+fn sequence_cases(rng: &mut Rng) -> Cases {
+    use render_spec::sequence::{incoherent_sample, sample_2d};
+    let mut c = Cases::new("sample_2d", 9);
+    let mut add = |pixel: u32, sample: u32, rays: u32, ray: u32| {
+        let s = sample_2d(pixel, incoherent_sample(sample, rays, ray));
+        let half = |w: u32| [(w >> 16) as f32, (w & 0xffff) as f32];
+        let (p, q) = (half(pixel), half(sample));
+        c.push(
+            &[[p[0], p[1], q[0], q[1]], [rays as f32, ray as f32, 0.0, 0.0]],
+            [s[0], s[1], 0.0, 0.0],
+            [0.0; 4],
+            format!("pixel {pixel} sample {sample}, ray {ray} of {rays}"),
+        );
+    };
+    for pixel in [0, 1, 2, 0xffff, 0x10000, 1 << 28, u32::MAX - 1, u32::MAX] {
+        for (sample, rays, ray) in [(0, 1, 0), (0, 8, 7), (3, 8, 5), (u32::MAX, 8, 7), (0x2000_0000, 1024, 1023)] {
+            add(pixel, sample, rays, ray);
+        }
+    }
+    for _ in 0..300 {
+        let word = |rng: &mut Rng| (rng.unit() * 65536.0) as u32 * 65536 + (rng.unit() * 65536.0) as u32;
+        let (pixel, sample) = (word(rng), word(rng) % 1024);
+        add(pixel, sample, 1 + rng.below(64) as u32, rng.below(64) as u32);
+    }
+    c
+}
+
+/// render_spec::sequence::cosine_direction: normals along the axes (both signs of z, the frame's
+/// branch) and random ones, samples at the quarter turns, the disk's centre and rim, and from the
+/// sequence.
+fn cosine_cases(rng: &mut Rng) -> Cases {
+    use render_spec::sequence::{cosine_direction, sample_2d};
+    let mut c = Cases::new("cosine_direction", 10);
+    let mut add = |n: Vec3, u: [f32; 2]| {
+        let d = cosine_direction(n.into(), u);
+        c.push(&[v4(n, 0.0), [u[0], u[1], 0.0, 0.0]], [d[0], d[1], d[2], 0.0], [0.0; 4], format!("n {n} u {u:?}"));
+    };
+    let below_one = 1.0 - 1.0 / (1u32 << 24) as f32;
+    let edges = [0.0, 0.125, 0.25, 0.5, 0.75, below_one, 0.2499999, 0.7500001];
+    for n in [Vec3::Z, -Vec3::Z, Vec3::X, -Vec3::Y, Vec3::new(0.0, -0.0, 1.0), Vec3::new(-0.0, 0.0, -1.0)] {
+        for u0 in edges {
+            for u1 in edges {
+                add(n, [u0, u1]);
+            }
+        }
+    }
+    for k in 0..400 {
+        add(unit_vec(rng), sample_2d(k * 7919, k));
+    }
+    c
+}
+
 /// The frame record with the camera's corner and steps and the bounce-stop words set: eye,
 /// top_left, h_step and v_step are its first four vec4s, `stop` sits after six vec4s and `size`
 /// (FrameData in tracer-vk/src/render.rs, whose layout test pins these offsets against naga).
 fn frame_record(camera: &Frame, stop: BounceStop) -> Vec<u8> {
-    let mut words = [0u32; 44];
+    let mut words = [0u32; 48];
     for (k, v) in [camera.eye, camera.top_left, camera.h_step, camera.v_step].into_iter().enumerate() {
         for (c, x) in v.to_array().into_iter().enumerate() {
             words[4 * k + c] = x.to_bits();
@@ -518,6 +582,8 @@ fn functions_equal_their_rust_twins(exact: bool, intersect: Intersect) {
     let mut total = 0;
     let primary = primary_cases(&view, 37, 23);
     for cases in [
+        sequence_cases(&mut rng),
+        cosine_cases(&mut rng),
         slab_cases(&mut rng),
         intersect_cases(&mut rng, intersect),
         offset_cases(&mut rng),

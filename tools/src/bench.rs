@@ -7,7 +7,7 @@ use crate::output::{self, Kind, Output};
 use crate::render_args::{IntersectArg, MAX_LIGHTS, lights_n, parse_count, parse_res, stored_camera};
 use bvh_format::SceneFile;
 use clap::ValueEnum;
-use render_spec::{CameraSpec, Image, Mode, Settings};
+use render_spec::{Ao, CameraSpec, Image, Mode, Settings};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -22,7 +22,8 @@ pub struct MatrixArgs {
     /// Image sizes.
     #[arg(long, value_delimiter = ',', value_parser = parse_res, default_value = "640x480,1280x960,1920x1440", allow_hyphen_values = true)]
     pub res: Vec<(u32, u32)>,
-    /// Modes: cast, or whitted with a light count (whitted1, whitted2, whitted4).
+    /// Modes: cast; whitted with a light count (whitted1, whitted2, whitted4); ao with the rays
+    /// per hit, of 10% of the scene's diagonal (ao8) or of another fraction (ao8:0.25); diffuse.
     #[arg(long, value_delimiter = ',', value_parser = parse_mode, default_value = "cast,whitted1,whitted2", allow_hyphen_values = true)]
     pub modes: Vec<BenchMode>,
     /// Timed frames per setting, 1 to 100000; the median is reported [default: 50 on the GPU, 10
@@ -49,8 +50,8 @@ pub fn parse_warmup(s: &str) -> Result<usize, String> {
     parse_count(s, 0, 100_000, "the number of warm-up frames").map(|n| n as usize)
 }
 
-/// A mode of the matrix: ray casting, or Whitted ray tracing with this many lights (the scene's
-/// first ones, completed by [`lights_n`]).
+/// A mode of the matrix: ray casting, Whitted ray tracing with this many lights (the scene's
+/// first ones, completed by [`lights_n`]), ambient occlusion or the diffuse bounce.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BenchMode {
     pub mode: Mode,
@@ -58,32 +59,57 @@ pub struct BenchMode {
 }
 
 impl BenchMode {
-    /// `cast`, `whitted1`, `whitted2`, ...: the name the options and the tables use.
+    /// `cast`, `whitted1`, `whitted2`, `ao8`, `ao8:0.25`, `diffuse`: the name the options and
+    /// the tables use.
     pub fn name(&self) -> String {
         match self.mode {
-            Mode::Cast => "cast".to_owned(),
+            Mode::Cast | Mode::Diffuse => self.mode.name().to_owned(),
             Mode::Whitted => format!("whitted{}", self.lights),
+            Mode::Ao(ao) if ao.length == Ao::default().length => format!("ao{}", ao.samples),
+            Mode::Ao(ao) => format!("ao{}:{}", ao.samples, ao.length),
         }
     }
 }
 
 pub fn parse_mode(s: &str) -> Result<BenchMode, String> {
+    let plain = |mode| Ok(BenchMode { mode, lights: 0 });
     match s.trim() {
-        "cast" => Ok(BenchMode { mode: Mode::Cast, lights: 0 }),
-        t => match t.strip_prefix("whitted") {
-            Some(n) => parse_count(n, 1, MAX_LIGHTS as u64, "the light count after \"whitted\"")
-                .map(|n| BenchMode { mode: Mode::Whitted, lights: n as usize }),
-            None => Err(format!("{s:?} is not a mode (cast, whitted1, whitted2, ...)")),
-        },
+        "cast" => plain(Mode::Cast),
+        "diffuse" => plain(Mode::Diffuse),
+        t => {
+            if let Some(n) = t.strip_prefix("whitted") {
+                return parse_count(n, 1, MAX_LIGHTS as u64, "the light count after \"whitted\"")
+                    .map(|n| BenchMode { mode: Mode::Whitted, lights: n as usize });
+            }
+            let Some(rest) = t.strip_prefix("ao") else {
+                return Err(format!("{s:?} is not a mode (cast, whitted1, whitted2, ..., ao8, ao8:0.25, diffuse)"));
+            };
+            let (n, length) = match rest.split_once(':') {
+                Some((n, length)) => (n, Some(length)),
+                None => (rest, None),
+            };
+            let samples = crate::render_args::parse_ao_samples(n)?;
+            let length = length.map_or(Ok(Ao::default().length), crate::render_args::parse_ao_length)?;
+            plain(Mode::Ao(Ao { samples, length }))
+        }
     }
 }
 
+/// Rays of a frame by kind, in the order of the tables' columns: primary, shadow, secondary, AO
+/// and diffuse.
+pub type Rays = [u64; 5];
+
+/// [`Rays`] of a frame's counts.
+pub fn rays_of(r: &render_spec::RayCounts) -> Rays {
+    [r.primary, r.shadow, r.secondary, r.ao, r.diffuse]
+}
+
 /// What one frame cost: milliseconds (whatever the tracer's [`Bench::timing`] says they cover) and
-/// primary, shadow and secondary rays.
+/// its rays.
 #[derive(Clone, Copy, Debug)]
 pub struct Timed {
     pub ms: f64,
-    pub rays: [u64; 3],
+    pub rays: Rays,
 }
 
 /// A tracer the matrix can time.
@@ -127,14 +153,15 @@ pub struct Row {
     pub method: String,
     pub median_ms: f64,
     pub min_ms: f64,
-    pub rays: [u64; 3],
+    /// Every ray counts towards the rate, AO and diffuse rays included.
+    pub rays: Rays,
     pub tracer: String,
     pub device: String,
 }
 
 /// The CSV columns, in order.
 pub const CSV_HEADER: &str = "scene,triangles,camera,width,height,mode,lights,method,median_ms,min_ms,primary,shadow,\
-                              secondary,mrays_per_s,tracer,device";
+                              secondary,ao,diffuse,mrays_per_s,tracer,device";
 
 impl Row {
     pub fn total_rays(&self) -> u64 {
@@ -147,9 +174,9 @@ impl Row {
     }
 
     pub fn csv(&self) -> String {
-        let [p, s, r] = self.rays;
+        let [p, s, r, a, d] = self.rays;
         format!(
-            "{},{},{},{},{},{},{},{},{:.4},{:.4},{p},{s},{r},{:.2},{},{}",
+            "{},{},{},{},{},{},{},{},{:.4},{:.4},{p},{s},{r},{a},{d},{:.2},{},{}",
             field(&self.scene),
             self.triangles,
             field(&self.camera),
@@ -167,9 +194,9 @@ impl Row {
     }
 
     fn markdown(&self) -> String {
-        let [p, s, r] = self.rays;
+        let [p, s, r, a, d] = self.rays;
         format!(
-            "| {} | {} | {}x{} | {} | {} {} | {} | {} | {p} | {s} | {r} |",
+            "| {} | {} | {}x{} | {} | {} {} | {} | {} | {p} | {s} | {r} | {a} | {d} |",
             self.scene,
             self.camera,
             self.width,
@@ -199,7 +226,8 @@ pub fn significant(x: f64) -> String {
 }
 
 /// Reads rows written by [`Row::csv`] (or by earlier versions of `trace-vk bench`, whose files have
-/// no `tracer` and `device` columns: those rows are `vk` on an unnamed device).
+/// no `tracer` and `device` columns: those rows are `vk` on an unnamed device; nor `ao` and
+/// `diffuse`: those rows traced none).
 pub fn read_csv(path: &Path) -> Result<Vec<Row>, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
@@ -222,7 +250,7 @@ pub fn read_csv(path: &Path) -> Result<Vec<Row>, String> {
         need("shadow")?,
         need("secondary")?,
     ];
-    let (tracer, device) = (col("tracer"), col("device"));
+    let (tracer, device, ao, diffuse) = (col("tracer"), col("device"), col("ao"), col("diffuse"));
     let mut rows = Vec::new();
     for (n, line) in lines {
         let f: Vec<&str> = line.split(',').map(str::trim).collect();
@@ -231,7 +259,9 @@ pub fn read_csv(path: &Path) -> Result<Vec<Row>, String> {
             return Err(bad(&format!("{} fields where the header has {}", f.len(), names.len())));
         }
         let num = |i: usize| f[idx[i]].parse::<f64>().map_err(|_| bad(&format!("{:?} is not a number", f[idx[i]])));
-        let int = |i: usize| f[idx[i]].parse::<u64>().map_err(|_| bad(&format!("{:?} is not a count", f[idx[i]])));
+        let count = |s: &str| s.parse::<u64>().map_err(|_| bad(&format!("{s:?} is not a count")));
+        let int = |i: usize| count(f[idx[i]]);
+        let optional = |c: Option<usize>| c.map_or(Ok(0), |i| count(f[i]));
         rows.push(Row {
             scene: f[idx[0]].to_owned(),
             triangles: int(1)?,
@@ -243,7 +273,7 @@ pub fn read_csv(path: &Path) -> Result<Vec<Row>, String> {
             method: f[idx[7]].to_owned(),
             median_ms: num(8)?,
             min_ms: num(9)?,
-            rays: [int(10)?, int(11)?, int(12)?],
+            rays: [int(10)?, int(11)?, int(12)?, optional(ao)?, optional(diffuse)?],
             tracer: tracer.map_or("vk", |i| f[i]).to_owned(),
             device: device.map_or("", |i| f[i]).to_owned(),
         });
@@ -258,9 +288,9 @@ pub fn markdown(prefaces: &[String], rows: &[Row]) -> String {
         let _ = writeln!(s, "{p}\n");
     }
     s.push_str(
-        "| scene | camera | size | mode | tracer, method | median ms | Mrays/s | primary | shadow | secondary |\n",
+        "| scene | camera | size | mode | tracer, method | median ms | Mrays/s | primary | shadow | secondary | AO | diffuse |\n",
     );
-    s.push_str("|---|---|---|---|---|---:|---:|---:|---:|---:|\n");
+    s.push_str("|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in rows {
         let _ = writeln!(s, "{}", r.markdown());
     }
@@ -297,7 +327,7 @@ pub fn write_tables(csv: &Path, preface: &str, rows: &[Row]) -> Result<PathBuf, 
 pub struct Measured {
     pub median_ms: f64,
     pub min_ms: f64,
-    pub rays: [u64; 3],
+    pub rays: Rays,
 }
 
 /// The least wall time of untimed frames before a setting is timed (see [`measure`]).
@@ -325,7 +355,7 @@ pub fn measure<B: Bench>(
         warmed += 1;
     }
     let mut times = Vec::with_capacity(frames);
-    let mut rays = [0u64; 3];
+    let mut rays = Rays::default();
     for _ in 0..frames.max(1) {
         let t = bench.frame(renderer, settings)?;
         times.push(t.ms);
@@ -450,6 +480,18 @@ mod tests {
     }
 
     #[test]
+    fn modes_parse_and_name_themselves_back() {
+        for name in ["cast", "whitted1", "whitted4", "ao8", "ao1", "ao16:0.25", "diffuse"] {
+            assert_eq!(parse_mode(name).unwrap().name(), name);
+        }
+        assert_eq!(parse_mode("ao8").unwrap().mode, Mode::Ao(Ao { samples: 8, length: 0.1 }));
+        assert_eq!(parse_mode("ao2:0.5").unwrap().mode, Mode::Ao(Ao { samples: 2, length: 0.5 }));
+        for bad in ["ao", "ao0", "ao8:", "ao8:0", "ao8:-1", "aox", "diffuse2", "whitted"] {
+            assert!(parse_mode(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
     fn rows_survive_a_round_trip_through_csv_and_old_files_read_as_vk() {
         let row = Row {
             scene: "dragon".into(),
@@ -462,7 +504,7 @@ mod tests {
             method: "packet".into(),
             median_ms: 12.5,
             min_ms: 11.25,
-            rays: [307200, 400000, 100],
+            rays: [307200, 400000, 100, 0, 0],
             tracer: "cpu".into(),
             device: "Some CPU, 16 threads".into(),
         };
@@ -483,7 +525,7 @@ mod tests {
         )
         .unwrap();
         let old = read_csv(&old).unwrap();
-        assert_eq!((old[0].tracer.as_str(), old[0].method.as_str(), old[0].rays), ("vk", "lst", [2764800, 0, 0]));
+        assert_eq!((old[0].tracer.as_str(), old[0].method.as_str(), old[0].rays), ("vk", "lst", [2764800, 0, 0, 0, 0]));
         assert!((old[0].mrays() - 6260.9).abs() < 0.1);
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -56,8 +56,7 @@ impl Bench for CpuBench {
         let t0 = Instant::now();
         let image = self.image(r, &Settings { aovs: false, ..s.clone() })?;
         let ms = t0.elapsed().as_secs_f64() * 1e3;
-        let r = image.rays;
-        Ok(Timed { ms, rays: [r.primary, r.shadow, r.secondary] })
+        Ok(Timed { ms, rays: crate::bench::rays_of(&image.rays) })
     }
 
     fn image(&self, (tracer, method): &mut (Tracer<'_>, Method), s: &Settings) -> Result<Image, String> {

@@ -6,7 +6,7 @@ use crate::output::{self, Kind, Output};
 use bvh_format::{Light, SceneFile};
 use clap::{Args, ValueEnum};
 use glam::{DVec3, Vec3};
-use render_spec::{Accuracy, CameraSpec, Image, Intersect, Mode, Offset, Settings};
+use render_spec::{Accuracy, Ao, CameraSpec, Image, Intersect, Mode, Offset, Settings};
 use std::path::PathBuf;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -15,6 +15,12 @@ pub enum ModeArg {
     Cast,
     /// Whitted ray tracing: lights with shadows, Phong, reflection and refraction.
     Whitted,
+    /// Ambient occlusion: the fraction of --ao-samples cosine-distributed rays of --ao-length
+    /// that leave each primary hit unblocked (grey; a miss shows the background).
+    Ao,
+    /// One cosine-distributed bounce of full length per primary hit: the hit's colour times what
+    /// the bounce sees (lit from the hit, as ray casting lights) or the background.
+    Diffuse,
 }
 
 /// The triangle test (`--intersect`).
@@ -96,6 +102,13 @@ pub struct RenderArgs {
     /// --spp above 1: t, N and prim of each pixel's first sample, nodes and tris over all).
     #[arg(long, allow_hyphen_values = true)]
     pub aov: Option<PathBuf>,
+    /// Ambient-occlusion rays per primary hit (--mode ao), 1 to 1024.
+    #[arg(long, value_parser = parse_ao_samples, default_value = "8", allow_hyphen_values = true)]
+    pub ao_samples: u32,
+    /// Length of the ambient-occlusion rays (--mode ao) as a fraction of the diagonal of the
+    /// scene's bounding box, above 0 (0.1: a tenth of the scene).
+    #[arg(long, value_parser = parse_ao_length, default_value = "0.1", allow_hyphen_values = true)]
+    pub ao_length: f32,
     /// Triangle test: watertight (no ray passes between two triangles sharing an edge) or mt
     /// (Möller-Trumbore: fewer operations, but leaks at shared edges).
     #[arg(long, value_enum, default_value = "watertight", help_heading = "Accuracy")]
@@ -310,6 +323,23 @@ pub fn parse_cutoff(s: &str) -> Result<f32, String> {
     Ok(cutoff)
 }
 
+/// `--ao-samples`: a whole number from 1 to [`render_spec::MAX_AO_SAMPLES`].
+pub fn parse_ao_samples(s: &str) -> Result<u32, String> {
+    let max = render_spec::MAX_AO_SAMPLES;
+    parse_count(s, 1, u64::from(max), "the ambient-occlusion rays per hit").map(|n| n as u32)
+}
+
+/// `--ao-length`: a finite fraction above 0, refused with the renderer's sentence.
+pub fn parse_ao_length(s: &str) -> Result<f32, String> {
+    let length: f32 = s.trim().parse().map_err(|_| {
+        format!(
+            "{s:?} is not a number; the ambient-occlusion length is a fraction of the scene's diagonal, such as 0.1"
+        )
+    })?;
+    Ao { samples: 1, length }.check().map_err(|e| e.to_string())?;
+    Ok(length)
+}
+
 pub fn parse_light(s: &str) -> Result<WorldLight, String> {
     let v = parse_f64s(s, &[3, 6], "a light is X,Y,Z (3 numbers) or X,Y,Z,R,G,B (6 numbers)")?;
     let colour = if v.len() == 6 { [v[3], v[4], v[5]].map(|c| c as f32) } else { [1.0, 1.0, 1.0] };
@@ -352,6 +382,8 @@ impl RenderArgs {
         match self.mode {
             ModeArg::Cast => Mode::Cast,
             ModeArg::Whitted => Mode::Whitted,
+            ModeArg::Ao => Mode::Ao(Ao { samples: self.ao_samples, length: self.ao_length }),
+            ModeArg::Diffuse => Mode::Diffuse,
         }
     }
 
@@ -490,6 +522,19 @@ pub fn accuracy_note(a: &Accuracy, scene: &SceneFile) -> String {
         parts.push(if a.cutoff == 0.0 { "no bounce cutoff".to_owned() } else { format!("bounce cutoff {}", a.cutoff) });
     }
     if parts.is_empty() { String::new() } else { format!(" ({})", parts.join(", ")) }
+}
+
+/// The rays of a frame as both tracers report them: primary, shadow and secondary, and AO and
+/// diffuse rays where there are any.
+pub fn rays_note(r: &render_spec::RayCounts) -> String {
+    let mut s = format!("{} primary, {} shadow, {} secondary", r.primary, r.shadow, r.secondary);
+    if r.ao > 0 {
+        s.push_str(&format!(", {} AO", r.ao));
+    }
+    if r.diffuse > 0 {
+        s.push_str(&format!(", {} diffuse", r.diffuse));
+    }
+    s
 }
 
 /// The line both tracers print for a heatmap: its scale, and how many pixels lie above a fixed one.

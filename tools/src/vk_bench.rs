@@ -69,8 +69,7 @@ impl Bench for VkBench {
 
     fn frame(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Timed, String> {
         let out = r.render_frame(s, false).map_err(|e| e.to_string())?;
-        let rays = out.image.rays;
-        Ok(Timed { ms: out.gpu_ms, rays: [rays.primary, rays.shadow, rays.secondary] })
+        Ok(Timed { ms: out.gpu_ms, rays: crate::bench::rays_of(&out.image.rays) })
     }
 
     fn image(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Image, String> {

@@ -74,6 +74,9 @@ fn every_option_refuses_bad_values_in_one_sentence_and_touches_nothing() {
         let render = ["render", "room.bvh", "--res", "8x8", "-o", "out.png"];
         add(c, tracer, &["render"], "", &["missing.bvh", "empty.bvh", "text.bvh", "folder.bvh", "empty.obj"]);
         add(c, tracer, &render, "--mode", &["", "fast"]);
+        let ao = [&render[..], &["--mode", "ao"]].concat();
+        add(c, tracer, &ao, "--ao-samples", &[BAD_COUNT, &["1025", "99999999999"]].concat());
+        add(c, tracer, &ao, "--ao-length", &[BAD_FLOAT, &["0", "-0.1"]].concat());
         add(c, tracer, &render, "--camera", &["", "nope", "-1"]);
         add(c, tracer, &[&render[..], &["--at", "0,1,0"]].concat(), "--eye", BAD_VEC3);
         add(c, tracer, &[&render[..], &["--eye", "0,0,3"]].concat(), "--at", BAD_VEC3);
@@ -100,7 +103,13 @@ fn every_option_refuses_bad_values_in_one_sentence_and_touches_nothing() {
         ["bench", "room.bvh", "--res", "8x8", "--frames", "1", "--warmup", "0", "--methods", "lst", "--modes", "cast"];
     add(c, "trace-vk", &bench, "--cameras", &["", "nope", "-1"]);
     add(c, "trace-vk", &bench, "--res", BAD_SIZE);
-    add(c, "trace-vk", &bench, "--modes", &["", "fast", "whitted-1", "whitted99999", "whitted"]);
+    add(
+        c,
+        "trace-vk",
+        &bench,
+        "--modes",
+        &["", "fast", "whitted-1", "whitted99999", "whitted", "ao", "ao0", "ao1025", "ao8:0", "ao8:nan", "ao8:", "aox"],
+    );
     add(c, "trace-vk", &bench, "--methods", &["", "fastest"]);
     add(c, "trace-vk", &bench, "--frames", &["", "-1", "0", "99999999999", "nan"]);
     add(c, "trace-vk", &bench, "--warmup", &["", "-1", "99999999999", "nan"]);

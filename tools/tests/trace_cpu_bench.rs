@@ -19,7 +19,7 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
     let room = repo().join("scenes/room.toml");
     let o = Command::new(env!("CARGO_BIN_EXE_trace-cpu"))
         .args(["bench", room.to_str().unwrap(), "--cameras", "medium,wide", "--res", "32x24,21x15"])
-        .args(["--modes", "cast,whitted1,whitted2", "--methods", "ordered,stackless", "--frames", "3"])
+        .args(["--modes", "cast,whitted1,whitted2,ao4,diffuse", "--methods", "ordered,stackless", "--frames", "3"])
         .args(["--warmup", "0", "--threads", "2", "--csv", csv.to_str().unwrap()])
         .output()
         .expect("trace-cpu runs");
@@ -28,19 +28,25 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
     let text = std::fs::read_to_string(&csv).unwrap();
     assert_eq!(text.lines().next(), Some(CSV_HEADER));
     let rows = read_csv(&csv).unwrap();
-    assert_eq!(rows.len(), 2 * 2 * 2 * 3, "cameras x sizes x methods x modes");
+    assert_eq!(rows.len(), 2 * 2 * 2 * 5, "cameras x sizes x methods x modes");
 
     let scene = tools::load_scene(Some(&room)).unwrap().file;
     let tracer = Tracer::new(&scene);
     for (i, r) in rows.iter().enumerate() {
         // Scene, then method, then camera, size and mode: the order of the loops.
-        let method = ["ordered", "stackless"][i / 12];
-        let camera = ["medium", "wide"][i / 6 % 2];
-        let size = [(32, 24), (21, 15)][i / 3 % 2];
-        let (mode, lights) = [("cast", 0), ("whitted1", 1), ("whitted2", 2)][i % 3];
+        let method = ["ordered", "stackless"][i / 20];
+        let camera = ["medium", "wide"][i / 10 % 2];
+        let size = [(32, 24), (21, 15)][i / 5 % 2];
+        let (name, lights, mode) = [
+            ("cast", 0, Mode::Cast),
+            ("whitted1", 1, Mode::Whitted),
+            ("whitted2", 2, Mode::Whitted),
+            ("ao4", 0, Mode::Ao(render_spec::Ao { samples: 4, length: 0.1 })),
+            ("diffuse", 0, Mode::Diffuse),
+        ][i % 5];
         assert_eq!(
             (r.scene.as_str(), r.method.as_str(), r.camera.as_str(), (r.width, r.height), r.mode.as_str(), r.lights),
-            ("room", method, camera, size, mode, lights),
+            ("room", method, camera, size, name, lights),
             "row {i}"
         );
         assert_eq!((r.tracer.as_str(), r.triangles), ("cpu", scene.triangles.len() as u64));
@@ -54,7 +60,7 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
                 width: r.width,
                 height: r.height,
                 camera: cam,
-                mode: if lights == 0 { Mode::Cast } else { Mode::Whitted },
+                mode,
                 lights: tools::render_args::lights_n(&scene, lights, &cam),
                 max_indirections: scene.settings.max_indirections,
                 aovs: false,
@@ -64,12 +70,16 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
         )
         .unwrap();
         let rays = image.rays;
-        assert_eq!(r.rays, [rays.primary, rays.shadow, rays.secondary], "row {i}");
+        assert_eq!(r.rays, [rays.primary, rays.shadow, rays.secondary, rays.ao, rays.diffuse], "row {i}");
         assert_eq!(r.rays[0], (r.width * r.height) as u64);
-        if lights == 0 {
-            assert_eq!(r.rays[1..], [0, 0], "row {i}: ray casting traces primary rays only");
-        } else {
-            assert!(r.rays[1] > 0 && r.rays[2] > 0, "row {i}: the room has lights, a mirror and glass");
+        // The room is closed: every primary ray hits, and casts 4 AO rays or one diffuse bounce.
+        match mode {
+            Mode::Cast => assert_eq!(r.rays[1..], [0, 0, 0, 0], "row {i}: ray casting traces primary rays only"),
+            Mode::Whitted => {
+                assert!(r.rays[1] > 0 && r.rays[2] > 0, "row {i}: the room has lights, a mirror and glass")
+            }
+            Mode::Ao(_) => assert_eq!(r.rays[1..], [0, 0, 4 * r.rays[0], 0], "row {i}"),
+            Mode::Diffuse => assert_eq!(r.rays[1..], [0, 0, 0, r.rays[0]], "row {i}"),
         }
     }
     let md = std::fs::read_to_string(csv.with_extension("md")).unwrap();

@@ -7,7 +7,7 @@ use crate::lanes::{OneByOne, Packets, TraceLanes};
 use crate::packet::{LANES, Rays};
 use crate::shade;
 use crate::traverse::{self, Stack};
-use crate::whitted::Shading;
+use crate::whitted::{Seeds, Shading};
 use crate::wide::{F8, Lanes, V3};
 use bvh_format::{Node, SceneFile, Triangle};
 use rayon::prelude::*;
@@ -374,11 +374,15 @@ fn block<L: Lanes, T: TraceLanes>(
     let (x, y) = (L::from_fn(|i| lane_xy(i).0 as f32), L::from_fn(|i| (band.y0 + lane_xy(i).1) as f32));
     primary.t_max = [f32::INFINITY; LANES];
     primary.dir = directions(frame, x, y, samples[0]).to_arrays();
-    let mut out = sh.block::<L, T>(&primary, lanes);
+    // Row-major pixel indices in the image (at most 2^28 pixels: no overflow).
+    let mut seeds =
+        Seeds { pixel: std::array::from_fn(|i| ((band.y0 + lane_xy(i).1) * w + lane_xy(i).0) as u32), sample: 0 };
+    let mut out = sh.block::<L, T>(&primary, &seeds, lanes);
     let mut colour = V3::<L>::from_arrays(&out.colour);
-    for &sample in &samples[1..] {
+    for (k, &sample) in samples.iter().enumerate().skip(1) {
         primary.dir = directions(frame, x, y, sample).to_arrays();
-        let more = sh.block::<L, T>(&primary, lanes);
+        seeds.sample = k as u32;
+        let more = sh.block::<L, T>(&primary, &seeds, lanes);
         colour = colour + V3::from_arrays(&more.colour);
         for i in 0..LANES {
             out.cost[i] += more.cost[i];
@@ -530,7 +534,7 @@ mod tests {
                     for sample in render_spec::accuracy::sample_positions(spp) {
                         let mut rays = Rays::default();
                         rays.set(0, &Ray::new(frame.eye, frame.sample_direction(x, y, sample)), f32::INFINITY);
-                        let c = sh.block::<F8, _>(&rays, &mut lanes).colour;
+                        let c = sh.block::<F8, _>(&rays, &Default::default(), &mut lanes).colour;
                         sum += Vec3::new(c[0][0], c[1][0], c[2][0]);
                     }
                     want.push(shade::to_u8(sum * (1.0 / spp as f32)));

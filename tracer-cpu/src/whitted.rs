@@ -2,7 +2,8 @@
 //! as the thesis's pipeline runs a kernel per stage (code example 4.3): trace the primary rays,
 //! shade once per light with that light's shadow rays traced together, then per indirection trace
 //! the secondary rays of the paths still alive and shade their hits the same way. Ray casting is
-//! the first stage alone, lit by a white light at the eye without shadow rays.
+//! the first stage alone, lit by a white light at the eye without shadow rays; ambient occlusion
+//! and the diffuse bounce follow the first stage with their incoherent rays.
 //!
 //! Each lane computes exactly what its pixel traced on its own would, in the same order, so an
 //! image does not depend on how its rays are grouped or traced ([`TraceLanes`]).
@@ -10,16 +11,18 @@
 use crate::geometry::Cost;
 use crate::lanes::TraceLanes;
 use crate::packet::{LANES, Rays, Results};
-use crate::shade;
+use crate::shade::{self, SurfaceOf};
 use crate::wide::{Lanes, Mask, V3};
 use bvh_format::{Light, Material, SceneFile};
 use glam::Vec3;
-use render_spec::{BounceStop, Intersect, Mode, NO_TRIANGLE, Offset, RayCounts, Settings};
+use render_spec::{Ao, BounceStop, Intersect, Mode, NO_TRIANGLE, Offset, RayCounts, Settings, sequence};
 
 /// Per-frame constants of the pipeline.
 pub struct Shading<'a> {
     scene: &'a SceneFile,
     mode: Mode,
+    /// The length of AO rays in scene units ([`Ao::distance`] of the scene's bounds).
+    ao_distance: f32,
     lights: &'a [Light],
     max_indirections: u32,
     ambient: Vec3,
@@ -90,6 +93,13 @@ impl<'a> Shading<'a> {
         Self {
             scene,
             mode: s.mode,
+            ao_distance: match s.mode {
+                Mode::Ao(ao) => {
+                    let (lo, hi) = scene.bounds();
+                    ao.distance(lo, hi)
+                }
+                _ => 0.0,
+            },
             lights: &s.lights,
             max_indirections: s.max_indirections,
             ambient: Vec3::from(scene.settings.ambient),
@@ -102,10 +112,10 @@ impl<'a> Shading<'a> {
     }
 
     /// Shades the valid lanes of `primary` (rays from the eye, `t_max` +inf) with lanes of type
-    /// `L`, tracing every ray through `lanes`. Inlined into the renderer's loop, which is compiled
+    /// `L`, tracing every ray through `lanes`; `seeds` number the lanes' incoherent rays. Inlined into the renderer's loop, which is compiled
     /// for AVX2 where the CPU has it.
     #[inline(always)]
-    pub(crate) fn block<L: Lanes, T: TraceLanes>(&self, primary: &Rays, lanes: &mut T) -> Block {
+    pub(crate) fn block<L: Lanes, T: TraceLanes>(&self, primary: &Rays, seeds: &Seeds, lanes: &mut T) -> Block {
         let scene = self.scene;
         let zero = L::splat(0.0);
         let background = V3::<L>::splat(self.background);
@@ -128,31 +138,8 @@ impl<'a> Shading<'a> {
                 break;
             }
             let hit_lanes = L::bools(hit);
-            let tri: [usize; LANES] = std::array::from_fn(|i| if hit_lanes[i] { hits.tri[i] as usize } else { 0 });
-            let (origin, dir) = (V3::<L>::from_arrays(&rays.origin), V3::<L>::from_arrays(&rays.dir));
-            // Edges and vertex normals (zero for a flat triangle) padded to 16 bytes per lane, for
-            // the 4-float gathers.
-            let pad = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
-            let edges: [[[f32; 4]; 2]; LANES] = tri.map(|k| {
-                let (e1, e2) = shade::edges(&scene.triangle(k));
-                [pad(e1), pad(e2)]
-            });
-            let normals: [[[f32; 4]; 3]; LANES] =
-                tri.map(|k| shade::shading_normals(scene.vertex_normals(k)).map(|n| pad(n.into())));
-            let s = shade::surface_of(
-                L::gather3(std::array::from_fn(|i| &edges[i][0])),
-                L::gather3(std::array::from_fn(|i| &edges[i][1])),
-                [
-                    L::gather3(std::array::from_fn(|i| &normals[i][0])),
-                    L::gather3(std::array::from_fn(|i| &normals[i][1])),
-                    L::gather3(std::array::from_fn(|i| &normals[i][2])),
-                ],
-                origin,
-                dir,
-                L::from_array(hits.t),
-                L::from_array(hits.u),
-                L::from_array(hits.v),
-            );
+            let (s, tri) = self.surfaces::<L>(&rays, &hits, hit_lanes);
+            let dir = V3::<L>::from_arrays(&rays.dir);
             if depth == 0 && self.aovs {
                 out.t = L::select(hit, L::from_array(hits.t), L::from_array(out.t)).to_array();
                 out.normal = V3::select(hit, s.shading, V3::zero()).to_arrays();
@@ -165,9 +152,22 @@ impl<'a> Shading<'a> {
             let m = Materials::<L>::gather(&std::array::from_fn(|i| {
                 &scene.materials[scene.triangles[tri[i]].material as usize]
             }));
-            if self.mode == Mode::Cast {
-                colour = V3::select(hit, shade::cast_of(m.kd, s.shading, dir), colour);
-                break;
+            match self.mode {
+                Mode::Cast => {
+                    colour = V3::select(hit, shade::cast_of(m.kd, s.shading, dir), colour);
+                    break;
+                }
+                Mode::Ao(ao) => {
+                    let open = self.unoccluded::<L, T>(ao, &s, hit_lanes, seeds, lanes, &mut out);
+                    colour = V3::select(hit, V3::new(open, open, open), colour);
+                    break;
+                }
+                Mode::Diffuse => {
+                    let light = self.diffuse_light::<L, T>(&s, hit_lanes, seeds, lanes, &mut out);
+                    colour = V3::select(hit, m.kd.mul_each(light), colour);
+                    break;
+                }
+                Mode::Whitted => {}
             }
 
             // Phong per light, each light's shadow rays traced together.
@@ -225,7 +225,131 @@ impl<'a> Shading<'a> {
     }
 }
 
+/// What numbers the incoherent rays of a block's lanes (render_spec::sequence): each lane's pixel
+/// (its row-major index in the image) and the pixel sample being traced.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Seeds {
+    pub pixel: [u32; LANES],
+    pub sample: u32,
+}
+
 impl Shading<'_> {
+    /// The surfaces at the lanes' hits (`hit`: lanes that found one; the others hold whatever
+    /// triangle 0 gives) and the hit triangles.
+    #[inline(always)]
+    fn surfaces<L: Lanes>(&self, rays: &Rays, hits: &Results, hit: [bool; LANES]) -> (SurfaceOf<L>, [usize; LANES]) {
+        let scene = self.scene;
+        let tri: [usize; LANES] = std::array::from_fn(|i| if hit[i] { hits.tri[i] as usize } else { 0 });
+        let (origin, dir) = (V3::<L>::from_arrays(&rays.origin), V3::<L>::from_arrays(&rays.dir));
+        // Edges and vertex normals (zero for a flat triangle) padded to 16 bytes per lane, for
+        // the 4-float gathers.
+        let pad = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
+        let edges: [[[f32; 4]; 2]; LANES] = tri.map(|k| {
+            let (e1, e2) = shade::edges(&scene.triangle(k));
+            [pad(e1), pad(e2)]
+        });
+        let normals: [[[f32; 4]; 3]; LANES] =
+            tri.map(|k| shade::shading_normals(scene.vertex_normals(k)).map(|n| pad(n.into())));
+        let s = shade::surface_of(
+            L::gather3(std::array::from_fn(|i| &edges[i][0])),
+            L::gather3(std::array::from_fn(|i| &edges[i][1])),
+            [
+                L::gather3(std::array::from_fn(|i| &normals[i][0])),
+                L::gather3(std::array::from_fn(|i| &normals[i][1])),
+                L::gather3(std::array::from_fn(|i| &normals[i][2])),
+            ],
+            origin,
+            dir,
+            L::from_array(hits.t),
+            L::from_array(hits.u),
+            L::from_array(hits.v),
+        );
+        (s, tri)
+    }
+
+    /// The rays of the incoherent modes from the surfaces `s` of the `hit` lanes: origins moved
+    /// off the surface to the side of the (turned) geometric normal, and cosine-distributed
+    /// directions about that normal for sequence number `n` of each lane's pixel.
+    #[inline(always)]
+    fn incoherent_rays<L: Lanes>(
+        &self,
+        s: &SurfaceOf<L>,
+        hit: [bool; LANES],
+        seeds: &Seeds,
+        t_max: f32,
+        n: u32,
+    ) -> Rays {
+        let normal = s.geometric.to_arrays();
+        let mut rays = Rays {
+            origin: self.leave(s.point, s.geometric).to_arrays(),
+            dir: [[0.0; LANES]; 3],
+            t_max: [t_max; LANES],
+            valid: hit,
+        };
+        for i in (0..LANES).filter(|&i| hit[i]) {
+            let u = sequence::sample_2d(seeds.pixel[i], n);
+            let d = sequence::cosine_direction([normal[0][i], normal[1][i], normal[2][i]], u);
+            for (dir, d) in rays.dir.iter_mut().zip(d) {
+                dir[i] = d;
+            }
+        }
+        rays
+    }
+
+    /// Ambient occlusion (docs/shading.md): the fraction of the AO rays of each `hit` lane that
+    /// nothing blocks, `open * (1 / samples)`.
+    #[inline(always)]
+    fn unoccluded<L: Lanes, T: TraceLanes>(
+        &self,
+        ao: Ao,
+        s: &SurfaceOf<L>,
+        hit: [bool; LANES],
+        seeds: &Seeds,
+        lanes: &mut T,
+        out: &mut Block,
+    ) -> L {
+        let mut open = [0u32; LANES];
+        for k in 0..ao.samples {
+            let n = sequence::incoherent_sample(seeds.sample, ao.samples, k);
+            let rays = self.incoherent_rays(s, hit, seeds, self.ao_distance, n);
+            out.rays.ao += rays.count() as u64;
+            let blocked = lanes.occluded(&rays, self.intersect);
+            add_cost(&mut out.cost, &rays.valid, &blocked);
+            for i in 0..LANES {
+                open[i] += u32::from(hit[i] && !blocked.hit[i]);
+            }
+        }
+        let inverse = ao.inverse();
+        L::from_fn(|i| open[i] as f32 * inverse)
+    }
+
+    /// The light a diffuse bounce brings back to each `hit` lane (docs/shading.md): the bounce
+    /// hit lit by a white light at the bounce's origin (ray casting's rule), or the background.
+    #[inline(always)]
+    fn diffuse_light<L: Lanes, T: TraceLanes>(
+        &self,
+        s: &SurfaceOf<L>,
+        hit: [bool; LANES],
+        seeds: &Seeds,
+        lanes: &mut T,
+        out: &mut Block,
+    ) -> V3<L> {
+        let rays = self.incoherent_rays(s, hit, seeds, f32::INFINITY, seeds.sample);
+        out.rays.diffuse += rays.count() as u64;
+        let hits = lanes.closest(&rays, self.intersect);
+        add_cost(&mut out.cost, &rays.valid, &hits);
+        let found: [bool; LANES] = std::array::from_fn(|i| hit[i] && hits.hit[i]);
+        let background = V3::<L>::splat(self.background);
+        if !found.iter().any(|&f| f) {
+            return background;
+        }
+        let (b, tri) = self.surfaces::<L>(&rays, &hits, found);
+        let kd =
+            V3::from_lanes(|i| Vec3::from(self.scene.materials[self.scene.triangles[tri[i]].material as usize].kd));
+        let lit = shade::cast_of(kd, b.shading, V3::from_arrays(&rays.dir));
+        V3::select(L::mask(found), lit, background)
+    }
+
     /// The origins of rays leaving the surface at `p` into the side of the unit geometric normal
     /// `n`: [`crate::geometry::leave`] lane by lane.
     #[inline(always)]

@@ -52,8 +52,11 @@ struct Frame {
     // sample_positions), 1 / samples per pixel (from the host: WGSL's division need not be
     // correctly rounded), the fixed origin offset (feature FIXED_OFFSET).
     sample: vec4<f32>,
-    // This sample's index, samples per pixel, -, -.
+    // This sample's index, samples per pixel, AO rays per hit (Mode::Ao), -.
     samples: vec4<u32>,
+    // The AO rays' length in scene units (render_spec::Ao::distance) and the host's f32 of
+    // 1 / (AO rays per hit), -, -.
+    ao: vec4<f32>,
 }
 
 // The current ray of a pixel: origin (w: path weight), direction (w: 1 while the path is alive).
@@ -70,8 +73,9 @@ struct HitRec {
 }
 
 // A pixel's colour so far, the local term of its current hit summed over the lights shaded so far
-// (added to the colour, times the path weight, after the last light, as the CPU does), and the
-// sum of the colours of the pixel's finished samples.
+// (added to the colour, times the path weight, after the last light, as the CPU does; in AO mode
+// local.x counts the AO rays not blocked so far), and the sum of the colours of the pixel's
+// finished samples.
 struct Accum {
     colour: vec4<f32>,
     local: vec4<f32>,
@@ -86,7 +90,8 @@ struct Aov {
     tris: u32,
 }
 
-// Which light a shade pass handles, and which bounce a bounce pass is (a push constant).
+// Which light a shade pass handles, and which bounce a bounce pass (or which ray an AO pass) is
+// (a push constant).
 struct Pass {
     light: u32,
     depth: u32,
@@ -117,12 +122,17 @@ var<immediate> pass_info: Pass;
 // This invocation's index in its workgroup (set by the entry point; SST needs it).
 var<private> lid: u32;
 
-// Adds one to the 64-bit counter at words `slot` (low) and `slot + 1` (high): a tile's shadow
-// rays can pass 2^32. Exactly one invocation sees the low word wrap and carries.
-fn count(slot: u32) {
-    if atomicAdd(&counters[slot], 1u) == 0xffffffffu {
+// Adds n to the 64-bit counter at words `slot` (low) and `slot + 1` (high): a tile's shadow
+// rays can pass 2^32. The invocation whose addition wraps the low word carries.
+fn count_n(slot: u32, n: u32) {
+    let old = atomicAdd(&counters[slot], n);
+    if old + n < old {
         atomicAdd(&counters[slot + 1u], 1u);
     }
+}
+
+fn count(slot: u32) {
+    count_n(slot, 1u);
 }
 
 // Records that a traversal gave up on a ray (a FAULT_* bit); the host refuses the frame.
@@ -631,4 +641,75 @@ fn to_rgba8(c: vec3<f32>) -> u32 {
 
 fn primary_dir(x: u32, y: u32) -> vec3<f32> {
     return unit(frame.top_left.xyz + (f32(x) + frame.sample.x) * frame.h_step.xyz + (f32(y) + frame.sample.y) * frame.v_step.xyz);
+}
+
+// render_spec::sequence, step for step: the R2 sequence of a pixel and the cosine-distributed
+// directions of the incoherent modes (tests/tests/wgsl_functions.rs holds them to the Rust bits).
+fn seq_hash(x_in: u32) -> u32 {
+    var x = x_in;
+    x ^= x >> 16u;
+    x *= 0x7feb352du;
+    x ^= x >> 15u;
+    x *= 0x846ca68bu;
+    x ^= x >> 16u;
+    return x;
+}
+
+fn seq_unit(x: u32) -> f32 {
+    return f32(x >> 8u) * (1.0 / 16777216.0);
+}
+
+fn sample_2d(pixel: u32, n: u32) -> vec2<f32> {
+    let sx = seq_hash(pixel);
+    let sy = seq_hash(sx ^ 0x9e3779b9u);
+    return vec2<f32>(seq_unit(sx + n * R2_STEP_X), seq_unit(sy + n * R2_STEP_Y));
+}
+
+fn incoherent_sample(sample: u32, rays: u32, ray: u32) -> u32 {
+    return sample * rays + ray;
+}
+
+// sin(pi/2 x), cos(pi/2 x) for x in [0, 1).
+fn quarter_turn(x: f32) -> vec2<f32> {
+    let x2 = x * x;
+    var s = QUARTER_SIN_6;
+    s = s * x2 + QUARTER_SIN_5;
+    s = s * x2 + QUARTER_SIN_4;
+    s = s * x2 + QUARTER_SIN_3;
+    s = s * x2 + QUARTER_SIN_2;
+    s = s * x2 + QUARTER_SIN_1;
+    s = s * x2 + QUARTER_SIN_0;
+    var c = QUARTER_COS_7;
+    c = c * x2 + QUARTER_COS_6;
+    c = c * x2 + QUARTER_COS_5;
+    c = c * x2 + QUARTER_COS_4;
+    c = c * x2 + QUARTER_COS_3;
+    c = c * x2 + QUARTER_COS_2;
+    c = c * x2 + QUARTER_COS_1;
+    c = c * x2 + QUARTER_COS_0;
+    return vec2<f32>(x * s, c);
+}
+
+fn cosine_direction(n: vec3<f32>, u: vec2<f32>) -> vec3<f32> {
+    let q4 = u.y * 4.0;
+    let q = floor(q4);
+    let sc = quarter_turn(q4 - q);
+    var phi = vec2<f32>(sc.y, sc.x);
+    if q >= 3.0 {
+        phi = vec2<f32>(sc.x, -sc.y);
+    } else if q >= 2.0 {
+        phi = vec2<f32>(-sc.y, -sc.x);
+    } else if q >= 1.0 {
+        phi = vec2<f32>(-sc.x, sc.y);
+    }
+    let r = sqrt_rn(u.x);
+    let z = sqrt_rn(1.0 - u.x);
+    let a = r * phi.x;
+    let b = r * phi.y;
+    let sign = select(1.0, -1.0, n.z < 0.0);
+    let k = div_rn(-1.0, sign + n.z);
+    let m = n.x * n.y * k;
+    let t1 = vec3<f32>(1.0 + sign * n.x * n.x * k, sign * m, -(sign * n.x));
+    let t2 = vec3<f32>(m, sign + n.y * n.y * k, -n.y);
+    return unit(t1 * a + t2 * b + n * z);
 }

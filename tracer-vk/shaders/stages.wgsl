@@ -1,7 +1,9 @@
 // The stream pipeline of thesis code examples 4.2 and 4.3, one pixel per invocation: ray casting
 // is a single trace-and-shade kernel; Whitted ray tracing traces the primary rays, shades once per
 // light, then per indirection traces the secondary rays and shades again, and finally converts to
-// 8 bits. Each pass reads and writes per-pixel state (paths, hits, accum, aovs) in storage buffers.
+// 8 bits. The incoherent modes trace the primary rays, then cast their AO rays (any hit) or their
+// diffuse bounce (closest hit) from every primary hit and shade, then convert. Each pass reads
+// and writes per-pixel state (paths, hits, accum, aovs) in storage buffers.
 //
 // Every invocation of a workgroup calls `trace` exactly once per stage, with `active` false when
 // its pixel lies outside the image or has nothing to trace: SST walks the tree with the whole
@@ -227,6 +229,93 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
     paths[p] = PathRay(vec4<f32>(o, w), vec4<f32>(dir, 1.0));
     // Paths still alive after this bounce: the host stops the passes once none is.
     atomicAdd(&counters[SLOT_LIVE + pass_info.depth], 1u);
+}
+
+// The image-wide index of pixel (x, y): the seed of its incoherent rays (render_spec::sequence),
+// the same whichever tile holds it.
+fn image_pixel(x: u32, y: u32) -> u32 {
+    return y * frame.size.x + x;
+}
+
+// Where the incoherent rays of a live path's primary hit leave from, and the turned geometric
+// normal they are distributed about.
+struct Leaving {
+    origin: vec3<f32>,
+    normal: vec3<f32>,
+    kd: vec3<f32>,
+}
+
+fn leaving(live: bool, p: u32) -> Leaving {
+    var l = Leaving(vec3<f32>(0.0), vec3<f32>(0.0, 0.0, 1.0), vec3<f32>(0.0));
+    if live {
+        let path = paths[p];
+        let h = hits[p];
+        let s = surface_at(make_ray(path.origin.xyz, path.dir.xyz), h);
+        l = Leaving(leave(s.point, s.geometric), s.geometric, material_of(h.tri).kd_n.xyz);
+    }
+    return l;
+}
+
+// Ambient occlusion (docs/shading.md): AO ray pass_info.depth of frame.samples.z, of length
+// frame.ao.x, from every primary hit through the any-hit traversal; one pass per ray, the rays
+// not blocked so far counted in accum.local.x (an f32 holds the count exactly). The last pass
+// writes the fraction. (One pass per ray rather than a loop around `trace`: lavapipe dropped
+// workgroups of the subgroup-voting SST whose any-hit walk ran inside a loop.)
+fn stage_ao(x: u32, y: u32, valid: bool) {
+    let p = select(0u, pixel_index(x, y), valid);
+    let live = valid && paths[p].dir.w != 0.0;
+    let start = leaving(live, p);
+    let k = pass_info.depth;
+    let u = sample_2d(image_pixel(x, y), incoherent_sample(frame.samples.x, frame.samples.z, k));
+    let r = make_ray(start.origin, cosine_direction(start.normal, u));
+    let blocked = trace(r, 0.0, frame.ao.x, true, live).tri != NO_TRIANGLE;
+//#if RT_EMIT
+    return; // rt_pipeline.wgsl: this half only writes the ray
+//#endif
+    if valid {
+        count(SLOT_FINISHED);
+    }
+    if !live {
+        return;
+    }
+    let open = select(accum[p].local.x, 0.0, k == 0u) + select(1.0, 0.0, blocked);
+    accum[p].local.x = open;
+    if k + 1u == frame.samples.z {
+        count_n(SLOT_AO, frame.samples.z);
+        accum[p].colour = vec4<f32>(vec3<f32>(open * frame.ao.y), 0.0);
+    }
+    aovs[p].nodes += cost_nodes;
+    aovs[p].tris += cost_tris;
+}
+
+// The diffuse bounce (docs/shading.md): one ray from every primary hit through the closest-hit
+// traversal; the colour is the primary hit's kd times the bounce hit lit by a white light at the
+// bounce's origin, or times the background.
+fn stage_diffuse(x: u32, y: u32, valid: bool) {
+    let p = select(0u, pixel_index(x, y), valid);
+    let live = valid && paths[p].dir.w != 0.0;
+    let start = leaving(live, p);
+    let u = sample_2d(image_pixel(x, y), frame.samples.x);
+    let r = make_ray(start.origin, cosine_direction(start.normal, u));
+    let h = trace(r, 0.0, F32_MAX, false, live);
+//#if RT_EMIT
+    return; // rt_pipeline.wgsl: this half only writes the ray
+//#endif
+    if valid {
+        count(SLOT_FINISHED);
+    }
+    if !live {
+        return;
+    }
+    count(SLOT_DIFFUSE);
+    var light = frame.background.xyz;
+    if h.tri != NO_TRIANGLE {
+        let s = surface_at(r, h);
+        light = material_of(h.tri).kd_n.xyz * max(dot3(s.shading, -r.d), 0.0);
+    }
+    accum[p].colour = vec4<f32>(start.kd * light, 0.0);
+    aovs[p].nodes += cost_nodes;
+    aovs[p].tris += cost_tris;
 }
 
 fn stage_convert(x: u32, y: u32, valid: bool) {

@@ -73,8 +73,13 @@ pub enum Stage {
     Shade,
     /// Whitted: trace one secondary ray per live path.
     Bounce,
-    /// Whitted: accumulated radiance to 8 bits.
+    /// Whitted and the incoherent modes: accumulated radiance to 8 bits.
     Convert,
+    /// Ambient occlusion: one AO ray of every primary hit (any hit); after the last, their
+    /// fraction.
+    Ao,
+    /// The diffuse bounce of every primary hit (closest hit), shaded.
+    Diffuse,
 }
 
 impl Stage {
@@ -85,6 +90,8 @@ impl Stage {
             Stage::Shade => "stage_shade",
             Stage::Bounce => "stage_bounce",
             Stage::Convert => "stage_convert",
+            Stage::Ao => "stage_ao",
+            Stage::Diffuse => "stage_diffuse",
         }
     }
 }
@@ -265,25 +272,29 @@ fn call_arguments(src: &str) -> (Vec<&str>, usize) {
 
 /// The counters buffer the kernels count into, in u32 words; the kernels get these as constants.
 pub mod counters {
-    /// 64-bit counters (low word, high word): primary, shadow and secondary rays, and invocations
-    /// that finished a stage for a pixel of the tile.
+    /// 64-bit counters (low word, high word): primary, shadow, secondary, AO and diffuse rays,
+    /// and invocations that finished a stage for a pixel of the tile.
     pub const PRIMARY: usize = 0;
     pub const SHADOW: usize = 2;
     pub const SECONDARY: usize = 4;
-    pub const FINISHED: usize = 6;
+    pub const AO: usize = 6;
+    pub const DIFFUSE: usize = 8;
+    pub const FINISHED: usize = 10;
     /// FAULT_* bits: a traversal gave up on a ray.
-    pub const FAULTS: usize = 8;
+    pub const FAULTS: usize = 12;
     /// Then one word per bounce: paths still alive after it.
-    pub const LIVE: usize = 9;
+    pub const LIVE: usize = 13;
     /// A stack push found the stack full (the tree is deeper than the file's depth).
     pub const FAULT_STACK: u32 = 1;
     /// A walk took more steps than the tree has nodes.
     pub const FAULT_WALK: u32 = 2;
 
-    pub(crate) const WGSL: [(&str, u32); 8] = [
+    pub(crate) const WGSL: [(&str, u32); 10] = [
         ("SLOT_PRIMARY", PRIMARY as u32),
         ("SLOT_SHADOW", SHADOW as u32),
         ("SLOT_SECONDARY", SECONDARY as u32),
+        ("SLOT_AO", AO as u32),
+        ("SLOT_DIFFUSE", DIFFUSE as u32),
         ("SLOT_FINISHED", FINISHED as u32),
         ("SLOT_FAULTS", FAULTS as u32),
         ("SLOT_LIVE", LIVE as u32),
@@ -564,7 +575,15 @@ mod tests {
     fn every_kernel_translates_for_every_specialisation() {
         for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup, Method::RtPipeline] {
             for (r, t) in [(false, false), (true, false), (false, true), (true, true)] {
-                for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert] {
+                for stage in [
+                    Stage::Cast,
+                    Stage::Primary,
+                    Stage::Shade,
+                    Stage::Bounce,
+                    Stage::Convert,
+                    Stage::Ao,
+                    Stage::Diffuse,
+                ] {
                     let s = spec(method, r, t);
                     if let Err(e) = compile(stage, &s) {
                         panic!("{method:?} {stage:?} reflection {r} refraction {t}: {e:?}");
@@ -676,7 +695,7 @@ mod tests {
     #[test]
     fn the_rt_pipeline_halves_split_every_tracing_stage_at_its_trace() {
         let s = spec(Method::RtPipeline, true, true);
-        for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce] {
+        for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Ao, Stage::Diffuse] {
             let emit = source_half(stage, &s, Half::Emit);
             let collect = source_half(stage, &s, Half::Collect);
             assert!(emit.contains("rt_rays[rt_slot] = RtRay(") && !emit.contains("return rt_hits[rt_slot];"));

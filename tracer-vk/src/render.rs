@@ -116,6 +116,7 @@ struct FrameData {
     tile: [u32; 4],
     sample: [f32; 4],
     samples: [u32; 4],
+    ao: [f32; 4],
 }
 
 /// The push constant of a pass (`Pass` in common.wgsl).
@@ -541,17 +542,16 @@ impl<'g> Renderer<'g> {
         if s.lights.len() > u32::MAX as usize / 2 {
             return Err(VkRenderError::TooManyLights(s.lights.len()));
         }
-        let whitted = s.mode == Mode::Whitted;
-        // Bounces only where a material can spawn one: no scene pays for what it lacks.
-        let indirections = if self.spec.reflection || self.spec.refraction { s.max_indirections } else { 0 };
-        let stages: &[Stage] = if whitted {
-            if indirections > 0 {
-                &[Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert]
-            } else {
-                &[Stage::Primary, Stage::Shade, Stage::Convert]
-            }
-        } else {
-            &[Stage::Cast]
+        // Bounces only in Whitted mode and where a material can spawn one: no scene pays for
+        // what it lacks.
+        let bounces = s.mode == Mode::Whitted && (self.spec.reflection || self.spec.refraction);
+        let indirections = if bounces { s.max_indirections } else { 0 };
+        let stages: &[Stage] = match s.mode {
+            Mode::Cast => &[Stage::Cast],
+            Mode::Whitted if indirections > 0 => &[Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert],
+            Mode::Whitted => &[Stage::Primary, Stage::Shade, Stage::Convert],
+            Mode::Ao(_) => &[Stage::Primary, Stage::Ao, Stage::Convert],
+            Mode::Diffuse => &[Stage::Primary, Stage::Diffuse, Stage::Convert],
         };
         let info = self.gpu.info();
         let groups = [info.max_workgroup_count[0], info.max_workgroup_count[1]];
@@ -591,7 +591,13 @@ impl<'g> Renderer<'g> {
             tile: [0; 4],
             sample: [0.5, 0.5, 1.0 / samples.len() as f32, offset],
             samples: [0, samples.len() as u32, 0, 0],
+            ao: [0.0; 4],
         };
+        if let Mode::Ao(ao) = s.mode {
+            let (lo, hi) = self.scene.bounds();
+            frame.samples[2] = ao.samples;
+            frame.ao = [ao.distance(lo, hi), ao.inverse(), 0.0, 0.0];
+        }
         let g = self.gpu;
         let frame_buf = g.create_buffer(size_of::<FrameData>() as u64, "frame")?;
         // Storage buffers may not be empty: a scene without lights binds one unused entry.
@@ -613,7 +619,7 @@ impl<'g> Renderer<'g> {
                 g.upload(&frame_buf, bytemuck::bytes_of(&frame))?;
                 self.render_tile(
                     tile,
-                    whitted,
+                    s.mode,
                     s.lights.len() as u32,
                     indirections,
                     &frame_buf,
@@ -658,15 +664,16 @@ impl<'g> Renderer<'g> {
         })
     }
 
-    /// Runs one tile's passes: the first submission traces the primary rays, shades and makes
-    /// the first bounces; later ones (each as many bounces as all before it) run only while some
+    /// Runs one tile's passes: the first submission traces the primary rays, shades (Whitted:
+    /// once per light; the incoherent modes: their AO rays or diffuse bounce) and makes the
+    /// first bounces; later ones (each as many bounces as all before it) run only while some
     /// path is alive. Every submission ends with the conversion to 8 bits, so whichever is last
     /// leaves the tile's image.
     #[allow(clippy::too_many_arguments)]
     fn render_tile(
         &self,
         tile: &Tile,
-        whitted: bool,
+        mode: Mode,
         light_count: u32,
         indirections: u32,
         frame_buf: &Buffer,
@@ -732,7 +739,7 @@ impl<'g> Renderer<'g> {
                 };
                 rec.zero(counters);
                 rec.mark("start");
-                if !whitted {
+                if mode == Mode::Cast {
                     pass(rec, Stage::Cast, 0, 0)?;
                     rec.mark("cast");
                     return Ok(());
@@ -740,10 +747,25 @@ impl<'g> Renderer<'g> {
                 if first == 0 {
                     pass(rec, Stage::Primary, 0, 0)?;
                     rec.mark("trace primary");
-                    for l in 0..shade_passes {
-                        pass(rec, Stage::Shade, l, 0)?;
+                    match mode {
+                        Mode::Ao(ao) => {
+                            // One pass per AO ray (the push constant's depth names it).
+                            for k in 0..ao.samples {
+                                pass(rec, Stage::Ao, 0, k)?;
+                            }
+                            rec.mark("ambient occlusion");
+                        }
+                        Mode::Diffuse => {
+                            pass(rec, Stage::Diffuse, 0, 0)?;
+                            rec.mark("diffuse bounce");
+                        }
+                        _ => {
+                            for l in 0..shade_passes {
+                                pass(rec, Stage::Shade, l, 0)?;
+                            }
+                            rec.mark("shade 0");
+                        }
                     }
-                    rec.mark("shade 0");
                 }
                 for depth in first..end {
                     pass(rec, Stage::Bounce, 0, depth)?;
@@ -764,7 +786,9 @@ impl<'g> Renderer<'g> {
             tally.rays.primary += wide(counters::PRIMARY);
             tally.rays.shadow += wide(counters::SHADOW);
             tally.rays.secondary += wide(counters::SECONDARY);
-            if !whitted || end >= indirections || words[counters::LIVE + end as usize - 1] == 0 {
+            tally.rays.ao += wide(counters::AO);
+            tally.rays.diffuse += wide(counters::DIFFUSE);
+            if mode != Mode::Whitted || end >= indirections || words[counters::LIVE + end as usize - 1] == 0 {
                 return Ok(());
             }
             first = end;
@@ -1086,6 +1110,7 @@ mod layout_contract {
                 ("tile", offset_of!(FrameData, tile)),
                 ("sample", offset_of!(FrameData, sample)),
                 ("samples", offset_of!(FrameData, samples)),
+                ("ao", offset_of!(FrameData, ao)),
             ],
         );
         let pad = offset_of!(PassData, pad);

@@ -115,20 +115,17 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     let mut lines = Vec::new();
     let r = image.rays;
     lines.push(format!(
-        "{}x{} {:?}{} with {} on {} threads: {} to trace and shade into the 8-bit image{}{}, rays: {} primary, \
-         {} shadow, {} secondary ({}) -> {}",
+        "{}x{} {}{} with {} on {} threads: {} to trace and shade into the 8-bit image{}{}, rays: {} ({}) -> {}",
         image.width,
         image.height,
-        settings.mode,
+        settings.mode.name(),
         tools::render_args::accuracy_note(&settings.accuracy, scene),
         if reference { "the f64 reference".to_owned() } else { format!("{:?}", method.resolve(scene)) },
         pool.current_num_threads(),
         duration(seconds),
         if settings.aovs { " and the AOVs" } else { "" },
         loaded.timing_note(),
-        r.primary,
-        r.shadow,
-        r.secondary,
+        tools::render_args::rays_note(&r),
         rays_per_second(r.total(), seconds),
         outputs.image.path.display()
     ));

@@ -161,19 +161,17 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let written = outputs.write(image, None, args.heatmap_max, scene)?;
     let r = image.rays;
     let mut lines = vec![format!(
-        "{}x{} {:?}{} with {}{} on {}: {} GPU{}, rays: {} primary, {} shadow, {} secondary ({}) -> {}",
+        "{}x{} {}{} with {}{} on {}: {} GPU{}, rays: {} ({}) -> {}",
         image.width,
         image.height,
-        settings.mode,
+        settings.mode.name(),
         tools::render_args::accuracy_note(&settings.accuracy, scene),
         method.name(),
         if args.exact { " (exact)" } else { "" },
         gpu.info().name,
         duration(out.gpu_ms / 1e3),
         loaded.timing_note(),
-        r.primary,
-        r.shadow,
-        r.secondary,
+        tools::render_args::rays_note(&r),
         rays_per_second(r.total(), out.gpu_ms / 1e3),
         outputs.image.path.display()
     )];

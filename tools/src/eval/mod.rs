@@ -9,6 +9,18 @@ pub mod reference;
 pub mod report;
 
 use crate::bench::{Bench, BenchMode, measure, parse_frames, parse_mode, parse_warmup};
+
+/// A mode of the matrix that the exact reference renders (cast or whitted).
+fn parse_reference_mode(s: &str) -> Result<BenchMode, String> {
+    let m = parse_mode(s)?;
+    match m.mode {
+        render_spec::Mode::Cast | render_spec::Mode::Whitted => Ok(m),
+        other => Err(format!(
+            "{s:?}: the evaluation compares with the exact reference, which has no {} mode (cast, whitted1, whitted2, ...)",
+            other.name()
+        )),
+    }
+}
 use crate::render_args::{
     self, IntersectArg, lights_n, parse_count, parse_offset, parse_res, parse_spp, stored_camera,
 };
@@ -31,7 +43,7 @@ pub struct EvalArgs {
     #[arg(long, value_delimiter = ',', value_parser = parse_res, default_value = "320x240", allow_hyphen_values = true)]
     pub res: Vec<(u32, u32)>,
     /// Modes: cast, or whitted with a light count (whitted1, whitted2, ...).
-    #[arg(long, value_delimiter = ',', value_parser = parse_mode, default_value = "whitted1", allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', value_parser = parse_reference_mode, default_value = "whitted1", allow_hyphen_values = true)]
     pub modes: Vec<BenchMode>,
     /// CPU traversals (auto, packet, ordered, stackless), or none.
     #[arg(long, value_delimiter = ',', default_value = "auto")]
@@ -414,7 +426,9 @@ fn evaluate<B: Bench>(c: &Context<'_>, t: &Tracer<'_, B>, gpu: bool) -> Result<V
                         indirections: settings.max_indirections,
                         median_ms: m.median_ms,
                         min_ms: m.min_ms,
-                        rays: m.rays,
+                        // The reference has no incoherent modes (parse_reference_mode): no
+                        // AO or diffuse rays to lose.
+                        rays: [m.rays[0], m.rays[1], m.rays[2]],
                         image: img,
                         hits,
                         shifts,

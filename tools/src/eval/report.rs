@@ -6,7 +6,7 @@ use super::{Variant, intersect_name, offset_name};
 use crate::bench::{field, significant};
 use crate::output::{self, Kind};
 use render_metrics::{HitErrors, ImageErrors, ShadingShifts};
-use render_spec::{Mode, Settings};
+use render_spec::Settings;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -40,12 +40,9 @@ pub struct Row {
     pub shifts: ShadingShifts,
 }
 
-/// `cast`, or `whitted` with the number of lights, as `bench` names modes.
+/// The mode as `bench` names it (`cast`, `whitted2`, `ao8`, `diffuse`).
 pub fn mode_name(s: &Settings) -> String {
-    match s.mode {
-        Mode::Cast => "cast".to_owned(),
-        Mode::Whitted => format!("whitted{}", s.lights.len()),
-    }
+    crate::bench::BenchMode { mode: s.mode, lights: s.lights.len() }.name()
 }
 
 /// The CSV columns, in order.

@@ -282,6 +282,9 @@ struct Shading<'a> {
 
 impl<'a> Shading<'a> {
     fn new(scene: &'a SceneFile, settings: &Settings) -> Result<Self, RenderError> {
+        if !matches!(settings.mode, Mode::Cast | Mode::Whitted) {
+            return Err(RenderError::ModeUnsupported { renderer: "the exact reference", mode: settings.mode.name() });
+        }
         Ok(Self {
             frame: Frame64::new(settings)?,
             bvh: Bvh::new(scene)?,
