@@ -89,7 +89,9 @@ fn primary_surface(scene: &bvh_format::SceneFile, s: &Settings, x: u32, y: u32) 
     let ray = Ray::new(frame.eye, frame.direction(x, y));
     let mut stack = Stack::default();
     let hit = tracer
-        .closest(Method::Ordered, &ray, 0.0, f32::INFINITY, &mut stack, &mut Cost::default())
+        .walk(Method::Ordered)
+        .expect("the file has the child-pair layout")
+        .closest(&ray, 0.0, f32::INFINITY, &mut stack, &mut Cost::default())
         .expect("every primary ray hits the box");
     let tri = tracer.triangles()[hit.tri as usize];
     let normals = scene.vertex_normals(hit.tri as usize);
@@ -103,6 +105,7 @@ fn primary_surface(scene: &bvh_format::SceneFile, s: &Settings, x: u32, y: u32) 
 fn a_pixel_of_each_mode_is_the_definition_evaluated_by_hand() {
     let scene = box_scene();
     let tracer = Tracer::new(scene);
+    let walk = tracer.walk(Method::Ordered).expect("the file has the child-pair layout");
     let ao = Ao { samples: 16, length: 0.3 };
     let s_ao = settings(scene, Mode::Ao(ao), 1);
     let s_diffuse = settings(scene, Mode::Diffuse, 1);
@@ -120,13 +123,7 @@ fn a_pixel_of_each_mode_is_the_definition_evaluated_by_hand() {
         for k in 0..ao.samples {
             let u = sample_2d(pixel, incoherent_sample(0, ao.samples, k));
             let d = Vec3::from(cosine_direction(surface.geometric.into(), u));
-            open += u32::from(!tracer.occluded(
-                Method::Ordered,
-                &Ray::new(from, d),
-                length,
-                &mut stack,
-                &mut Cost::default(),
-            ));
+            open += u32::from(!walk.occluded(&Ray::new(from, d), length, &mut stack, &mut Cost::default()));
         }
         let v = shade::to_u8(Vec3::splat(open as f32 * ao.inverse()));
         assert_eq!(ao_image.rgb[pixel as usize], v, "AO pixel ({x}, {y}): {open} of {} open", ao.samples);
@@ -135,8 +132,7 @@ fn a_pixel_of_each_mode_is_the_definition_evaluated_by_hand() {
         let d = Vec3::from(cosine_direction(surface.geometric.into(), sample_2d(pixel, 0)));
         let bounce = Ray::new(from, d);
         let kd = Vec3::from(scene.materials[scene.triangles[tri as usize].material as usize].kd);
-        let light = match tracer.closest(Method::Ordered, &bounce, 0.0, f32::INFINITY, &mut stack, &mut Cost::default())
-        {
+        let light = match walk.closest(&bounce, 0.0, f32::INFINITY, &mut stack, &mut Cost::default()) {
             Some(h) => {
                 let t = tracer.triangles()[h.tri as usize];
                 let b = shade::surface(&t, scene.vertex_normals(h.tri as usize), from, d, h.t, h.u, h.v);
