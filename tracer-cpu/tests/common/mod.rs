@@ -17,7 +17,11 @@ pub fn compile(path: &Path) -> SceneFile {
 
 /// Compiles a scene description given as text.
 pub fn compile_toml(name: &str, text: &str) -> SceneFile {
-    let dir = std::env::temp_dir().join(format!("tracer-cpu-test-{}-{name}", std::process::id()));
+    // One folder per call: tests run on several threads of one process, and two may compile the
+    // same scene at once (one would delete the other's file).
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("tracer-cpu-test-{}-{call}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let p = dir.join(format!("{name}.toml"));
     std::fs::write(&p, text).unwrap();
