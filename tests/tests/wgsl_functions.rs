@@ -547,19 +547,8 @@ fn every_shared_wgsl_function_equals_its_rust_twin_under_exact() {
 
 fn functions_equal_their_rust_twins(exact: bool, intersect: Intersect) {
     let gpu = common::gpu();
-    let spec = Specialisation {
-        method: Method::Lst,
-        stack_size: 1,
-        leaf_size: 1,
-        workgroup: (8, 8),
-        reflection: true,
-        refraction: true,
-        smooth: true,
-        exact,
-        intersect,
-        fixed_offset: false,
-        split: tracer_vk::kernels::Split::NONE,
-    };
+    let spec =
+        Specialisation { stack_size: 1, leaf_size: 1, exact, intersect, ..Specialisation::every_feature(Method::Lst) };
     let source = format!("{}\n{HARNESS}", kernels::prelude(&spec));
     let mut spirv = tracer_vk::translate(&source, "function harness", &[]).expect("the harness compiles");
     if exact {

@@ -151,6 +151,26 @@ impl Split {
 }
 
 impl Specialisation {
+    /// `method`'s kernels with every feature kept (reflection, refraction, smooth normals; the
+    /// default triangle test and offset; one binding per array; a 23-entry stack, 8-triangle
+    /// leaves, 8x8 workgroups): what tests that inspect the kernels start from, so a new field
+    /// gets one default here rather than one in each of them.
+    pub fn every_feature(method: Method) -> Specialisation {
+        Specialisation {
+            method,
+            stack_size: 23,
+            leaf_size: 8,
+            workgroup: (8, 8),
+            reflection: true,
+            refraction: true,
+            smooth: true,
+            exact: false,
+            intersect: Intersect::Watertight,
+            fixed_offset: false,
+            split: Split::NONE,
+        }
+    }
+
     /// The `//#if` blocks of the kernel files this specialisation keeps.
     fn features(&self) -> Vec<&'static str> {
         let mut features = Vec::new();
@@ -556,19 +576,7 @@ mod tests {
     fn spec(method: Method, reflection: bool, refraction: bool) -> Specialisation {
         // Smooth normals with reflection, so that both settings of each feature translate.
         let smooth = reflection;
-        Specialisation {
-            method,
-            stack_size: 23,
-            leaf_size: 8,
-            workgroup: (8, 8),
-            reflection,
-            refraction,
-            smooth,
-            exact: false,
-            intersect: Intersect::Watertight,
-            fixed_offset: false,
-            split: Split::NONE,
-        }
+        Specialisation { reflection, refraction, smooth, ..Specialisation::every_feature(method) }
     }
 
     #[test]

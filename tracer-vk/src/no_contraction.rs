@@ -225,19 +225,7 @@ mod tests {
         let gpu = gpu();
         for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
             for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert] {
-                let spec = Specialisation {
-                    method,
-                    stack_size: 23,
-                    leaf_size: 8,
-                    workgroup: (8, 8),
-                    reflection: true,
-                    refraction: true,
-                    smooth: true,
-                    exact: true,
-                    intersect: render_spec::Intersect::Watertight,
-                    fixed_offset: false,
-                    split: crate::kernels::Split::NONE,
-                };
+                let spec = Specialisation { exact: true, ..Specialisation::every_feature(method) };
                 // The exact kernel's text as naga writes it, then with the pass.
                 let source = kernels::source(stage, &spec);
                 let plain = if method == Method::SstSubgroup {
@@ -296,19 +284,7 @@ mod tests {
     /// lavapipe, does not report shaderDenormPreserveFloat32, so no pipeline is made of it).
     #[test]
     fn denormals_are_preserved_by_execution_mode() {
-        let spec = Specialisation {
-            method: Method::Lst,
-            stack_size: 23,
-            leaf_size: 8,
-            workgroup: (8, 8),
-            reflection: true,
-            refraction: true,
-            smooth: true,
-            exact: true,
-            intersect: render_spec::Intersect::Watertight,
-            fixed_offset: false,
-            split: crate::kernels::Split::NONE,
-        };
+        let spec = Specialisation { exact: true, ..Specialisation::every_feature(Method::Lst) };
         let words = kernels::compile(Stage::Bounce, &spec).expect("the kernel compiles");
         let out = rspirv::dr::load_words(preserve_denormals(&words, "t").unwrap()).unwrap();
         assert!(out.capabilities.iter().any(|i| i.operands == [Operand::Capability(Capability::DenormPreserve)]));

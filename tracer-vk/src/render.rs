@@ -938,17 +938,11 @@ mod tests {
 
     fn spec() -> Specialisation {
         Specialisation {
-            method: Method::Sst,
             stack_size: 12,
             leaf_size: 4,
-            workgroup: (8, 8),
             reflection: false,
             refraction: false,
-            smooth: true,
-            exact: false,
-            intersect: Intersect::Watertight,
-            fixed_offset: false,
-            split: crate::kernels::Split::NONE,
+            ..Specialisation::every_feature(Method::Sst)
         }
     }
 
@@ -1006,19 +1000,7 @@ mod layout_contract {
 
     /// A kernel with every feature present, so that every struct and binding is declared.
     fn module() -> naga::Module {
-        let spec = Specialisation {
-            method: Method::Lst,
-            stack_size: 23,
-            leaf_size: 8,
-            workgroup: (8, 8),
-            reflection: true,
-            refraction: true,
-            smooth: true,
-            exact: false,
-            intersect: Intersect::Watertight,
-            fixed_offset: false,
-            split: crate::kernels::Split::NONE,
-        };
+        let spec = Specialisation::every_feature(Method::Lst);
         naga::front::wgsl::parse_str(&kernels::source(Stage::Bounce, &spec)).expect("the kernel parses")
     }
 

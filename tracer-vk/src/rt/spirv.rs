@@ -369,19 +369,7 @@ mod tests {
 
     /// (field offsets, stride) of a WGSL struct as naga lays out the rt-pipeline kernels.
     fn wgsl_layout(name: &str) -> (Vec<u32>, u32) {
-        let spec = Specialisation {
-            method: Method::RtPipeline,
-            stack_size: 1,
-            leaf_size: 1,
-            workgroup: (8, 8),
-            reflection: true,
-            refraction: true,
-            smooth: true,
-            exact: false,
-            intersect: render_spec::Intersect::Watertight,
-            fixed_offset: false,
-            split: crate::kernels::Split::NONE,
-        };
+        let spec = Specialisation { stack_size: 1, leaf_size: 1, ..Specialisation::every_feature(Method::RtPipeline) };
         let m = naga::front::wgsl::parse_str(&kernels::source_half(Stage::Shade, &spec, Half::Emit)).unwrap();
         let mut l = naga::proc::Layouter::default();
         l.update(m.to_ctx()).unwrap();
