@@ -21,9 +21,9 @@
 use bvh_build::import::shapes;
 use bvh_format::{SceneFile, Triangle};
 use glam::{DVec3, Vec3};
-use render_spec::{CameraSpec, Mode, NO_TRIANGLE, Settings};
+use render_spec::{CameraSpec, NO_TRIANGLE, Settings};
 use std::collections::HashMap;
-use tools::stress::edge_grid::{Aim, camera_grid, scene_of};
+use tools::stress::edge_grid::{Aim, camera_grid, cast_settings, scene_of};
 use tracer_cpu::geometry::{Ray, intersect, intersect_moller_trumbore};
 use tracer_cpu::reference::intersect64;
 use tracer_cpu::traverse::Stack;
@@ -37,19 +37,6 @@ const DISTANCES: [f32; 5] = [1.0, 10.0, 100.0, 1000.0, 10_000.0];
 /// Pixels whose primary ray hit nothing, as the `prim` output says.
 fn misses(prim: &[u32]) -> usize {
     prim.iter().filter(|&&p| p == NO_TRIANGLE).count()
-}
-
-fn cast_settings(cam: CameraSpec, n: u32) -> Settings {
-    Settings {
-        width: n,
-        height: n,
-        camera: cam,
-        mode: Mode::Cast,
-        lights: Vec::new(),
-        max_indirections: 0,
-        aovs: true,
-        accuracy: Default::default(),
-    }
 }
 
 fn cpu_prims(scene: &SceneFile, cam: CameraSpec, n: u32, method: Method) -> (Vec<[u8; 3]>, Vec<u32>) {

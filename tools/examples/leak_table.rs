@@ -7,8 +7,8 @@
 //!
 //! cargo run --release -p tools --features embree --example leak_table [-- N]
 
-use render_spec::{Accuracy, Intersect, Mode, NO_TRIANGLE, Settings};
-use tools::stress::edge_grid::{Aim, camera_grid};
+use render_spec::{Accuracy, Intersect, NO_TRIANGLE, Settings};
+use tools::stress::edge_grid::{Aim, camera_grid, cast_settings};
 use tracer_cpu::embree::{Flags, Scene as Embree};
 use tracer_cpu::geometry::Ray;
 use tracer_cpu::{Method, Tracer};
@@ -28,16 +28,8 @@ fn main() -> Result<(), String> {
             let (scene, cam, _) = camera_grid(n, distance, aim)?;
             let tracer = Tracer::new(&scene);
             let ours = |intersect| -> Result<usize, String> {
-                let settings = Settings {
-                    width: n,
-                    height: n,
-                    camera: cam,
-                    mode: Mode::Cast,
-                    lights: Vec::new(),
-                    max_indirections: 0,
-                    aovs: true,
-                    accuracy: Accuracy { intersect, ..Default::default() },
-                };
+                let settings =
+                    Settings { accuracy: Accuracy { intersect, ..Default::default() }, ..cast_settings(cam, n) };
                 let img = tracer_cpu::render(&tracer, &settings, Method::Ordered).map_err(|e| e.to_string())?;
                 let prim = img.aov.ok_or("the renderer returned no AOVs")?.prim;
                 Ok(prim.iter().filter(|&&p| p == NO_TRIANGLE).count())

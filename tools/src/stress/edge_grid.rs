@@ -7,7 +7,7 @@
 use bvh_build::Scene;
 use bvh_format::{Camera, Material, SceneFile};
 use glam::Vec3;
-use render_spec::CameraSpec;
+use render_spec::{CameraSpec, Mode, Settings};
 
 /// Compiles triangles (flat normals, one default material) with the default build settings.
 pub fn scene_of(tris: Vec<[Vec3; 3]>, camera: Option<Camera>) -> Result<SceneFile, String> {
@@ -85,4 +85,19 @@ pub fn camera_grid(n: u32, distance: f32, aim: Aim) -> Result<(SceneFile, Camera
         .collect();
     let camera = Camera::new("grid", cam.eye.into(), cam.at.into(), cam.up.into(), cam.fov_deg);
     Ok((scene_of(tris, Some(camera))?, cam, aimed))
+}
+
+/// Ray casting of an `n` x `n` image from `cam` with the primary hits' AOVs: a pixel whose `prim`
+/// is `NO_TRIANGLE` is a ray that slipped through the grid.
+pub fn cast_settings(cam: CameraSpec, n: u32) -> Settings {
+    Settings {
+        width: n,
+        height: n,
+        camera: cam,
+        mode: Mode::Cast,
+        lights: Vec::new(),
+        max_indirections: 0,
+        aovs: true,
+        accuracy: Default::default(),
+    }
 }
