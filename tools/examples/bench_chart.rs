@@ -3,8 +3,14 @@
 //! bar per tracer and method (and thread count or device, where one tracer ran on several), on a
 //! logarithmic axis so that CPU and GPU rates share it.
 //!
+//! With `--ray-types` a bar is one kind of ray instead of one mode: a mode's frame minus the cast
+//! frame of the same scene, shot, size and method leaves the time of its extra rays, so the cast row
+//! gives the primary rate and, say, the ao8 row the rate of its AO rays alone (rays beyond the
+//! primary ones over the time beyond the cast frame). Modes without a cast row beside them are left
+//! out with a warning.
+//!
 //! ```text
-//! cargo run --release -p tools --example bench_chart -- CSV... [-o chart.svg|chart.png]
+//! cargo run --release -p tools --example bench_chart -- CSV... [--ray-types] [-o chart.svg|chart.png]
 //! ```
 
 use plotters::coord::Shift;
@@ -15,12 +21,17 @@ use tools::bench::{Row, read_csv, significant};
 fn main() {
     let mut csvs = Vec::new();
     let mut out = PathBuf::from("bench-chart.svg");
+    let mut ray_types = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "-o" | "--output" => out = args.next().map(PathBuf::from).unwrap_or_else(|| fail("-o needs a file name")),
+            "--ray-types" => ray_types = true,
             "-h" | "--help" => {
-                println!("bench_chart CSV... [-o chart.svg|chart.png]: Mrays/s per scene, setting, tracer and method");
+                println!(
+                    "bench_chart CSV... [--ray-types] [-o chart.svg|chart.png]: Mrays/s per scene, setting (or kind of \
+                     ray), tracer and method"
+                );
                 return;
             }
             _ => csvs.push(PathBuf::from(a)),
@@ -32,6 +43,9 @@ fn main() {
     let mut rows = Vec::new();
     for c in &csvs {
         rows.extend(read_csv(c).unwrap_or_else(|e| fail(&e)));
+    }
+    if ray_types {
+        rows = by_ray_type(&rows);
     }
     if rows.is_empty() {
         fail("the CSV files hold no rows");
@@ -50,6 +64,50 @@ fn main() {
 fn fail(msg: &str) -> ! {
     eprintln!("error: {msg}");
     std::process::exit(1)
+}
+
+/// One row per kind of ray: the cast row as "primary", every other mode as the rays it adds to the
+/// cast frame of the same scene, shot, size, tracer, method and device over the time it adds.
+fn by_ray_type(rows: &[Row]) -> Vec<Row> {
+    const KINDS: [&str; 5] = ["primary", "shadow", "secondary", "AO", "diffuse"];
+    let key = |r: &Row| {
+        (r.scene.clone(), r.camera.clone(), r.width, r.height, r.tracer.clone(), r.method.clone(), r.device.clone())
+    };
+    let mut out = Vec::new();
+    for r in rows {
+        let Some(cast) = rows.iter().find(|c| c.mode == "cast" && key(c) == key(r)) else {
+            eprintln!("warning: no cast row beside {} {} {} {}: left out", r.scene, r.mode, r.tracer, r.method);
+            continue;
+        };
+        if r.mode == "cast" {
+            out.push(Row { mode: "primary".into(), ..r.clone() });
+            continue;
+        }
+        let extra: Vec<u64> = r.rays.iter().zip(&cast.rays).map(|(a, b)| a.saturating_sub(*b)).collect();
+        let kinds: Vec<&str> = KINDS.iter().zip(&extra).filter(|(_, n)| **n > 0).map(|(k, _)| *k).collect();
+        let ms = r.median_ms - cast.median_ms;
+        if kinds.is_empty() || ms <= 0.0 {
+            eprintln!(
+                "warning: {} {} {} {} adds no rays or no time to the cast frame: left out",
+                r.scene, r.mode, r.tracer, r.method
+            );
+            continue;
+        }
+        let mut rays = [0; 5];
+        rays.copy_from_slice(&extra);
+        out.push(Row {
+            mode: if kinds.join("+").eq_ignore_ascii_case(&r.mode) {
+                r.mode.clone()
+            } else {
+                format!("{} ({})", kinds.join("+"), r.mode)
+            },
+            median_ms: ms,
+            min_ms: r.min_ms - cast.min_ms,
+            rays,
+            ..r.clone()
+        });
+    }
+    out
 }
 
 fn names(paths: &[PathBuf]) -> String {
