@@ -166,9 +166,13 @@ impl Default for Tiles {
 }
 
 impl Tiles {
-    /// Whole blocks: an even number of rows and a multiple of 4 columns, at least one block.
+    /// Whole blocks: an even number of rows and a multiple of 4 columns, at least one block. Sizes
+    /// beyond any image (`usize::MAX` for "the whole width") are cut first, so that rounding up to
+    /// whole blocks cannot wrap to zero.
     fn blocks(self) -> Self {
-        Self { rows: self.rows.max(2).next_multiple_of(2), columns: self.columns.max(4).next_multiple_of(4) }
+        const BEYOND_ANY_IMAGE: usize = 1 << 30;
+        let whole = |n: usize, block: usize| n.clamp(block, BEYOND_ANY_IMAGE).next_multiple_of(block);
+        Self { rows: whole(self.rows, 2), columns: whole(self.columns, 4) }
     }
 }
 
@@ -256,7 +260,7 @@ fn render_in<T: TraceLanes>(
     let frame = settings.frame()?;
     tracer.walk(method)?;
     let (w, h) = (settings.width as usize, settings.height as usize);
-    let sh = Shading::new(tracer.scene, settings);
+    let sh = Shading::new(tracer, settings);
     let samples: Vec<(f32, f32)> = render_spec::accuracy::sample_positions(settings.accuracy.spp).collect();
     let mut rgb = vec![[0u8; 3]; w * h];
     let mut aov = settings.aovs.then(|| Aovs {
@@ -477,6 +481,11 @@ mod tests {
                 };
                 let (a, b) = (image(true).unwrap(), image(false).unwrap());
                 assert_eq!(a.rgb, b.rgb, "{mode:?} {method:?}");
+                for tiles in [Tiles { rows: 2, columns: usize::MAX }, Tiles { rows: usize::MAX, columns: 1 }] {
+                    let other =
+                        render_in(&tracer, &settings, Method::Packet, || Packets::new(walk), tiles, &|_| {}, true);
+                    assert_eq!(a.rgb, other.unwrap().rgb, "{mode:?} {method:?}: {tiles:?}");
+                }
                 assert_eq!(a.rgb, render(&tracer, &settings, method).unwrap().rgb, "{mode:?} {method:?}: other tiles");
                 assert_eq!(a.rays, b.rays, "{mode:?} {method:?}");
                 let (x, y) = (a.aov.unwrap(), b.aov.unwrap());
@@ -525,7 +534,7 @@ mod tests {
             };
             let one = Settings { accuracy: Default::default(), ..settings.clone() };
             let frame = settings.frame().unwrap();
-            let sh = Shading::new(&scene, &settings);
+            let sh = Shading::new(&tracer, &settings);
             let mut lanes = OneByOne::new(tracer.walk(Method::Ordered).unwrap());
             let mut want = Vec::new();
             for y in 0..h {

@@ -11,15 +11,20 @@
 use crate::geometry::Cost;
 use crate::lanes::TraceLanes;
 use crate::packet::{LANES, Rays, Results};
+use crate::render::Tracer;
 use crate::shade::{self, SurfaceOf};
 use crate::wide::{Lanes, Mask, V3};
-use bvh_format::{Light, Material, SceneFile};
+use bvh_format::{Light, Material, SceneFile, Triangle};
 use glam::Vec3;
 use render_spec::{Ao, BounceStop, Intersect, Mode, NO_TRIANGLE, Offset, RayCounts, Settings, sequence};
 
 /// Per-frame constants of the pipeline.
 pub struct Shading<'a> {
     scene: &'a SceneFile,
+    /// The tracer's expanded triangles: the hit triangle's corners and material are read here, in
+    /// the cache lines the traversal has just read, rather than through the file's index and
+    /// vertex arrays (two more scattered reads per hit).
+    triangles: &'a [Triangle],
     mode: Mode,
     /// The length of AO rays in scene units ([`Ao::distance`] of the scene's bounds).
     ao_distance: f32,
@@ -89,9 +94,11 @@ impl<L: Lanes> Materials<L> {
 }
 
 impl<'a> Shading<'a> {
-    pub fn new(scene: &'a SceneFile, s: &'a Settings) -> Self {
+    pub fn new(tracer: &'a Tracer<'a>, s: &'a Settings) -> Self {
+        let scene = tracer.scene;
         Self {
             scene,
+            triangles: tracer.triangles(),
             mode: s.mode,
             ao_distance: match s.mode {
                 Mode::Ao(ao) => {
@@ -150,7 +157,7 @@ impl<'a> Shading<'a> {
                 }
             }
             let m = Materials::<L>::gather(&std::array::from_fn(|i| {
-                &scene.materials[scene.triangles[tri[i]].material as usize]
+                &scene.materials[self.triangles[tri[i]].material as usize]
             }));
             match self.mode {
                 Mode::Cast => {
@@ -245,7 +252,7 @@ impl Shading<'_> {
         // the 4-float gathers.
         let pad = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
         let edges: [[[f32; 4]; 2]; LANES] = tri.map(|k| {
-            let (e1, e2) = shade::edges(&scene.triangle(k));
+            let (e1, e2) = shade::edges(&self.triangles[k]);
             [pad(e1), pad(e2)]
         });
         let normals: [[[f32; 4]; 3]; LANES] =
@@ -344,8 +351,7 @@ impl Shading<'_> {
             return background;
         }
         let (b, tri) = self.surfaces::<L>(&rays, &hits, found);
-        let kd =
-            V3::from_lanes(|i| Vec3::from(self.scene.materials[self.scene.triangles[tri[i]].material as usize].kd));
+        let kd = V3::from_lanes(|i| Vec3::from(self.scene.materials[self.triangles[tri[i]].material as usize].kd));
         let lit = shade::cast_of(kd, b.shading, V3::from_arrays(&rays.dir));
         V3::select(L::mask(found), lit, background)
     }
