@@ -493,7 +493,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
     bar.finish();
     bench.finish()?;
     let preface = format!(
-        "Device: {device} (`{}`); {frames} frames per setting after {warmup} warm-up frames; {}; triangle test {}.",
+        "Device: {device} (`{}`); {frames} frames per setting after at least {warmup} warm-up frames, 1 s of them and more until their times settled; {}; triangle test {}.",
         bench.tracer(),
         bench.timing(),
         m.intersect.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default()

@@ -331,7 +331,7 @@ pub fn run<C: Bench, G: Bench>(
     let preface: Vec<String> = devices
         .iter()
         .map(|(t, d, timing, f, w)| {
-            format!("`{t}`: {d}; the median of {f} timed frames per setting after at least {w} untimed and 1 s of untimed frames; {timing}.")
+            format!("`{t}`: {d}; the median of {f} timed frames per setting after at least {w} untimed frames, 1 s of them and more until their times settled; {timing}.")
         })
         .chain(
             [(cpu.bench.tracer(), cpu.left_out(&variants)), (gpu.bench.tracer(), gpu.left_out(&variants))]
