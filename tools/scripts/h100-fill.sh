@@ -10,6 +10,10 @@
 #   tiles     `--tile-pixels 2764800`: the 7680x4320 frame cut into 12 dispatches of 1920x1440's
 #             pixel count (bands of 7680x360), so its rays keep the large frame's coherence with
 #             the small frame's dispatch size
+#   base43    `base` against 7680x5760: 1920x1440's 4:3 aspect at 4x the size. 7680x4320 is 16:9,
+#             a wider view with more cheap background rays: on the dragon's medium camera its
+#             rays take 18% less traversal work each (tools/examples/warp_cost: 12.2 against
+#             14.9 nodes and triangles per ray; 7680x5760: 14.9)
 #   base2     `base` again at the end: how far the machine drifted during the run
 # and samples the GPU's SM clock (nvidia-smi, every 100 ms) during each variant.
 #
@@ -19,18 +23,23 @@
 # small frame stays low in every variant, a dispatch of 1920x1440 fills the GPU and the gap is
 # the small frame's less coherent rays (an 8x8 workgroup spans 4x the angle of the large frame's),
 # which no scheduling recovers. The SM clock column shows whether a variant ran at lower clocks.
+# Expected from the work alone (tools/examples/warp_cost on the dragon, medium camera: the largest
+# lane's work per 32-lane warp, 19.0 at 1920x1440, 13.7 at 7680x4320, 16.6 at 7680x5760): a
+# 1920x1440 frame that filled the GPU perfectly would reach about 72% of 7680x4320's rate and 87%
+# of 7680x5760's (LST cast, caches aside); what base falls short of that is fill, clocks or cache.
 #
 # Run from the repository root on the H100 machine. Expects release binaries in .bin/:
 #   .bin/trace-vk .bin/bvhc        cargo build --release -p tools
 # and, where .gl/ holds the Vulkan loader packages of /work/shared/device.md, unpacks them first.
 # Writes $OUT (default out/h100-fill): summary.md (read this), log.txt, one CSV and Markdown table
-# per variant, clocks-VARIANT.csv. About 4 minutes.
+# per variant, clocks-VARIANT.csv. About 5 minutes.
 #
 # Env: FRAMES (default 20), METHODS (default lst,stackless), MODES (default cast,whitted1); for a
 # trial run on a small machine only: SMALL, LARGE (sizes), SCENE_FILE.
 set -uo pipefail
 SMALL=${SMALL:-1920x1440}
 LARGE=${LARGE:-7680x4320}
+LARGE43=${LARGE43:-7680x5760}
 SCENE_FILE=${SCENE_FILE:-scenes/dragon.toml}
 TILE=$((${SMALL%x*} * ${SMALL#*x}))
 OUT=${OUT:-out/h100-fill}
@@ -70,7 +79,7 @@ variant() {
       >"$OUT/clocks-$name.csv" 2>/dev/null &
     sampler=$!
   fi
-  "$BIN/trace-vk" bench "$SCENE" --cameras medium --res "$SMALL,$LARGE" --modes "$MODES" \
+  "$BIN/trace-vk" bench "$SCENE" --cameras medium --res "$SMALL,${LARGE_NOW:-$LARGE}" --modes "$MODES" \
     --methods "$METHODS" --frames "$FRAMES" --csv "$OUT/$name.csv" "$@" >"$OUT/$name.out" 2>&1
   local rc=$?
   [ -n "$sampler" ] && kill "$sampler" 2>/dev/null && wait "$sampler" 2>/dev/null
@@ -82,6 +91,7 @@ variant base
 variant flight4 --in-flight 4
 variant flight16 --in-flight 16
 variant tiles --tile-pixels "$TILE"
+LARGE_NOW=$LARGE43 variant base43
 variant base2
 
 # summary.md: per variant, method and mode the two rates and their ratio, and the SM clock.
@@ -92,7 +102,7 @@ variant base2
   echo
   echo "| variant | method | mode | $SMALL Mrays/s | $LARGE Mrays/s | small / large | SM MHz median (min) |"
   echo "|---|---|---|--:|--:|--:|--:|"
-  for name in base flight4 flight16 tiles base2; do
+  for name in base flight4 flight16 tiles base43 base2; do
     csv="$OUT/$name.csv"
     [ -f "$csv" ] || { echo "| $name | (failed) | | | | | |"; continue; }
     clock="?"
@@ -115,6 +125,7 @@ variant base2
   done
   echo
   echo "In \`tiles\` the $LARGE frame ran in dispatches of at most $TILE pixels (its $SMALL row is the base frame)."
+  echo "In \`base43\` the large frame is $LARGE43 (the small frame's aspect), elsewhere $LARGE."
 } >"$OUT/summary.md"
 cat "$OUT/summary.md"
 log "done"

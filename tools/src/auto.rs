@@ -95,7 +95,7 @@ pub fn key(
 /// share 4^9, 1920x1440 is 4^11, 7680x4320 4^12.
 pub fn size_class(width: u32, height: u32) -> u32 {
     let pixels = (u64::from(width) * u64::from(height)).max(1);
-    (pixels.ilog2() + 1) / 2
+    pixels.ilog2().div_ceil(2)
 }
 
 /// The cache file of a scene: `NAME.methods` beside it.
@@ -155,6 +155,9 @@ fn write(path: &Path, entries: &[Entry]) -> Result<(), String> {
     .map_err(|e| e.to_string())
 }
 
+/// Every candidate's median ms, or why it was left out.
+pub type Timings = Vec<(Method, Result<f64, String>)>;
+
 /// How a pick was made.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Source {
@@ -162,7 +165,7 @@ pub enum Source {
     Cached(PathBuf),
     /// Calibrated now: every candidate's median ms or why it was left out, and where the pick was
     /// written (`None`: the built-in scene, or the file could not be written, as warned).
-    Calibrated { timings: Vec<(Method, Result<f64, String>)>, written: Option<PathBuf> },
+    Calibrated { timings: Timings, written: Option<PathBuf> },
 }
 
 /// A pick of `--method auto`.
@@ -271,8 +274,10 @@ impl<'a> Picker<'a> {
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .map(|(m, _)| m)
             .ok_or_else(|| {
-                let why: Vec<String> =
-                    timings.iter().filter_map(|(m, t)| t.as_ref().err().map(|e| format!("{}: {e}", m.name()))).collect();
+                let why: Vec<String> = timings
+                    .iter()
+                    .filter_map(|(m, t)| t.as_ref().err().map(|e| format!("{}: {e}", m.name())))
+                    .collect();
                 format!("no method renders this scene on this device ({})", why.join("; "))
             })?;
         let note: Vec<String> = timings
@@ -301,7 +306,7 @@ impl<'a> Picker<'a> {
 
     /// A few frames of every candidate: the median GPU time of each (wall time on a device
     /// without timestamps), or why it was left out.
-    pub fn calibrate(&self, settings: &Settings) -> Result<Vec<(Method, Result<f64, String>)>, String> {
+    pub fn calibrate(&self, settings: &Settings) -> Result<Timings, String> {
         let mut out = Vec::new();
         for (method, supported) in methods(self.gpu).into_iter().filter(|(m, _)| self.candidates.contains(m)) {
             let timed = supported.and_then(|()| self.time(method, settings));

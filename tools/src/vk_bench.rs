@@ -68,15 +68,23 @@ impl VkBench {
 /// A renderer of one method, or `auto`'s: the method picked for the last settings and its
 /// renderer, picked again when the settings change.
 pub enum VkRenderer<'a> {
-    Fixed(Renderer<'a>),
-    Auto { bench: &'a VkBench, picker: Picker<'a>, current: Option<(Settings, Method, Renderer<'a>)> },
+    Fixed(Box<Renderer<'a>>),
+    Auto(Box<Auto<'a>>),
+}
+
+/// `auto`'s state: the pick of the last settings and its renderer.
+pub struct Auto<'a> {
+    bench: &'a VkBench,
+    picker: Picker<'a>,
+    current: Option<(Settings, Method, Renderer<'a>)>,
 }
 
 impl<'a> VkRenderer<'a> {
     fn for_settings(&mut self, s: &Settings) -> Result<&mut Renderer<'a>, String> {
         match self {
-            VkRenderer::Fixed(r) => Ok(r),
-            VkRenderer::Auto { bench, picker, current } => {
+            VkRenderer::Fixed(r) => Ok(&mut **r),
+            VkRenderer::Auto(auto) => {
+                let Auto { bench, picker, current } = &mut **auto;
                 // Settings that differ only in per-pixel outputs share a pick.
                 let same = |c: &Settings| Settings { aovs: s.aovs, ..c.clone() } == *s;
                 if !current.as_ref().is_some_and(|(c, _, _)| same(c)) {
@@ -140,9 +148,9 @@ impl Bench for VkBench {
         if name == AUTO {
             let picker =
                 Picker::new(&self.gpu, scene, path, self.workgroup, exact, self.recalibrate).among(&self.candidates);
-            return Ok(VkRenderer::Auto { bench: self, picker, current: None });
+            return Ok(VkRenderer::Auto(Box::new(Auto { bench: self, picker, current: None })));
         }
-        Ok(VkRenderer::Fixed(self.renderer(scene, method_of(name)?, exact)?))
+        Ok(VkRenderer::Fixed(Box::new(self.renderer(scene, method_of(name)?, exact)?)))
     }
 
     fn unsupported(&self, method: &str) -> Option<String> {
@@ -154,8 +162,11 @@ impl Bench for VkBench {
     /// `auto:lst` for auto's pick of the last settings.
     fn method_label(&self, r: &VkRenderer<'_>, method: &str) -> String {
         match r {
-            VkRenderer::Auto { current: Some((_, m, _)), .. } => format!("{method}:{}", m.name()),
-            _ => method.to_owned(),
+            VkRenderer::Auto(a) => match &a.current {
+                Some((_, m, _)) => format!("{method}:{}", m.name()),
+                None => method.to_owned(),
+            },
+            VkRenderer::Fixed(_) => method.to_owned(),
         }
     }
 

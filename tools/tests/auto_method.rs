@@ -20,8 +20,18 @@ fn compile_room(dir: &Path, extra: &[&str]) {
 
 /// Renders with `--method auto` and returns (stdout, stderr).
 fn render(dir: &Path, extra: &[&str]) -> (String, String) {
-    let mut args =
-        vec!["render", "room.bvh", "--method", "auto", "--candidates", "lst,stackless", "--res", "24x16", "-o", "a.png"];
+    let mut args = vec![
+        "render",
+        "room.bvh",
+        "--method",
+        "auto",
+        "--candidates",
+        "lst,stackless",
+        "--res",
+        "24x16",
+        "-o",
+        "a.png",
+    ];
     args.extend(extra);
     let o = run(dir, "trace-vk", &args);
     assert_ok(&o, "trace-vk render --method auto");

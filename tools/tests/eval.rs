@@ -40,7 +40,16 @@ fn run(out: &Path) -> Vec<HashMap<String, String>> {
     let bunny = repo().join("scenes/bunny.toml");
     let o = Command::new(env!("CARGO_BIN_EXE_trace-eval"))
         .args([bunny.to_str().unwrap(), "--cameras", "medium", "--res", "160x120", "--modes", "whitted1"])
-        .args(["--cpu-methods", "auto", "--gpu-methods", "lst,rt-pipeline", "--intersect", "watertight,mt", "--offset", "scale"])
+        .args([
+            "--cpu-methods",
+            "auto",
+            "--gpu-methods",
+            "lst,rt-pipeline",
+            "--intersect",
+            "watertight,mt",
+            "--offset",
+            "scale",
+        ])
         .args(["--spp", "1,4,16", "--cutoff", "default", "--reference-spp", "64", "--frames", "1", "--warmup", "0"])
         .args(["--threads", "2", "--validate", "--out", out.to_str().unwrap()])
         .output()

@@ -774,44 +774,44 @@ impl<'g> Renderer<'g> {
                 rec.zero(counters);
                 rec.mark("start");
                 for _ in 0..copies {
-                if mode == Mode::Cast {
-                    pass(rec, Stage::Cast, 0, 0)?;
-                    rec.mark("cast");
-                    continue;
-                }
-                if first == 0 {
-                    pass(rec, Stage::Primary, 0, 0)?;
-                    rec.mark("trace primary");
-                    match mode {
-                        Mode::Ao(ao) => {
-                            // One pass per AO ray (the push constant's depth names it).
-                            for k in 0..ao.samples {
-                                pass(rec, Stage::Ao, 0, k)?;
+                    if mode == Mode::Cast {
+                        pass(rec, Stage::Cast, 0, 0)?;
+                        rec.mark("cast");
+                        continue;
+                    }
+                    if first == 0 {
+                        pass(rec, Stage::Primary, 0, 0)?;
+                        rec.mark("trace primary");
+                        match mode {
+                            Mode::Ao(ao) => {
+                                // One pass per AO ray (the push constant's depth names it).
+                                for k in 0..ao.samples {
+                                    pass(rec, Stage::Ao, 0, k)?;
+                                }
+                                rec.mark("ambient occlusion");
                             }
-                            rec.mark("ambient occlusion");
-                        }
-                        Mode::Diffuse => {
-                            pass(rec, Stage::Diffuse, 0, 0)?;
-                            rec.mark("diffuse bounce");
-                        }
-                        _ => {
-                            for l in 0..shade_passes {
-                                pass(rec, Stage::Shade, l, 0)?;
+                            Mode::Diffuse => {
+                                pass(rec, Stage::Diffuse, 0, 0)?;
+                                rec.mark("diffuse bounce");
                             }
-                            rec.mark("shade 0");
+                            _ => {
+                                for l in 0..shade_passes {
+                                    pass(rec, Stage::Shade, l, 0)?;
+                                }
+                                rec.mark("shade 0");
+                            }
                         }
                     }
-                }
-                for depth in first..end {
-                    pass(rec, Stage::Bounce, 0, depth)?;
-                    rec.mark(&format!("trace secondary {}", depth + 1));
-                    for l in 0..shade_passes {
-                        pass(rec, Stage::Shade, l, depth + 1)?;
+                    for depth in first..end {
+                        pass(rec, Stage::Bounce, 0, depth)?;
+                        rec.mark(&format!("trace secondary {}", depth + 1));
+                        for l in 0..shade_passes {
+                            pass(rec, Stage::Shade, l, depth + 1)?;
+                        }
+                        rec.mark(&format!("shade {}", depth + 1));
                     }
-                    rec.mark(&format!("shade {}", depth + 1));
-                }
-                pass(rec, Stage::Convert, 0, 0)?;
-                rec.mark("convert");
+                    pass(rec, Stage::Convert, 0, 0)?;
+                    rec.mark("convert");
                 }
                 Ok(())
             })?;

@@ -2,11 +2,11 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
+use tools::auto::Picker;
 use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
 use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
-use tools::auto::Picker;
 use tools::vk_bench::{AUTO, VkBench, check_validation};
 use tracer_vk::kernels::Method;
 use tracer_vk::render::RT_TRAVERSAL;
@@ -182,7 +182,10 @@ struct Auto {
 impl Auto {
     /// The candidates as methods; auto itself is not one.
     fn candidates(&self) -> Result<Vec<Method>, String> {
-        self.candidates.iter().map(|&m| method_of(m).ok_or_else(|| "auto is not a candidate of auto".to_owned())).collect()
+        self.candidates
+            .iter()
+            .map(|&m| method_of(m).ok_or_else(|| "auto is not a candidate of auto".to_owned()))
+            .collect()
     }
 }
 
