@@ -79,3 +79,34 @@ fn bounce_passes_stop_once_no_path_is_alive() {
         assert!(err.contains(&MAX_INDIRECTIONS.to_string()) && !err.contains('\n'), "{err}");
     }
 }
+
+/// Frames recorded back to back into one submission (`trace-vk bench --in-flight`, issue 10 item
+/// 3) give the single frame's image, AOVs and ray counts, in every mode, tiled or not; with more
+/// than one sample per pixel they are refused, since a copy would add its sample again.
+#[test]
+fn frames_recorded_into_one_submission_give_the_single_frames_image() {
+    let gpu = gpu();
+    let scene = compile("room.toml");
+    let base = room_settings(&scene, 40, 30, scene.settings.max_indirections);
+    let modes = [Mode::Cast, Mode::Whitted, Mode::Ao(render_spec::Ao { samples: 3, length: 0.1 }), Mode::Diffuse];
+    for method in [Method::Lst, Method::Stackless] {
+        for mode in modes {
+            let s = Settings { mode, ..base.clone() };
+            let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the scene uploads");
+            let one = r.render(&s).expect("one frame per submission");
+            r.set_frames_per_submission(3);
+            let three = r.render(&s).expect("three frames per submission");
+            let what = format!("{} {} x3", method.name(), mode.name());
+            assert_same_frame(&what, &one, &three);
+            r.limit_tile_pixels(2 * 64);
+            assert_same_frame(&format!("{what} in tiles"), &one, &r.render(&s).expect("tiled, three per submission"));
+        }
+    }
+    let mut r = Renderer::new(&gpu, &scene, Method::Lst, (8, 8)).expect("the scene uploads");
+    r.set_frames_per_submission(2);
+    let spp4 = Settings { accuracy: render_spec::Accuracy { spp: 4, ..Default::default() }, ..base };
+    let e = r.render(&spp4).expect_err("copies of a four-sample frame are refused").to_string();
+    assert!(e.contains("one sample per pixel") && !e.contains('\n'), "{e}");
+    let messages = gpu.validation_messages();
+    assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
+}

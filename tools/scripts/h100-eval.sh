@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Issue 8's speed-against-accuracy figures on the H100 machine (docs/accuracy.md): `trace-eval`
 # on four shipped scenes at 640x480, Whitted with one light, every accuracy setting (each alone
-# against the defaults), the GPU's three traversals with and without --exact, and the CPU tracer
+# against the defaults), the GPU's three traversals and rt-pipeline with and without --exact, and the CPU tracer
 # on the host's 16 cores, against the f64 reference at 64 samples per pixel.
 #
 # Run from the repository root, on the device machine, after the Vulkan loader set-up of
@@ -39,7 +39,7 @@ fi
 START=$(date +%s)
 # shellcheck disable=SC2086 # SCENES is a list of paths
 .bin/trace-eval $SCENES --cameras medium --res "$RES" --modes whitted1 \
-  --cpu-methods auto --gpu-methods lst,stackless,sst \
+  --cpu-methods auto --gpu-methods lst,stackless,sst,rt-pipeline \
   --intersect watertight,mt --offset scale,1e-4,1e-3,1e-2 --spp 1,4,16 --cutoff default,0 --exact off,on \
   --reference-spp 64 --out "$OUT" 2>&1 | tee "$OUT/log.txt"
 echo "eval took $(($(date +%s) - START)) s" | tee -a "$OUT/log.txt"

@@ -125,6 +125,25 @@ pub trait Bench {
     /// What the time of a frame covers, for the Markdown preface.
     fn timing(&self) -> String;
     fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<Self::Renderer<'a>, String>;
+    /// [`Bench::prepare`] for a scene read from `path` (`None`: the built-in scene), for tracers
+    /// that keep something beside the scene file (`trace-vk`'s `auto` caches its picks there).
+    fn prepare_file<'a>(
+        &'a self,
+        scene: &'a SceneFile,
+        _path: Option<&'a Path>,
+        method: &str,
+    ) -> Result<Self::Renderer<'a>, String> {
+        self.prepare(scene, method)
+    }
+    /// Why this tracer cannot run `method` on its device at all (rt-pipeline on a GPU without
+    /// ray tracing), or `None`: the evaluation lists such methods as not supported.
+    fn unsupported(&self, _method: &str) -> Option<String> {
+        None
+    }
+    /// The `method` column of a row measured with `r` (`trace-vk`'s `auto` adds its pick).
+    fn method_label(&self, _r: &Self::Renderer<'_>, method: &str) -> String {
+        method.to_owned()
+    }
     /// Whether the tracer implements these accuracy settings (the evaluation leaves out those it
     /// does not, rather than report an image rendered without them).
     fn honours(&self, _accuracy: &render_spec::Accuracy) -> bool {
@@ -332,11 +351,18 @@ pub struct Measured {
 
 /// The least wall time of untimed frames before a setting is timed (see [`measure`]).
 const WARM_UP_S: f64 = 1.0;
-/// The most untimed frames [`WARM_UP_S`] may add.
-const MAX_WARM_UP: usize = 500;
+/// A window of the settling test (see [`measure`]) holds at least this many untimed frames and
+/// lasts at least SETTLE_WINDOW_S.
+const SETTLE_WINDOW: usize = 3;
+const SETTLE_WINDOW_S: f64 = 0.2;
+/// A window whose median is faster than the one before by more than this share is still
+/// warming up.
+const SETTLE_SHARE: f64 = 0.02;
+/// The most wall time of untimed frames where the times do not settle.
+const MAX_WARM_UP_S: f64 = 10.0;
 
-/// Renders at least `warmup` untimed frames (more until 1 s has passed) and then `frames`
-/// timed frames of `settings` (`frames` at least 1).
+/// Renders at least `warmup` untimed frames and at least 1 s of them, and goes on until the
+/// frame times have settled, then `frames` timed frames of `settings` (`frames` at least 1).
 pub fn measure<B: Bench>(
     bench: &B,
     renderer: &mut B::Renderer<'_>,
@@ -344,15 +370,33 @@ pub fn measure<B: Bench>(
     warmup: usize,
     frames: usize,
 ) -> Result<Measured, String> {
-    // Untimed frames: `warmup` of them, and more until WARM_UP_S have passed. A GPU raises its
-    // clocks only after some busy time: on the H100, sub-millisecond frames measured after three
-    // warm-up frames came out up to 4.7 times slower for the first setting of a scene than the
-    // same kernels measured later; 1 s of warm-up removed most of that, though not all (SST).
+    // A GPU raises its clocks only after some busy time, and lowers them in idle gaps. On the
+    // H100, sub-millisecond frames after three warm-up frames came out up to 4.7x slow for the
+    // first setting of a scene, and after a fixed 1 s of warm-up still up to 3.7x slow in
+    // trace-eval, whose settings follow idle gaps (the CPU's evaluation before the GPU's, FLIP
+    // and the hit comparison between settings), where `trace-vk bench` runs its settings back to
+    // back. So the warm-up ends only once the times stop falling: a window (SETTLE_WINDOW frames
+    // and SETTLE_WINDOW_S) whose median is within SETTLE_SHARE of the window before, or after
+    // MAX_WARM_UP_S; whatever came before, the timed frames then start from the same state.
     let start = std::time::Instant::now();
-    let mut warmed = 0;
-    while warmed < warmup || (start.elapsed().as_secs_f64() < WARM_UP_S && warmed < MAX_WARM_UP) {
-        bench.frame(renderer, settings)?;
+    let (mut warmed, mut settled) = (0, false);
+    let (mut window, mut previous) = (Vec::new(), None::<f64>);
+    let mut window_start = start;
+    loop {
+        let elapsed = start.elapsed().as_secs_f64();
+        if warmed >= warmup && elapsed >= WARM_UP_S && (settled || elapsed >= MAX_WARM_UP_S) {
+            break;
+        }
+        window.push(bench.frame(renderer, settings)?.ms);
         warmed += 1;
+        if window.len() >= SETTLE_WINDOW && window_start.elapsed().as_secs_f64() >= SETTLE_WINDOW_S {
+            window_start = std::time::Instant::now();
+            let m = median(&mut window);
+            // Without timestamps there is nothing to settle.
+            settled = !m.is_finite() || previous.is_some_and(|p| m >= p * (1.0 - SETTLE_SHARE));
+            previous = Some(m);
+            window.clear();
+        }
     }
     let mut times = Vec::with_capacity(frames);
     let mut rays = Rays::default();
@@ -409,7 +453,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
         let cameras: Vec<(&String, CameraSpec)> =
             m.cameras.iter().map(|c| Ok((c, stored_camera(&scene, c)?))).collect::<Result<_, String>>()?;
         for &method in methods {
-            let mut renderer = bench.prepare(&scene, method)?;
+            let mut renderer = bench.prepare_file(&scene, path.as_deref(), method)?;
             for &(cam, camera) in &cameras {
                 for &(width, height) in &m.res {
                     for mode in &m.modes {
@@ -433,7 +477,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
                             height,
                             mode: mode.name(),
                             lights: mode.lights,
-                            method: method.to_owned(),
+                            method: bench.method_label(&renderer, method),
                             median_ms: m.median_ms,
                             min_ms: m.min_ms,
                             rays: m.rays,
@@ -449,7 +493,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
     bar.finish();
     bench.finish()?;
     let preface = format!(
-        "Device: {device} (`{}`); {frames} frames per setting after {warmup} warm-up frames; {}; triangle test {}.",
+        "Device: {device} (`{}`); {frames} frames per setting after at least {warmup} warm-up frames, 1 s of them and more until their times settled; {}; triangle test {}.",
         bench.tracer(),
         bench.timing(),
         m.intersect.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default()

@@ -1,8 +1,9 @@
 //! What the command-line programs share: command-line handling ([`cli`]), loading scenes (the
 //! built-in bunny included), the render options every tracer takes ([`render_args`]), writing
-//! every output safely ([`output`]), the benchmark matrix ([`bench`], with the CPU tracer in
+//! every output safely ([`output`]), `trace-vk --method auto` ([`auto`]), the benchmark matrix ([`bench`], with the CPU tracer in
 //! [`cpu_bench`], the Vulkan tracer in [`vk_bench`]) and the evaluation of speed against accuracy ([`eval`]).
 
+pub mod auto;
 pub mod bench;
 pub mod cli;
 pub mod cpu_bench;

@@ -1,12 +1,17 @@
 //! The Vulkan tracer as a [`Bench`]: GPU time of whole frames from timestamp queries. `trace-vk
 //! bench` times it, and `trace-eval` sets it beside the CPU.
 
+use crate::auto::Picker;
 use crate::bench::{Bench, Timed};
 use bvh_format::SceneFile;
 use render_spec::{Image, Settings};
+use std::path::Path;
 use tracer_vk::Gpu;
 use tracer_vk::kernels::Method;
 use tracer_vk::render::Renderer;
+
+/// The method name that picks per setting ([`crate::auto`]).
+pub const AUTO: &str = "auto";
 
 /// Marks a method name for the exact kernels in [`VkBench::prepare`] (the evaluation's
 /// `--exact on`).
@@ -33,10 +38,72 @@ pub struct VkBench {
     pub workgroup: (u32, u32),
     /// Exact kernels for every method (`trace-vk bench --exact`).
     pub exact: bool,
+    /// `auto` calibrates even where the cache has a pick (`--recalibrate`).
+    pub recalibrate: bool,
+    /// `auto` picks among these (`--candidates`; empty: every method).
+    pub candidates: Vec<Method>,
+    /// Frames recorded into each submission, timed as their mean (`--in-flight`; 1: one).
+    pub in_flight: u32,
+    /// Tiles of at most this many pixels (`--tile-pixels`), below the device's own limit.
+    pub tile_pixels: Option<u64>,
+}
+
+impl VkBench {
+    /// A device's bench with one frame per submission and tiles as large as the device allows.
+    pub fn new(gpu: Gpu, workgroup: (u32, u32), exact: bool) -> VkBench {
+        VkBench { gpu, workgroup, exact, recalibrate: false, candidates: Vec::new(), in_flight: 1, tile_pixels: None }
+    }
+
+    fn renderer<'a>(&'a self, scene: &'a SceneFile, method: Method, exact: bool) -> Result<Renderer<'a>, String> {
+        let mut r = Renderer::new(&self.gpu, scene, method, self.workgroup).map_err(|e| e.to_string())?;
+        r.set_exact(exact);
+        r.set_frames_per_submission(self.in_flight);
+        if let Some(p) = self.tile_pixels {
+            r.limit_tile_pixels(p);
+        }
+        Ok(r)
+    }
+}
+
+/// A renderer of one method, or `auto`'s: the method picked for the last settings and its
+/// renderer, picked again when the settings change.
+pub enum VkRenderer<'a> {
+    Fixed(Box<Renderer<'a>>),
+    Auto(Box<Auto<'a>>),
+}
+
+/// `auto`'s state: the pick of the last settings and its renderer.
+pub struct Auto<'a> {
+    bench: &'a VkBench,
+    picker: Picker<'a>,
+    current: Option<(Settings, Method, Renderer<'a>)>,
+}
+
+impl<'a> VkRenderer<'a> {
+    fn for_settings(&mut self, s: &Settings) -> Result<&mut Renderer<'a>, String> {
+        match self {
+            VkRenderer::Fixed(r) => Ok(&mut **r),
+            VkRenderer::Auto(auto) => {
+                let Auto { bench, picker, current } = &mut **auto;
+                // Settings that differ only in per-pixel outputs share a pick.
+                let same = |c: &Settings| Settings { aovs: s.aovs, ..c.clone() } == *s;
+                if !current.as_ref().is_some_and(|(c, _, _)| same(c)) {
+                    let pick = picker.pick(s)?;
+                    crate::say!("{}x{} {}: {}", s.width, s.height, s.mode.name(), pick.line());
+                    let renderer = match current.take() {
+                        Some((_, m, r)) if m == pick.method => r,
+                        _ => bench.renderer(picker.scene, pick.method, picker.exact)?,
+                    };
+                    *current = Some((s.clone(), pick.method, renderer));
+                }
+                Ok(&mut current.as_mut().expect("picked above").2)
+            }
+        }
+    }
 }
 
 impl Bench for VkBench {
-    type Renderer<'a> = Renderer<'a>;
+    type Renderer<'a> = VkRenderer<'a>;
 
     fn tracer(&self) -> &'static str {
         "vk"
@@ -49,31 +116,67 @@ impl Bench for VkBench {
 
     fn timing(&self) -> String {
         format!(
-            "a frame's time is the GPU time of its passes from timestamp queries (workgroup {}x{}{})",
+            "a frame's time is the GPU time of its passes from timestamp queries (workgroup {}x{}{}{}{})",
             self.workgroup.0,
             self.workgroup.1,
-            if self.exact { ", exact kernels: no fused multiply-adds" } else { "" }
+            if self.exact { ", exact kernels: no fused multiply-adds" } else { "" },
+            if self.in_flight > 1 {
+                format!(", {} frames recorded into each submission, their mean", self.in_flight)
+            } else {
+                String::new()
+            },
+            self.tile_pixels.map_or(String::new(), |p| format!(", tiles of at most {p} pixels"))
         )
     }
 
     /// `method` is a traversal's name, with [`EXACT_SUFFIX`] for its exact kernels.
-    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<Renderer<'a>, String> {
+    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<VkRenderer<'a>, String> {
+        self.prepare_file(scene, None, method)
+    }
+
+    /// `auto` caches its picks beside `path`.
+    fn prepare_file<'a>(
+        &'a self,
+        scene: &'a SceneFile,
+        path: Option<&'a Path>,
+        method: &str,
+    ) -> Result<VkRenderer<'a>, String> {
         let (name, exact) = match method.strip_suffix(EXACT_SUFFIX) {
             Some(name) => (name, true),
             None => (method, self.exact),
         };
-        let mut r = Renderer::new(&self.gpu, scene, method_of(name)?, self.workgroup).map_err(|e| e.to_string())?;
-        r.set_exact(exact);
-        Ok(r)
+        if name == AUTO {
+            let picker =
+                Picker::new(&self.gpu, scene, path, self.workgroup, exact, self.recalibrate).among(&self.candidates);
+            return Ok(VkRenderer::Auto(Box::new(Auto { bench: self, picker, current: None })));
+        }
+        Ok(VkRenderer::Fixed(Box::new(self.renderer(scene, method_of(name)?, exact)?)))
     }
 
-    fn frame(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Timed, String> {
-        let out = r.render_frame(s, false).map_err(|e| e.to_string())?;
+    fn unsupported(&self, method: &str) -> Option<String> {
+        let name = method.strip_suffix(EXACT_SUFFIX).unwrap_or(method);
+        let m = method_of(name).ok()?;
+        crate::auto::support(&self.gpu, m).err()
+    }
+
+    /// `auto:lst` for auto's pick of the last settings.
+    fn method_label(&self, r: &VkRenderer<'_>, method: &str) -> String {
+        match r {
+            VkRenderer::Auto(a) => match &a.current {
+                Some((_, m, _)) => format!("{method}:{}", m.name()),
+                None => method.to_owned(),
+            },
+            VkRenderer::Fixed(_) => method.to_owned(),
+        }
+    }
+
+    fn frame(&self, r: &mut VkRenderer<'_>, s: &Settings) -> Result<Timed, String> {
+        let out = r.for_settings(s)?.render_frame(s, false).map_err(|e| e.to_string())?;
         Ok(Timed { ms: out.gpu_ms, rays: crate::bench::rays_of(&out.image.rays) })
     }
 
-    fn image(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Image, String> {
-        Ok(r.render(s).map_err(|e| e.to_string())?.image)
+    fn image(&self, r: &mut VkRenderer<'_>, s: &Settings) -> Result<Image, String> {
+        Ok(r.for_settings(s)?.render(s).map_err(|e| e.to_string())?.image)
     }
 
     fn finish(&self) -> Result<(), String> {

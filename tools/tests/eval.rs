@@ -7,7 +7,8 @@
 //!
 //! on the CPU and on the GPU;
 //! - the default setting's hits agree with the reference's but for a few rays;
-//! - a second run finds its references in the cache and measures the same errors.
+//! - a second run finds its references in the cache and measures the same errors;
+//! - rt-pipeline has rows where the device supports it, else eval.md names it with the reason.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -39,7 +40,16 @@ fn run(out: &Path) -> Vec<HashMap<String, String>> {
     let bunny = repo().join("scenes/bunny.toml");
     let o = Command::new(env!("CARGO_BIN_EXE_trace-eval"))
         .args([bunny.to_str().unwrap(), "--cameras", "medium", "--res", "160x120", "--modes", "whitted1"])
-        .args(["--cpu-methods", "auto", "--gpu-methods", "lst", "--intersect", "watertight,mt", "--offset", "scale"])
+        .args([
+            "--cpu-methods",
+            "auto",
+            "--gpu-methods",
+            "lst,rt-pipeline",
+            "--intersect",
+            "watertight,mt",
+            "--offset",
+            "scale",
+        ])
         .args(["--spp", "1,4,16", "--cutoff", "default", "--reference-spp", "64", "--frames", "1", "--warmup", "0"])
         .args(["--threads", "2", "--validate", "--out", out.to_str().unwrap()])
         .output()
@@ -73,8 +83,20 @@ fn the_bunny_evaluation_shows_the_orderings_the_measurements_must_show() {
         assert!(disagree < 0.01, "{tracer}: {disagree} of the default hits differ from the reference's");
         assert!(num(default, "median_ms") > 0.0 && num(default, "primary") == 160.0 * 120.0);
     }
+    // rt-pipeline is evaluated where the device has it, else named with the reason, never missing.
+    let gpu = tracer_vk::Gpu::new(None, false).expect("a Vulkan device");
+    let rt = tools::auto::support(&gpu, tracer_vk::kernels::Method::RtPipeline);
+    let rt_rows = rows.iter().filter(|r| r["method"] == "rt-pipeline").count();
+    match &rt {
+        Ok(()) => assert_eq!(rt_rows, 4, "rt-pipeline: default, mt, spp 4, spp 16"),
+        Err(why) => {
+            assert_eq!(rt_rows, 0);
+            assert!(md.contains("not supported on this device, so no rows: rt-pipeline (") && md.contains(why), "{md}");
+        }
+    }
     for tracer in ["cpu", "vk"] {
-        assert_eq!(rows.iter().filter(|r| r["tracer"] == tracer).count(), 4, "{tracer}: default, mt, spp 4, spp 16");
+        let n = rows.iter().filter(|r| r["tracer"] == tracer && r["method"] != "rt-pipeline").count();
+        assert_eq!(n, 4, "{tracer}: default, mt, spp 4, spp 16");
     }
     for f in ["eval.md", "bunny-medium-160x120-whitted1.svg", "bunny-medium-160x120-whitted1.png"] {
         assert!(std::fs::metadata(out.join(f)).map(|m| m.len() > 1000).unwrap_or(false), "{f} missing or empty");

@@ -99,6 +99,8 @@ fn every_option_refuses_bad_values_in_one_sentence_and_touches_nothing() {
     let vk = ["render", "room.bvh", "--res", "8x8", "-o", "out.png"];
     add(c, "trace-vk", &vk, "--workgroup", &[BAD_SIZE, &["64x64"]].concat());
     add(c, "trace-vk", &vk, "--device", &["", "-1", "nan", "99999999999", "999"]);
+    let auto = ["render", "room.bvh", "--res", "8x8", "-o", "out.png", "--method", "auto"];
+    add(c, "trace-vk", &auto, "--candidates", &["", "fastest", "auto"]);
     let bench =
         ["bench", "room.bvh", "--res", "8x8", "--frames", "1", "--warmup", "0", "--methods", "lst", "--modes", "cast"];
     add(c, "trace-vk", &bench, "--cameras", &["", "nope", "-1"]);
@@ -117,6 +119,9 @@ fn every_option_refuses_bad_values_in_one_sentence_and_touches_nothing() {
     add(c, "trace-vk", &bench, "--csv", &["", "missing/b.csv", "b.txt", "folder"]);
     add(c, "trace-vk", &bench, "--device", &["-1", "999"]);
     add(c, "trace-vk", &bench, "--intersect", &["", "moller"]);
+    add(c, "trace-vk", &bench, "--in-flight", &["", "0", "-1", "65", "nan"]);
+    add(c, "trace-vk", &bench, "--tile-pixels", &["", "0", "-1", "nan"]);
+    add(c, "trace-vk", &bench, "--candidates", &["fastest", "auto"]);
     add(c, "trace-vk", &["bench"], "", &["missing.bvh", "empty.bvh", "text.bvh", "folder.bvh"]);
 
     assert!(cases.len() > 250, "{} cases", cases.len());

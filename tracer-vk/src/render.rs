@@ -175,6 +175,8 @@ pub struct Renderer<'g> {
     targets: Option<Targets>,
     /// A tile holds at most this many pixels (besides the device's own limits).
     tile_pixels: u64,
+    /// Frames recorded back to back into each submission ([`Renderer::set_frames_per_submission`]).
+    frames_per_submission: u32,
 }
 
 /// The kernels' storage buffers by binding number, as common.wgsl names them; `render_tile` binds
@@ -407,6 +409,7 @@ impl<'g> Renderer<'g> {
             rt,
             targets: None,
             tile_pixels: tiles::device_tile_pixels(info),
+            frames_per_submission: 1,
         })
     }
 
@@ -451,6 +454,15 @@ impl<'g> Renderer<'g> {
     pub fn limit_tile_pixels(&mut self, pixels: u64) {
         let wg = self.spec.workgroup.0 as u64 * self.spec.workgroup.1 as u64;
         self.tile_pixels = tiles::device_tile_pixels(self.gpu.info()).min(pixels.max(wg));
+    }
+
+    /// Records `n` copies of each frame back to back into one submission, waited for once, and
+    /// reports their mean: GPU time and rays per frame (issue 10 item 3: whether small frames fill
+    /// the GPU when the gaps between submissions go). Every copy redoes the same work from the
+    /// primary rays on, so the image is the single frame's. Frames of one sample per pixel only
+    /// (a copy would add its sample to the sum again); all bounces go into the one submission.
+    pub fn set_frames_per_submission(&mut self, n: u32) {
+        self.frames_per_submission = n.max(1);
     }
 
     fn pipeline(&mut self, stage: Stage) -> Result<(), VkError> {
@@ -538,6 +550,13 @@ impl<'g> Renderer<'g> {
     ) -> Result<Output, VkRenderError> {
         let (image, aovs) = (readback, readback && s.aovs);
         let f = s.frame()?;
+        if self.frames_per_submission > 1 && s.accuracy.spp > 1 {
+            return Err(VkError::Usage(format!(
+                "{} frames per submission take one sample per pixel, not {}",
+                self.frames_per_submission, s.accuracy.spp
+            ))
+            .into());
+        }
         self.specialise_for(&s.accuracy);
         if s.lights.len() > u32::MAX as usize / 2 {
             return Err(VkRenderError::TooManyLights(s.lights.len()));
@@ -642,6 +661,16 @@ impl<'g> Renderer<'g> {
             progress(Progress { pixels_done: done, pixels: total });
         }
         debug_assert_eq!(host.width, s.width);
+        // The mean of the frames of each submission (identical work, so the counts divide).
+        let n = self.frames_per_submission;
+        if n > 1 {
+            let r = &mut tally.rays;
+            for c in [&mut r.primary, &mut r.shadow, &mut r.secondary, &mut r.ao, &mut r.diffuse] {
+                *c /= u64::from(n);
+            }
+            tally.gpu_ms /= f64::from(n);
+            tally.passes.iter_mut().for_each(|(_, ms)| *ms /= f64::from(n));
+        }
         let f32_of = |u: u32| f32::from_bits(u);
         let a = &host.aovs;
         let aov = aovs.then(|| Aovs {
@@ -712,10 +741,15 @@ impl<'g> Renderer<'g> {
         let rays = &self.ray_halves;
         let rt = self.rt.as_ref();
         let shade_passes = light_count.max(1);
+        let copies = self.frames_per_submission;
         let mut first = 0;
         loop {
-            // Bounces [first, end) in this submission.
-            let end = if first == 0 { indirections.min(FIRST_BOUNCES) } else { indirections.min(2 * first) };
+            // Bounces [first, end) in this submission; copies of a frame make all in one.
+            let end = match first {
+                _ if copies > 1 => indirections,
+                0 => indirections.min(FIRST_BOUNCES),
+                _ => indirections.min(2 * first),
+            };
             let mut dispatches = 0u64;
             let timings = g.run(|rec| {
                 let mut pass = |rec: &mut crate::device::Recorder, stage: Stage, light: u32, depth: u32| {
@@ -739,49 +773,51 @@ impl<'g> Renderer<'g> {
                 };
                 rec.zero(counters);
                 rec.mark("start");
-                if mode == Mode::Cast {
-                    pass(rec, Stage::Cast, 0, 0)?;
-                    rec.mark("cast");
-                    return Ok(());
-                }
-                if first == 0 {
-                    pass(rec, Stage::Primary, 0, 0)?;
-                    rec.mark("trace primary");
-                    match mode {
-                        Mode::Ao(ao) => {
-                            // One pass per AO ray (the push constant's depth names it).
-                            for k in 0..ao.samples {
-                                pass(rec, Stage::Ao, 0, k)?;
+                for _ in 0..copies {
+                    if mode == Mode::Cast {
+                        pass(rec, Stage::Cast, 0, 0)?;
+                        rec.mark("cast");
+                        continue;
+                    }
+                    if first == 0 {
+                        pass(rec, Stage::Primary, 0, 0)?;
+                        rec.mark("trace primary");
+                        match mode {
+                            Mode::Ao(ao) => {
+                                // One pass per AO ray (the push constant's depth names it).
+                                for k in 0..ao.samples {
+                                    pass(rec, Stage::Ao, 0, k)?;
+                                }
+                                rec.mark("ambient occlusion");
                             }
-                            rec.mark("ambient occlusion");
-                        }
-                        Mode::Diffuse => {
-                            pass(rec, Stage::Diffuse, 0, 0)?;
-                            rec.mark("diffuse bounce");
-                        }
-                        _ => {
-                            for l in 0..shade_passes {
-                                pass(rec, Stage::Shade, l, 0)?;
+                            Mode::Diffuse => {
+                                pass(rec, Stage::Diffuse, 0, 0)?;
+                                rec.mark("diffuse bounce");
                             }
-                            rec.mark("shade 0");
+                            _ => {
+                                for l in 0..shade_passes {
+                                    pass(rec, Stage::Shade, l, 0)?;
+                                }
+                                rec.mark("shade 0");
+                            }
                         }
                     }
-                }
-                for depth in first..end {
-                    pass(rec, Stage::Bounce, 0, depth)?;
-                    rec.mark(&format!("trace secondary {}", depth + 1));
-                    for l in 0..shade_passes {
-                        pass(rec, Stage::Shade, l, depth + 1)?;
+                    for depth in first..end {
+                        pass(rec, Stage::Bounce, 0, depth)?;
+                        rec.mark(&format!("trace secondary {}", depth + 1));
+                        for l in 0..shade_passes {
+                            pass(rec, Stage::Shade, l, depth + 1)?;
+                        }
+                        rec.mark(&format!("shade {}", depth + 1));
                     }
-                    rec.mark(&format!("shade {}", depth + 1));
+                    pass(rec, Stage::Convert, 0, 0)?;
+                    rec.mark("convert");
                 }
-                pass(rec, Stage::Convert, 0, 0)?;
-                rec.mark("convert");
                 Ok(())
             })?;
             tally.add_timings(&timings);
             let words: Vec<u32> = g.download_as(counters)?;
-            check_counts(&self.spec, &words, tile.pixels(), first == 0, dispatches)?;
+            check_counts(&self.spec, &words, tile.pixels(), first == 0, copies, dispatches)?;
             let wide = |slot: usize| words[slot] as u64 | (words[slot + 1] as u64) << 32;
             tally.rays.primary += wide(counters::PRIMARY);
             tally.rays.shadow += wide(counters::SHADOW);
@@ -797,13 +833,14 @@ impl<'g> Renderer<'g> {
 }
 
 /// Refuses a submission whose counts do not add up: every dispatch must have finished every
-/// pixel of the tile, the first must have traced one primary ray per pixel, and no traversal may
-/// have given up on a ray.
+/// pixel of the tile, the first must have traced one primary ray per pixel and frame (`copies`
+/// frames per submission), and no traversal may have given up on a ray.
 fn check_counts(
     spec: &Specialisation,
     words: &[u32],
     pixels: u64,
     first: bool,
+    copies: u32,
     dispatches: u64,
 ) -> Result<(), VkRenderError> {
     let method = spec.method.name();
@@ -818,8 +855,9 @@ fn check_counts(
         return Err(VkRenderError::Fault { method, what: "took more steps than the tree has nodes".to_owned() });
     }
     let primary = wide(counters::PRIMARY);
-    if first && primary != pixels {
-        return Err(VkRenderError::LostWork { method, what: "primary rays", done: primary, expected: pixels });
+    let expected = pixels * u64::from(copies);
+    if first && primary != expected {
+        return Err(VkRenderError::LostWork { method, what: "primary rays", done: primary, expected });
     }
     let finished = wide(counters::FINISHED);
     let expected = dispatches * pixels;
@@ -959,12 +997,16 @@ mod tests {
 
     #[test]
     fn counts_that_add_up_pass() {
-        check_counts(&spec(), &words(100, 400, 0), 100, true, 4).unwrap();
+        check_counts(&spec(), &words(100, 400, 0), 100, true, 1, 4).unwrap();
         // Later submissions trace no primary rays.
-        check_counts(&spec(), &words(0, 300, 0), 100, false, 3).unwrap();
+        check_counts(&spec(), &words(0, 300, 0), 100, false, 1, 3).unwrap();
         // 64-bit counts: more than 2^32 pixel passes in one tile.
         let n = 1u64 << 31;
-        check_counts(&spec(), &words(n, 3 * n, 0), n, true, 3).unwrap();
+        check_counts(&spec(), &words(n, 3 * n, 0), n, true, 1, 3).unwrap();
+        // Two frames per submission: twice the primary rays, every dispatch counted.
+        check_counts(&spec(), &words(200, 800, 0), 100, true, 2, 8).unwrap();
+        let short = check_counts(&spec(), &words(100, 800, 0), 100, true, 2, 8).unwrap_err().to_string();
+        assert!(short.contains("finished 100 of the 200 primary rays"), "{short}");
     }
 
     #[test]
@@ -977,7 +1019,7 @@ mod tests {
             (words(100, 400, counters::FAULT_WALK), true, "more steps than the tree has nodes"),
         ];
         for (w, first, says) in cases {
-            let r = check_counts(&spec(), &w, 100, first, 4);
+            let r = check_counts(&spec(), &w, 100, first, 1, 4);
             if says.is_empty() {
                 assert!(r.is_ok(), "{r:?}");
                 continue;

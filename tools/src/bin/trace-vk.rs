@@ -2,11 +2,12 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
+use tools::auto::Picker;
 use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
 use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
-use tools::vk_bench::{VkBench, check_validation};
+use tools::vk_bench::{AUTO, VkBench, check_validation};
 use tracer_vk::kernels::Method;
 use tracer_vk::render::RT_TRAVERSAL;
 use tracer_vk::render::Renderer;
@@ -41,9 +42,17 @@ enum Command {
     Render {
         #[command(flatten)]
         args: Box<RenderArgs>,
-        /// GPU traversal.
+        /// GPU traversal; auto picks the fastest for the scene, mode and size from a calibration
+        /// run, cached beside the scene file (docs/vulkan-tracer.md, "--method auto").
         #[arg(long, value_enum, default_value = "lst")]
         method: MethodArg,
+        /// With --method auto: calibrate again even where the cache has a pick, and replace it.
+        #[arg(long)]
+        recalibrate: bool,
+        /// With --method auto: pick among these methods only [default: every method the device
+        /// supports].
+        #[arg(long, value_delimiter = ',', value_enum)]
+        candidates: Vec<MethodArg>,
         /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
         #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
         workgroup: (u32, u32),
@@ -65,8 +74,32 @@ struct BenchArgs {
     /// Time the bit-exact kernels (`render --exact`: no fused multiply-adds).
     #[arg(long)]
     exact: bool,
+    /// With the method auto: calibrate again even where the cache has a pick, and replace it.
+    #[arg(long)]
+    recalibrate: bool,
+    /// With the method auto: pick among these methods only [default: every method the device
+    /// supports].
+    #[arg(long, value_delimiter = ',', value_enum)]
+    candidates: Vec<MethodArg>,
+    /// Record N frames back to back into each submission, waited for once, and time their mean
+    /// (1 to 64; one sample per pixel): whether small frames fill the GPU without the gaps
+    /// between submissions (tools/scripts/h100-fill.sh). The images are those of one frame.
+    #[arg(long, value_parser = parse_in_flight, default_value = "1")]
+    in_flight: u32,
+    /// Render in tiles of at most N pixels (at least one workgroup's), below the device's limit:
+    /// a large frame cut into small frames' dispatches, rays as coherent as the large frame's.
+    #[arg(long, value_parser = parse_tile_pixels)]
+    tile_pixels: Option<u64>,
     #[command(flatten)]
     device: DeviceArgs,
+}
+
+fn parse_in_flight(s: &str) -> Result<u32, String> {
+    parse_count(s, 1, 64, "the frames per submission").map(|n| n as u32)
+}
+
+fn parse_tile_pixels(s: &str) -> Result<u64, String> {
+    parse_count(s, 1, 1 << 32, "the pixels per tile")
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -82,6 +115,9 @@ enum MethodArg {
     /// The GPU vendor's traversal (VK_KHR_ray_tracing_pipeline on the driver's own acceleration
     /// structures) with the same shading; where `trace-vk devices` says the device supports it.
     RtPipeline,
+    /// The fastest of the methods above that the device supports, for this scene, mode and size:
+    /// picked by timing a few frames of each, cached beside the scene file (`SCENE.methods`).
+    Auto,
 }
 
 fn parse_device(s: &str) -> Result<usize, String> {
@@ -93,7 +129,9 @@ fn main() -> ExitCode {
     tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
-        Command::Render { args, method, workgroup, device } => render(&args, method, workgroup, &device),
+        Command::Render { args, method, recalibrate, candidates, workgroup, device } => {
+            render(&args, method, Auto { recalibrate, candidates }, workgroup, &device)
+        }
     })
 }
 
@@ -135,17 +173,49 @@ fn open_for(device: &DeviceArgs, methods: &[Method]) -> Result<Gpu, String> {
     Ok(gpu)
 }
 
-fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &DeviceArgs) -> Result<(), String> {
+/// What `--method auto` takes besides the scene.
+struct Auto {
+    recalibrate: bool,
+    candidates: Vec<MethodArg>,
+}
+
+impl Auto {
+    /// The candidates as methods; auto itself is not one.
+    fn candidates(&self) -> Result<Vec<Method>, String> {
+        self.candidates
+            .iter()
+            .map(|&m| method_of(m).ok_or_else(|| "auto is not a candidate of auto".to_owned()))
+            .collect()
+    }
+}
+
+fn render(
+    args: &RenderArgs,
+    method: MethodArg,
+    auto: Auto,
+    workgroup: (u32, u32),
+    device: &DeviceArgs,
+) -> Result<(), String> {
+    let candidates = auto.candidates()?;
     let outputs = args.check()?;
-    let method = method_of(method);
+    let chosen = method_of(method);
     // A device without rt-pipeline refuses it before the scene is read.
-    let early = if method == Method::RtPipeline { Some(open_for(device, &[method])?) } else { None };
+    let early = if chosen == Some(Method::RtPipeline) { Some(open_for(device, &[Method::RtPipeline])?) } else { None };
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
     let gpu = match early {
         Some(gpu) => gpu,
         None => open(device)?,
+    };
+    let (method, pick) = match chosen {
+        Some(m) => (m, None),
+        None => {
+            let picker = Picker::new(&gpu, scene, args.scene.as_deref(), workgroup, args.exact, auto.recalibrate)
+                .among(&candidates);
+            let pick = picker.pick(&settings)?;
+            (pick.method, Some(pick))
+        }
     };
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
     renderer.set_exact(args.exact);
@@ -188,26 +258,36 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
             duration(out.gpu_ms / 1e3)
         ));
     }
+    lines.extend(pick.map(|p| p.line()));
     for line in lines.into_iter().chain(written) {
         say!("{line}");
     }
     Ok(())
 }
 
-fn method_of(m: MethodArg) -> Method {
-    match m {
+/// The method, or `None` for auto.
+fn method_of(m: MethodArg) -> Option<Method> {
+    Some(match m {
         MethodArg::Lst => Method::Lst,
         MethodArg::Stackless => Method::Stackless,
         MethodArg::Sst => Method::Sst,
         MethodArg::SstSubgroup => Method::SstSubgroup,
         MethodArg::RtPipeline => Method::RtPipeline,
-    }
+        MethodArg::Auto => return None,
+    })
 }
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
-    let methods: Vec<&str> = b.methods.iter().map(|&m| method_of(m).name()).collect();
-    let all: Vec<Method> = b.methods.iter().map(|&m| method_of(m)).collect();
-    let bench = VkBench { gpu: open_for(&b.device, &all)?, workgroup: b.workgroup, exact: b.exact };
+    let methods: Vec<&str> = b.methods.iter().map(|&m| method_of(m).map_or(AUTO, Method::name)).collect();
+    let all: Vec<Method> = b.methods.iter().filter_map(|&m| method_of(m)).collect();
+    let auto = Auto { recalibrate: b.recalibrate, candidates: b.candidates.clone() };
+    let bench = VkBench {
+        recalibrate: b.recalibrate,
+        candidates: auto.candidates()?,
+        in_flight: b.in_flight,
+        tile_pixels: b.tile_pixels,
+        ..VkBench::new(open_for(&b.device, &all)?, b.workgroup, b.exact)
+    };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;
     Ok(())
 }

@@ -48,7 +48,8 @@ pub struct EvalArgs {
     /// CPU traversals (auto, packet, ordered, stackless), or none.
     #[arg(long, value_delimiter = ',', default_value = "auto")]
     pub cpu_methods: Vec<String>,
-    /// GPU traversals (lst, stackless, sst, sst-subgroup), or none.
+    /// GPU traversals (lst, stackless, sst, sst-subgroup, rt-pipeline), or none; one the device
+    /// does not support is left out and named in eval.md with the reason.
     #[arg(long, value_delimiter = ',', default_value = "lst")]
     pub gpu_methods: Vec<String>,
     /// Triangle tests: watertight (the default test) and mt (Möller-Trumbore).
@@ -219,6 +220,16 @@ pub struct Tracer<'b, B: Bench> {
 }
 
 impl<B: Bench> Tracer<'_, B> {
+    /// The methods the device runs.
+    fn runnable(&self) -> Vec<&String> {
+        self.methods.iter().filter(|m| self.bench.unsupported(m).is_none()).collect()
+    }
+
+    /// The methods the device does not support, each with the reason (left out, and said so).
+    fn unsupported(&self) -> Vec<String> {
+        self.methods.iter().filter_map(|m| self.bench.unsupported(m).map(|why| format!("{m} ({why})"))).collect()
+    }
+
     /// The settings of `variants` this tracer does not implement (left out, and said so).
     fn left_out(&self, variants: &[Variant]) -> Vec<String> {
         if self.methods.is_empty() {
@@ -236,7 +247,7 @@ impl<B: Bench> Tracer<'_, B> {
                 .filter(|v| (!v.exact || (self.exact_method)(m).is_some()) && self.bench.honours(&v.accuracy))
                 .count()
         };
-        self.methods.iter().map(exact).sum()
+        self.runnable().into_iter().map(exact).sum()
     }
 }
 
@@ -320,7 +331,7 @@ pub fn run<C: Bench, G: Bench>(
     let preface: Vec<String> = devices
         .iter()
         .map(|(t, d, timing, f, w)| {
-            format!("`{t}`: {d}; the median of {f} timed frames per setting after at least {w} untimed and 1 s of untimed frames; {timing}.")
+            format!("`{t}`: {d}; the median of {f} timed frames per setting after at least {w} untimed frames, 1 s of them and more until their times settled; {timing}.")
         })
         .chain(
             [(cpu.bench.tracer(), cpu.left_out(&variants)), (gpu.bench.tracer(), gpu.left_out(&variants))]
@@ -329,6 +340,12 @@ pub fn run<C: Bench, G: Bench>(
                 .map(|(t, l)| {
                     format!("`{t}` does not implement these settings yet; they were left out: {}.", l.join(", "))
                 }),
+        )
+        .chain(
+            [(cpu.bench.tracer(), cpu.unsupported()), (gpu.bench.tracer(), gpu.unsupported())]
+                .into_iter()
+                .filter(|(_, l)| !l.is_empty())
+                .map(|(t, l)| format!("`{t}`: not supported on this device, so no rows: {}.", l.join("; "))),
         )
         .chain([format!(
             "Reference: {}, {} samples per pixel, every bounce up to the scene's indirections (cutoff 0); hit errors \
@@ -355,7 +372,7 @@ struct Context<'a> {
 /// Every method and variant of one tracer on one scene's frames.
 fn evaluate<B: Bench>(c: &Context<'_>, t: &Tracer<'_, B>, gpu: bool) -> Result<Vec<Row>, String> {
     let mut rows = Vec::new();
-    for method in &t.methods {
+    for method in t.runnable() {
         for exact in [false, true] {
             let run_method = match (exact, (t.exact_method)(method)) {
                 (false, _) => method.clone(),

@@ -33,8 +33,9 @@ impl Method {
 }
 
 /// Every method the sweep runs: CPU ordered, stackless, packet; GPU LST, stackless, SST,
-/// SST-subgroup.
-pub const METHODS: [Method; 7] = [
+/// SST-subgroup and rt-pipeline (refused, with the reason, on a device without it: see
+/// [`unsupported`]).
+pub const METHODS: [Method; 8] = [
     Method::Cpu(tracer_cpu::Method::Ordered),
     Method::Cpu(tracer_cpu::Method::Stackless),
     Method::Cpu(tracer_cpu::Method::Packet),
@@ -42,7 +43,17 @@ pub const METHODS: [Method; 7] = [
     Method::Gpu(tracer_vk::kernels::Method::Stackless),
     Method::Gpu(tracer_vk::kernels::Method::Sst),
     Method::Gpu(tracer_vk::kernels::Method::SstSubgroup),
+    Method::Gpu(tracer_vk::kernels::Method::RtPipeline),
 ];
+
+/// Why `method` does not run on `gpu` at all (a GPU method the device lacks, such as rt-pipeline
+/// on lavapipe), as the refusal every point then records; `None` where it runs.
+pub fn unsupported(method: Method, gpu: Option<&tracer_vk::Gpu>) -> Option<String> {
+    match (method, gpu) {
+        (Method::Gpu(m), Some(g)) => crate::auto::support(g, m).err().map(|why| format!("not supported: {why}")),
+        _ => None,
+    }
+}
 
 /// What a point's images are compared with, besides every primary hit against the reference.
 #[derive(Clone, Debug)]
@@ -193,6 +204,8 @@ pub fn sweep(
         for &method in methods {
             let tally = if matches!(method, Method::Gpu(_)) && gpu_lost {
                 Tally { refusal: Some("not run: the device hung on an earlier point".to_owned()), ..Tally::default() }
+            } else if let Some(why) = unsupported(method, gpu.as_deref()) {
+                Tally { refusal: Some(why), ..Tally::default() }
             } else {
                 run(&case, &reference, method, gpu.as_ref(), limit)
             };
