@@ -26,11 +26,11 @@ fn a_device_lost_during_a_frame_is_an_error_and_later_frames_fail_alike() {
     let mut r = Renderer::new(&gpu, &scene, Method::Lst, (8, 8)).expect("the scene uploads");
     r.render(&s).expect("a frame before the fault renders");
     gpu.simulate(Some(Fault::DeviceLost));
-    let e = r.render(&s).err().expect("the lost device fails the frame");
+    let e = r.render(&s).expect_err("the lost device fails the frame");
     assert!(matches!(e, VkRenderError::Vulkan(VkError::DeviceLost)), "{e:?}");
     assert!(one_sentence(&e).contains("device was lost"));
     gpu.simulate(None);
-    let again = r.render(&s).err().expect("a lost device stays lost");
+    let again = r.render(&s).expect_err("a lost device stays lost");
     assert!(matches!(again, VkRenderError::Vulkan(VkError::DeviceLost)), "{again:?}");
     let e = Renderer::new(&gpu, &scene, Method::Stackless, (8, 8)).err().expect("nothing uploads to a lost device");
     assert!(matches!(e, VkRenderError::Vulkan(VkError::DeviceLost)), "{e:?}");
@@ -43,7 +43,7 @@ fn a_frame_past_the_time_limit_is_an_error() {
     let s = frame_settings(&scene, "medium", 32, 24, Mode::Whitted);
     let mut r = Renderer::new(&gpu, &scene, Method::Stackless, (8, 8)).expect("the scene uploads");
     gpu.simulate(Some(Fault::Timeout));
-    let e = r.render(&s).err().expect("the frame times out");
+    let e = r.render(&s).expect_err("the frame times out");
     assert!(matches!(e, VkRenderError::Vulkan(VkError::Timeout { .. })), "{e:?}");
     assert!(one_sentence(&e).contains("did not finish"));
     gpu.simulate(None);
