@@ -325,3 +325,64 @@ pub fn sweep(
     }
     rows
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tracer_vk::VkError;
+    use tracer_vk::render::VkRenderError;
+
+    #[test]
+    fn device_errors_are_faults_hangs_or_limits() {
+        let lost = Stop::from(VkRenderError::Vulkan(VkError::DeviceLost));
+        assert!(matches!(lost, Stop::Fault(ref m, true) if m.contains("lost")), "{lost:?}");
+        let dropped = VkRenderError::LostWork { method: "LST", what: "primary rays", done: 1, expected: 2 };
+        assert!(matches!(Stop::from(dropped), Stop::Fault(_, false)));
+        assert!(matches!(Stop::from(VkRenderError::Vulkan(VkError::Timeout { seconds: 1 })), Stop::Hang));
+        let memory = VkRenderError::Vulkan(VkError::OutOfDeviceMemory { label: "nodes".into(), bytes: 1 << 30 });
+        assert!(matches!(Stop::from(memory), Stop::Refused(ref m) if m.contains("nodes")));
+    }
+
+    #[test]
+    fn moller_trumbore_lines_fail_only_on_crashes_hangs_faults_and_nans() {
+        let leaks = Tally { pixels: 10, failed: 3, leaks: 2, wrong: 1, ..Tally::default() };
+        assert!(leaks.failed_with(Intersect::Watertight));
+        assert!(!leaks.failed_with(Intersect::MollerTrumbore));
+        let nan = Tally { pixels: 10, failed: 1, non_finite: 1, ..Tally::default() };
+        assert!(nan.failed_with(Intersect::MollerTrumbore));
+        let fault = Tally { fault: Some("the Vulkan device was lost".into()), ..Tally::default() };
+        assert!(fault.failed_with(Intersect::MollerTrumbore) && fault.failure_rate() == Some(1.0));
+        assert!(report::cell(&fault).starts_with("**FAULT**"));
+    }
+
+    #[test]
+    fn triangle_counts_grow_by_ten_up_to_the_cap() {
+        assert_eq!(cases::triangle_counts(100_000), [1000, 10_000, 100_000]);
+        assert_eq!(cases::triangle_counts(3_000_000), [1000, 10_000, 100_000, 1_000_000, 3_000_000]);
+        assert_eq!(cases::triangle_counts(1000), [1000]);
+        for n in [1000u64, 100_000, 3_000_000] {
+            let side = scenes::terrain_side(n) as u64;
+            assert!((2 * side * side).abs_diff(n) <= 4 * side, "{n}: side {side}");
+        }
+    }
+
+    #[test]
+    fn large_frames_get_more_time_than_small_ones() {
+        let scene = scenes::chain(2);
+        let shot = cases::shot(&scene, render_spec::CameraSpec::from(&scene.cameras[0]), 16384, 16384);
+        let mut c = Case {
+            axis: cases::AXES[13],
+            x: 0.0,
+            label: String::new(),
+            scene,
+            shots: vec![shot],
+            expect: Expect::CpuOrdered,
+            near: 0.0,
+            both_tests: false,
+        };
+        assert_eq!(c.time_limit(Duration::from_secs(60)), Duration::from_secs(60 * 64));
+        c.shots[0].width = 64;
+        c.shots[0].height = 48;
+        assert_eq!(c.time_limit(Duration::from_secs(60)), Duration::from_secs(60));
+    }
+}
