@@ -14,7 +14,8 @@
 # Device tool: command `bash tools/scripts/h100-size.sh`, carry [".bin"]. Writes into $OUT
 # (default ./out/h100-size): log.txt, cpu.png, lst.png, stackless.png, size.md and size.svg/.png
 # (the sweep's size tables and chart). TRIANGLES (default 96,000,000: triangles alone 4.3 GiB at
-# 48 bytes, so two bindings; nodes 2.9 GiB per layout, one) sets the scene's size.
+# 48 bytes, so two bindings; nodes 2.9 GiB per layout, one) sets the scene's size, MAX_TRIANGLES
+# (default 10^7) the sweep's largest, SWEEP=0 leaves the sweep out.
 #
 # What it prints: large_scene's counts (triangles, nodes, MiB per GPU array, the bindings each
 # array needs at 4 GiB, generation/compile/write seconds); `bvhc info` (bytes per section); the
@@ -29,6 +30,8 @@
 set -uo pipefail
 OUT=${OUT:-out/h100-size}
 TRIANGLES=${TRIANGLES:-96000000}
+MAX_TRIANGLES=${MAX_TRIANGLES:-10000000}
+SWEEP=${SWEEP:-1}
 mkdir -p "$OUT"
 for b in trace-vk trace-cpu bvhc stress large_scene image_diff; do
   [ -x ".bin/$b" ] || { echo "missing .bin/$b (see the top of $0)" >&2; exit 1; }
@@ -38,7 +41,12 @@ echo "host: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 
 echo "date: $(date -u '+%Y-%m-%d %H:%M UTC'); git: $(git rev-parse --short HEAD 2>/dev/null || echo '?')"
 .bin/trace-vk devices
 SCENE=$OUT/large.bvh
-timed() { /usr/bin/time -f "  [%e s wall, %M KiB peak memory: $*]" "$@"; }
+# Wall time and peak memory of a command (GNU time where the host has it, else bash's `time`).
+if [ -x /usr/bin/time ]; then
+  timed() { /usr/bin/time -f "  [%e s wall, %M KiB peak memory: $*]" "$@"; }
+else
+  timed() { local t0=$SECONDS; "$@"; local rc=$?; echo "  [$((SECONDS - t0)) s wall: $*]"; return $rc; }
+fi
 
 echo "== generating and compiling $TRIANGLES triangles =="
 timed .bin/large_scene "$TRIANGLES" "$SCENE" || exit 1
@@ -55,9 +63,10 @@ for m in lst stackless; do
 done
 rm -f "$SCENE"
 
+[ "$SWEEP" = 1 ] || exit 0
 LEFT=$((450 - SECONDS))
 echo "== the sweep's size axis up to 10^7 triangles and 16384 x 16384 (at most $LEFT s) =="
-timeout "$LEFT" .bin/stress --axis "size:" --max-triangles 10000000 --timeout 60 \
+timeout "$LEFT" .bin/stress --axis "size:" --max-triangles "$MAX_TRIANGLES" --timeout 60 \
   --out "$OUT/size.md" --chart "$OUT/size" \
   --machine "$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $(nproc) threads; Vulkan: NVIDIA H100"
 echo "stress exit status $? (0: no silent failure; 124: ran past its $LEFT s)"
