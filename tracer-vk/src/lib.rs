@@ -21,8 +21,8 @@ pub mod tiles;
 /// The ash version the raw handles ([`Gpu::ash_device`], [`Recorder::raw`]) come from.
 pub use ash;
 pub use device::{
-    Buffer, BufferDesc, DeviceInfo, DeviceKind, Gpu, Pipeline, PipelineDesc, Recorder, Timings, ValidationLog,
-    list_devices,
+    Buffer, BufferDesc, DeviceInfo, DeviceKind, FAULT_VARIABLE, Fault, Gpu, Pipeline, PipelineDesc, Recorder, Timings,
+    ValidationLog, list_devices,
 };
 pub use error::VkError;
 pub use shader::{translate, translate_with_subgroups};

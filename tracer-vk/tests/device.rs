@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use tracer_vk::{DeviceKind, Gpu, ValidationLog, VkError, list_devices, translate};
+use tracer_vk::{DeviceKind, FAULT_VARIABLE, Fault, Gpu, ValidationLog, VkError, list_devices, translate};
 
 fn gpu() -> Gpu {
     Gpu::new(None, true).unwrap_or_else(|e| panic!("{e}"))
@@ -304,4 +304,77 @@ fn upload_inside_run_is_an_error() {
     assert_eq!(gpu.download(&buf).unwrap(), [7; 16]);
     drop(buf);
     finish(gpu);
+}
+
+/// A lost device (simulated: lavapipe never loses its own) ends the run that saw it with
+/// `DeviceLost` in one sentence, and stays lost: later uploads and runs fail the same way, not
+/// with a hang or a crash, even after the simulation is switched off.
+#[test]
+fn a_lost_device_is_an_error_and_stays_lost() {
+    let gpu = gpu();
+    let buf = gpu.create_buffer_with(&[1u32; 64], "numbers").unwrap();
+    let pipeline = gpu.pipeline(&translate(DOUBLE, "double", &[]).unwrap(), 1, 8, "double").unwrap();
+    gpu.run(|r| r.dispatch(&pipeline, &[&buf], &push(&[64, 2]), [1, 1, 1])).unwrap();
+    gpu.simulate(Some(Fault::DeviceLost));
+    let e = gpu.run(|r| r.dispatch(&pipeline, &[&buf], &push(&[64, 2]), [1, 1, 1])).unwrap_err();
+    assert!(matches!(e, VkError::DeviceLost), "{e:?}");
+    let text = e.to_string();
+    assert!(text.contains("lost") && !text.contains('\n'), "{text}");
+    gpu.simulate(None);
+    assert!(matches!(gpu.upload(&buf, &[0; 16]).unwrap_err(), VkError::DeviceLost));
+    assert!(matches!(gpu.download(&buf).unwrap_err(), VkError::DeviceLost));
+    assert!(matches!(gpu.run(|_| Ok(())).unwrap_err(), VkError::DeviceLost));
+    drop((pipeline, buf));
+    finish(gpu);
+}
+
+/// Allocations past what the (simulated) device has left fail with `OutOfDeviceMemory`, naming
+/// the buffer and its size; smaller ones still succeed, and the device is usable afterwards.
+#[test]
+fn out_of_device_memory_names_the_buffer() {
+    let gpu = gpu();
+    gpu.simulate(Some(Fault::OutOfMemory(1 << 20)));
+    let e = gpu.create_buffer(4 << 20, "nodes").unwrap_err();
+    match &e {
+        VkError::OutOfDeviceMemory { label, bytes } => assert_eq!((label.as_str(), *bytes), ("nodes", 4 << 20)),
+        other => panic!("{other:?}"),
+    }
+    let text = e.to_string();
+    assert!(text.contains("nodes") && text.contains("4194304") && !text.contains('\n'), "{text}");
+    let small = gpu.create_buffer_with(&[3u32; 16], "small").unwrap();
+    assert_eq!(gpu.download_as::<u32>(&small).unwrap(), [3; 16]);
+    gpu.simulate(None);
+    let big = gpu.create_buffer(4 << 20, "nodes").unwrap();
+    drop((small, big));
+    finish(gpu);
+}
+
+/// A run that does not finish in time ends in `Timeout`, one sentence; the simulation of it
+/// (for frames, whose work lavapipe finishes too fast to time out for real) says the same.
+#[test]
+fn a_simulated_timeout_reads_like_a_real_one() {
+    let gpu = gpu();
+    let buf = gpu.create_buffer_with(&[1u32; 64], "numbers").unwrap();
+    let pipeline = gpu.pipeline(&translate(DOUBLE, "double", &[]).unwrap(), 1, 8, "double").unwrap();
+    gpu.simulate(Some(Fault::Timeout));
+    let e = gpu.run(|r| r.dispatch(&pipeline, &[&buf], &push(&[64, 2]), [1, 1, 1])).unwrap_err();
+    assert!(matches!(e, VkError::Timeout { seconds: 120 }), "{e:?}");
+    gpu.simulate(None);
+    // The work had finished: the device goes on.
+    gpu.run(|r| r.dispatch(&pipeline, &[&buf], &push(&[64, 3]), [1, 1, 1])).unwrap();
+    assert_eq!(gpu.download_as::<u32>(&buf).unwrap()[..64], [6; 64]);
+    drop((pipeline, buf));
+    finish(gpu);
+}
+
+#[test]
+fn fault_names_parse_and_a_wrong_one_is_one_sentence() {
+    assert_eq!(Fault::parse("device-lost").unwrap(), Fault::DeviceLost);
+    assert_eq!(Fault::parse("timeout").unwrap(), Fault::Timeout);
+    assert_eq!(Fault::parse("out-of-memory:65536").unwrap(), Fault::OutOfMemory(65536));
+    for bad in ["lost", "out-of-memory:", "out-of-memory:-1", "timeout "] {
+        let e = Fault::parse(bad).unwrap_err();
+        let text = e.to_string();
+        assert!(matches!(e, VkError::Usage(_)) && text.contains(FAULT_VARIABLE) && !text.contains('\n'), "{text}");
+    }
 }

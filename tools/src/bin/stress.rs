@@ -26,11 +26,13 @@ generated scenes along each axis of trouble: distance from the origin 10^0..10^7
 the compiler's rebasing), scale 10^-8..10^8, axis-parallel rays through faces, edges and vertices (+0 and -0 \
 components), grazing rays down to 1e-6 degrees, ray origins on a surface, edge and vertex, zero-area and needle \
 triangles, duplicates, coplanar overlaps, a vertex shared by 1000 triangles, trees 1000 deep, leaves of 1000 \
-triangles, halls of mirrors up to 64 indirections and glass inside glass.\n\nEvery pixel's primary hit is checked \
-against the exact f64 brute-force reference; points that compare images (distance, scale, secondary rays) also \
-count pixels whose colour differs. Each point and method is counted as wrong hits, leaks, NaN/infinite values, \
-wrong pixels, crashes (panics), hangs (no frame within --timeout) or refusals (a typed error: a limit, not a \
-silent failure). Writes a Markdown report and a chart (SVG and PNG); the exit status is 1 when anything failed \
+triangles, halls of mirrors up to 64 indirections, glass inside glass, triangle counts up to --max-triangles and \
+frames up to 16384 x 16384. Where Möller-Trumbore (--intersect mt) can differ, every method runs with it too, as \
+a line of its own.\n\nEvery pixel's primary hit is checked against the exact f64 brute-force reference; points \
+that compare images (distance, scale, secondary rays, size) also count pixels whose colour differs. Each point \
+and method is counted as wrong hits, leaks, NaN/infinite values, wrong pixels, crashes (panics), hangs (no frame \
+within --timeout), device faults (a lost device, dropped work) or refusals (a typed error: a limit, not a silent \
+failure). Writes a Markdown report and a chart (SVG and PNG); the exit status is 1 when anything failed \
 in silence."
 )]
 struct Cli {
@@ -49,7 +51,8 @@ struct Cli {
     /// Vulkan device index (see `trace-vk devices`) [default: the first discrete GPU, else any].
     #[arg(long, value_parser = parse_device)]
     device: Option<usize>,
-    /// Seconds one method may take on one point before it counts as a hang.
+    /// Seconds one method may take on one point before it counts as a hang (per 4 Mi pixels on
+    /// the large frames).
     #[arg(long, default_value = "120", value_parser = parse_seconds)]
     timeout: u64,
     /// Run only the axes whose names contain this text (repeatable), e.g. `--axis distance`.
@@ -58,6 +61,13 @@ struct Cli {
     /// Describe the machine in the report as this (default: the CPU model and the device's name).
     #[arg(long)]
     machine: Option<String>,
+    /// The size axis's largest scene: triangle counts 10^3, 10^4, ... up to this, and this.
+    #[arg(long, default_value_t = cases::DEFAULT_MAX_TRIANGLES, value_parser = parse_triangles)]
+    max_triangles: u64,
+}
+
+fn parse_triangles(s: &str) -> Result<u64, String> {
+    parse_count(s, 1000, u32::MAX as u64, "the largest triangle count")
 }
 
 fn parse_device(s: &str) -> Result<usize, String> {
@@ -95,29 +105,29 @@ fn sweep(cli: &Cli) -> Result<(), String> {
     });
     say!("generating the scenes ...");
     let extent = if cli.quick { Extent::Quick } else { Extent::Full };
-    let cases: Vec<_> = cases::all(extent)
-        .into_iter()
-        .filter(|c| cli.axis.is_empty() || cli.axis.iter().any(|a| c.axis.contains(a.as_str())))
-        .collect();
-    let progress = Progress::new((cases.len() * methods.len()) as u64, "{bar:40} {pos}/{len} {msg}", false);
+    let wanted = |axis: &str| cli.axis.is_empty() || cli.axis.iter().any(|a| axis.contains(a.as_str()));
+    let cases = cases::all(extent, cli.max_triangles, &wanted);
+    let runs: usize = cases.iter().map(|c| if c.both_tests { 2 } else { 1 }).sum();
+    let progress = Progress::new((runs * methods.len()) as u64, "{bar:40} {pos}/{len} {msg}", false);
     let rows = tools::stress::sweep(cases, &methods, gpu, Duration::from_secs(cli.timeout), &|row| {
         progress.inc(1);
-        progress.set_message(format!("{} {} {}", row.axis, row.label, row.method.name()));
+        progress.set_message(format!("{} {} {}", row.axis, row.label, row.line()));
     });
     progress.finish();
 
     let silent: Vec<String> = rows
         .iter()
         // The f32-world axis shows what the compiler's rebasing prevents; it is not a method.
-        .filter(|r| r.tally.silent_failure() && r.axis != AXES[1])
-        .map(|r| format!("{} {}: {} {}", r.axis, r.label, r.method.name(), report::cell(&r.tally)))
+        .filter(|r| r.failed() && r.axis != AXES[1])
+        .map(|r| format!("{} {}: {} {}", r.axis, r.label, r.line(), report::cell(&r.tally)))
         .collect();
     let axes: String = cli.axis.iter().map(|a| format!(" --axis {a:?}")).collect();
     let command = format!(
-        "cargo run --release -p tools --bin stress --{}{}{axes} --timeout {}",
+        "cargo run --release -p tools --bin stress --{}{}{axes} --timeout {} --max-triangles {}",
         if cli.quick { " --quick" } else { "" },
         if cli.cpu_only { " --cpu-only" } else { "" },
-        cli.timeout
+        cli.timeout,
+        cli.max_triangles
     );
     let mut md = std::fs::read_to_string(&cli.out).ok().map(|s| head_of(&s)).unwrap_or_default();
     md += &format!(

@@ -245,6 +245,15 @@ fn render(
         rays_per_second(r.total(), out.gpu_ms / 1e3),
         outputs.image.path.display()
     )];
+    let split = renderer.specialisation().split;
+    if split.node_chunks > 1 || split.tri_chunks > 1 {
+        lines.push(format!(
+            "the scene is split over storage buffer bindings of at most {} MiB: nodes {}, triangles {}",
+            gpu.info().max_storage_buffer_range.min(gpu.info().max_memory_allocation) >> 20,
+            split.node_chunks,
+            split.tri_chunks
+        ));
+    }
     if let Some(b) = renderer.structure_build() {
         let traversal: f64 = out.passes.iter().filter(|(l, _)| l == RT_TRAVERSAL).map(|(_, ms)| ms).sum();
         lines.push(format!(

@@ -7,7 +7,7 @@ use super::{Case, Tally};
 use bvh_format::{SceneFile, Triangle};
 use glam::DVec3;
 use render_spec::{Image, NO_TRIANGLE, Settings};
-use tracer_cpu::reference::intersect64;
+use tracer_cpu::reference::{Bvh, bvh::Ray64, intersect64};
 
 /// Barycentric margin within which a ray counts as passing through an edge or vertex.
 pub const EDGE: f64 = 1e-5;
@@ -44,31 +44,34 @@ fn plane_hit(tri: &Triangle, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
     Some((t, w[0].min(w[1]).min(w[2])))
 }
 
-/// The reference answers for every pixel of one frame.
+/// The reference answers for every pixel of one frame; none for a frame without AOVs (too large
+/// to hold its hits: only its colours are compared).
+///
+/// The closest hit is brute force's, found by the f64 walk of the file's tree
+/// (`tracer_cpu::reference::Bvh`, tested equal to brute force), so that scenes of millions of
+/// triangles are checked too. Whether another triangle lies at the same distance only matters
+/// for a hit on its triangle's boundary, and only there is every triangle tried.
 pub fn reference(scene: &SceneFile, shot: &Settings, near: f64) -> Vec<RefPixel> {
     use rayon::prelude::*;
-    let tris = scene.leaf_triangles();
+    if !shot.aovs {
+        return Vec::new();
+    }
+    let bvh = Bvh::new(scene).expect("the sweep's scenes hold a tree");
+    let tris = bvh.triangles();
     let frame = shot.frame().expect("the sweep's cameras are valid");
     let o = frame.eye.as_dvec3();
     (0..shot.height * shot.width)
         .into_par_iter()
-        .map(|i| {
+        .map_init(Vec::new, |stack, i| {
             let d = frame.direction(i % shot.width, i / shot.width).as_dvec3();
-            let mut best: Option<(f64, u32)> = None;
-            for (k, t) in tris.iter().enumerate() {
-                if let Some((t, _, _)) = intersect64(t, o, d, 0.0)
-                    && t > near
-                    && best.is_none_or(|b| t < b.0)
-                {
-                    best = Some((t, k as u32));
-                }
-            }
-            let hit = best.map(|(t, k)| (t, k, plane_hit(&tris[k as usize], o, d).map_or(0.0, |h| h.1)));
-            let shared = best.is_some_and(|(t, k)| {
-                tris.iter().enumerate().any(|(j, tri)| {
-                    j as u32 != k
-                        && intersect64(tri, o, d, 0.0).is_some_and(|(tj, _, _)| (tj - t).abs() <= TIE * t.abs())
-                })
+            let best = bvh.closest(&Ray64::new(o, d), near, stack, &mut Default::default());
+            let hit = best.map(|h| (h.t, h.tri, plane_hit(&tris[h.tri as usize], o, d).map_or(0.0, |p| p.1)));
+            let shared = hit.is_some_and(|(t, k, edge)| {
+                edge <= EDGE
+                    && tris.iter().enumerate().any(|(j, tri)| {
+                        j as u32 != k
+                            && intersect64(tri, o, d, 0.0).is_some_and(|(tj, _, _)| (tj - t).abs() <= TIE * t.abs())
+                    })
             });
             RefPixel { origin: o, dir: d, hit, shared }
         })
@@ -88,6 +91,19 @@ pub fn tally_image(
     let mut stored = vec![0u32; case.scene.input_index.len()];
     for (s, &i) in case.scene.input_index.iter().enumerate() {
         stored[i as usize] = s as u32;
+    }
+    if !shot.aovs {
+        // Colours only (a frame too large to hold its hits).
+        if let Some(e) = expected {
+            let off = e.rgb.iter().zip(&image.rgb).filter(|(a, b)| off_colour(a, b)).count() as u64;
+            tally.image += off;
+            tally.failed += off;
+        }
+        if image.rgb.len() as u64 != shot.width as u64 * shot.height as u64 {
+            tally.crash = Some(format!("the frame came back with {} pixels", image.rgb.len()));
+        }
+        tally.pixels += shot.width as u64 * shot.height as u64;
+        return;
     }
     let Some(aov) = image.aov.as_ref() else {
         tally.crash = Some("the frame came back without AOVs".to_owned());
@@ -116,8 +132,7 @@ pub fn tally_image(
                 wrong = !tie && !ambiguous;
             }
         }
-        let off_colour = expected
-            .is_some_and(|e| e.rgb[i].iter().zip(&image.rgb[i]).any(|(a, b)| a.abs_diff(*b) > COLOUR_TOLERANCE));
+        let off_colour = expected.is_some_and(|e| off_colour(&e.rgb[i], &image.rgb[i]));
         tally.wrong += wrong as u64;
         tally.leaks += leak as u64;
         tally.non_finite += non_finite as u64;
@@ -125,4 +140,9 @@ pub fn tally_image(
         tally.failed += (wrong || leak || non_finite || off_colour) as u64;
     }
     tally.pixels += (shot.width * shot.height) as u64;
+}
+
+/// Whether two pixels differ by more than [`COLOUR_TOLERANCE`] in a channel.
+fn off_colour(a: &[u8; 3], b: &[u8; 3]) -> bool {
+    a.iter().zip(b).any(|(a, b)| a.abs_diff(*b) > COLOUR_TOLERANCE)
 }

@@ -11,7 +11,7 @@ pub mod report;
 pub mod scenes;
 
 use bvh_format::SceneFile;
-use render_spec::{Image, Settings};
+use render_spec::{Image, Intersect, Settings};
 use std::sync::Arc;
 use std::sync::mpsc;
 use std::time::Duration;
@@ -55,6 +55,19 @@ pub fn unsupported(method: Method, gpu: Option<&tracer_vk::Gpu>) -> Option<Strin
     }
 }
 
+/// The triangle tests a point runs with: the default edge-consistent test, and Möller-Trumbore
+/// (`--intersect mt`) on the axes where the two can differ (rays through edges and vertices, far
+/// from the origin, at extreme scales).
+pub const INTERSECTS: [Intersect; 2] = [Intersect::Watertight, Intersect::MollerTrumbore];
+
+/// The name of a sweep line: the method, with " mt" for Möller-Trumbore.
+pub fn line_name(method: Method, intersect: Intersect) -> String {
+    match intersect {
+        Intersect::Watertight => method.name(),
+        Intersect::MollerTrumbore => format!("{} mt", method.name()),
+    }
+}
+
 /// What a point's images are compared with, besides every primary hit against the reference.
 #[derive(Clone, Debug)]
 pub enum Expect {
@@ -63,6 +76,10 @@ pub enum Expect {
     /// Each shot's colours must match these images (the same scene at the origin, at scale 1):
     /// a pixel off by more than [`check::COLOUR_TOLERANCE`] counts as a wrong image (acne).
     Images(Vec<Image>),
+    /// As `Images`, with the CPU ordered walk's images of the shots themselves, rendered when the
+    /// point runs (so that a large frame's image is made only if its axis is swept, and held only
+    /// while its point runs).
+    CpuOrdered,
 }
 
 /// One point of one axis: a scene and the frames rendered of it.
@@ -77,6 +94,21 @@ pub struct Case {
     pub expect: Expect,
     /// Hits closer than this to the ray origin are ambiguous (a ray leaving a surface).
     pub near: f64,
+    /// Also run every method with Möller-Trumbore ([`INTERSECTS`]).
+    pub both_tests: bool,
+}
+
+impl Case {
+    /// Pixels of all its shots.
+    pub fn pixels(&self) -> u64 {
+        self.shots.iter().map(|s| s.width as u64 * s.height as u64).sum()
+    }
+
+    /// How long one method may take on this point: `limit` for up to 4 Mi pixels (every point
+    /// but the large frames), proportionally more above.
+    pub fn time_limit(&self, limit: Duration) -> Duration {
+        limit * self.pixels().div_ceil(1 << 22).max(1) as u32
+    }
 }
 
 /// What one method did on one point.
@@ -92,6 +124,11 @@ pub struct Tally {
     pub image: u64,
     pub crash: Option<String>,
     pub hang: bool,
+    /// The device failed (lost, or its kernels dropped work) with this typed error: not silent,
+    /// but a failure, not a limit.
+    pub fault: Option<String>,
+    /// The fault was the device's loss: the GPU is not used again.
+    pub device_lost: bool,
     /// The method refused the point with this sentence (a limit, not a silent failure).
     pub refusal: Option<String>,
 }
@@ -99,7 +136,7 @@ pub struct Tally {
 impl Tally {
     /// Share of pixels that failed silently: 1 for a crash or hang, `None` for a refusal.
     pub fn failure_rate(&self) -> Option<f64> {
-        if self.crash.is_some() || self.hang {
+        if self.crash.is_some() || self.hang || self.fault.is_some() {
             return Some(1.0);
         }
         if self.refusal.is_some() {
@@ -112,19 +149,70 @@ impl Tally {
     pub fn silent_failure(&self) -> bool {
         self.failure_rate().is_some_and(|r| r > 0.0)
     }
+
+    /// Whether a line with this triangle test failed: Möller-Trumbore's wrong hits, leaks and
+    /// wrong pixels at edges are the trade `--intersect mt` makes (docs/shading.md), so only a
+    /// crash, hang, device fault or NaN counts against it.
+    pub fn failed_with(&self, intersect: Intersect) -> bool {
+        match intersect {
+            Intersect::Watertight => self.silent_failure(),
+            Intersect::MollerTrumbore => {
+                self.crash.is_some() || self.hang || self.fault.is_some() || self.non_finite > 0
+            }
+        }
+    }
 }
 
-/// Renders every shot of `case` with `method`. A refusal (a typed error) is returned as `Err`.
-fn render_all(case: &Case, method: Method, gpu: Option<&tracer_vk::Gpu>) -> Result<Vec<Image>, String> {
+/// Why a method gave no images.
+#[derive(Debug)]
+enum Stop {
+    /// A typed error naming a limit, before the first frame.
+    Refused(String),
+    /// The device was lost (`true`) or dropped work.
+    Fault(String, bool),
+    /// The GPU did not finish within its own timeout.
+    Hang,
+}
+
+impl From<tracer_vk::render::VkRenderError> for Stop {
+    fn from(e: tracer_vk::render::VkRenderError) -> Stop {
+        use tracer_vk::VkError;
+        use tracer_vk::render::VkRenderError as E;
+        match e {
+            E::Vulkan(VkError::Timeout { .. }) => Stop::Hang,
+            E::Vulkan(VkError::DeviceLost) => Stop::Fault(e.to_string(), true),
+            E::LostWork { .. } | E::Fault { .. } => Stop::Fault(e.to_string(), false),
+            e => Stop::Refused(e.to_string()),
+        }
+    }
+}
+
+/// The shots of `case` with triangle test `intersect`.
+fn shots(case: &Case, intersect: Intersect) -> Vec<Settings> {
+    let mut shots = case.shots.clone();
+    for s in &mut shots {
+        s.accuracy.intersect = intersect;
+    }
+    shots
+}
+
+/// Renders every shot of `case` with `method` and `intersect`.
+fn render_all(
+    case: &Case,
+    method: Method,
+    intersect: Intersect,
+    gpu: Option<&tracer_vk::Gpu>,
+) -> Result<Vec<Image>, Stop> {
+    let shots = shots(case, intersect);
     match method {
         Method::Cpu(m) => {
             let tracer = tracer_cpu::Tracer::new(&case.scene);
-            case.shots.iter().map(|s| tracer_cpu::render(&tracer, s, m).map_err(|e| e.to_string())).collect()
+            shots.iter().map(|s| tracer_cpu::render(&tracer, s, m).map_err(|e| Stop::Refused(e.to_string()))).collect()
         }
         Method::Gpu(m) => {
-            let gpu = gpu.ok_or("no Vulkan device")?;
-            let mut r = tracer_vk::render::Renderer::new(gpu, &case.scene, m, (8, 8)).map_err(|e| e.to_string())?;
-            case.shots.iter().map(|s| r.render(s).map(|o| o.image).map_err(|e| e.to_string())).collect()
+            let gpu = gpu.ok_or_else(|| Stop::Refused("no Vulkan device".to_owned()))?;
+            let mut r = tracer_vk::render::Renderer::new(gpu, &case.scene, m, (8, 8))?;
+            shots.iter().map(|s| r.render(s).map(|o| o.image).map_err(Stop::from)).collect()
         }
     }
 }
@@ -132,26 +220,30 @@ fn render_all(case: &Case, method: Method, gpu: Option<&tracer_vk::Gpu>) -> Resu
 /// How a run of one method on one point ended.
 enum Ended {
     Images(Vec<Image>),
-    Refused(String),
+    Stopped(Stop),
     Crashed(String),
 }
 
-/// Runs `case` with `method` on a worker thread: a panic is a crash, no answer within `limit` a
-/// hang (the thread is left behind; the caller stops using the device).
+/// Runs `case` with `method` and `intersect` on a worker thread: a panic is a crash, no answer
+/// within the case's share of `limit` a hang (the thread is left behind; the caller stops using
+/// the device). `expected` are the images a [`Expect::CpuOrdered`] point compares with.
 pub fn run(
     case: &Arc<Case>,
     reference: &Arc<Vec<Vec<check::RefPixel>>>,
+    expected: Option<&[Image]>,
     method: Method,
+    intersect: Intersect,
     gpu: Option<&Arc<tracer_vk::Gpu>>,
     limit: Duration,
 ) -> Tally {
     let (tx, rx) = mpsc::channel();
     let (c, g) = (Arc::clone(case), gpu.cloned());
     std::thread::spawn(move || {
-        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| render_all(&c, method, g.as_deref())));
+        let r =
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| render_all(&c, method, intersect, g.as_deref())));
         let _ = tx.send(match r {
             Ok(Ok(images)) => Ended::Images(images),
-            Ok(Err(e)) => Ended::Refused(e),
+            Ok(Err(e)) => Ended::Stopped(e),
             Err(p) => Ended::Crashed(
                 p.downcast_ref::<String>()
                     .cloned()
@@ -161,19 +253,21 @@ pub fn run(
         });
     });
     let mut tally = Tally::default();
-    match rx.recv_timeout(limit) {
+    match rx.recv_timeout(case.time_limit(limit)) {
         Ok(Ended::Images(images)) => {
             for (k, image) in images.iter().enumerate() {
                 let expected = match &case.expect {
                     Expect::Images(v) => v.get(k),
+                    Expect::CpuOrdered => expected.and_then(|v| v.get(k)),
                     Expect::Hits => None,
                 };
                 check::tally_image(case, &reference[k], &case.shots[k], image, expected, &mut tally);
             }
         }
-        Ok(Ended::Refused(e)) => tally.refusal = Some(e),
+        Ok(Ended::Stopped(Stop::Refused(e))) => tally.refusal = Some(e),
+        Ok(Ended::Stopped(Stop::Fault(e, lost))) => (tally.fault, tally.device_lost) = (Some(e), lost),
+        Ok(Ended::Stopped(Stop::Hang)) | Err(_) => tally.hang = true,
         Ok(Ended::Crashed(e)) => tally.crash = Some(e),
-        Err(_) => tally.hang = true,
     }
     tally
 }
@@ -185,10 +279,23 @@ pub struct Row {
     pub x: f64,
     pub label: String,
     pub method: Method,
+    pub intersect: Intersect,
     pub tally: Tally,
 }
 
-/// Runs every case with every method in `methods`, calling `progress` after each point.
+impl Row {
+    pub fn line(&self) -> String {
+        line_name(self.method, self.intersect)
+    }
+
+    /// Whether this row failed (see [`Tally::failed_with`]).
+    pub fn failed(&self) -> bool {
+        self.tally.failed_with(self.intersect)
+    }
+}
+
+/// Runs every case with every method in `methods` (and, where the case asks, with both triangle
+/// tests), calling `progress` after each point.
 pub fn sweep(
     cases: Vec<Case>,
     methods: &[Method],
@@ -201,21 +308,94 @@ pub fn sweep(
     for case in cases {
         let case = Arc::new(case);
         let reference = Arc::new(case.shots.iter().map(|s| check::reference(&case.scene, s, case.near)).collect());
-        for &method in methods {
-            let tally = if matches!(method, Method::Gpu(_)) && gpu_lost {
-                Tally { refusal: Some("not run: the device hung on an earlier point".to_owned()), ..Tally::default() }
-            } else if let Some(why) = unsupported(method, gpu.as_deref()) {
-                Tally { refusal: Some(why), ..Tally::default() }
-            } else {
-                run(&case, &reference, method, gpu.as_ref(), limit)
-            };
-            if tally.hang && matches!(method, Method::Gpu(_)) {
-                gpu_lost = true;
+        let expected = matches!(case.expect, Expect::CpuOrdered).then(|| {
+            let tracer = tracer_cpu::Tracer::new(&case.scene);
+            let render = |s| tracer_cpu::render(&tracer, s, tracer_cpu::Method::Ordered);
+            case.shots.iter().map(render).collect::<Result<Vec<_>, _>>().map_err(|e| e.to_string())
+        });
+        let intersects = if case.both_tests { &INTERSECTS[..] } else { &INTERSECTS[..1] };
+        for &intersect in intersects {
+            for &method in methods {
+                let tally = if matches!(method, Method::Gpu(_)) && gpu_lost {
+                    let why = "not run: the device hung or was lost on an earlier point";
+                    Tally { refusal: Some(why.to_owned()), ..Tally::default() }
+                } else if let Some(why) = unsupported(method, gpu.as_deref()) {
+                    Tally { refusal: Some(why), ..Tally::default() }
+                } else if let Some(Err(e)) = &expected {
+                    Tally { refusal: Some(format!("no CPU image to compare with: {e}")), ..Tally::default() }
+                } else {
+                    let expected = expected.as_ref().and_then(|e| e.as_deref().ok());
+                    run(&case, &reference, expected, method, intersect, gpu.as_ref(), limit)
+                };
+                if (tally.hang || tally.device_lost) && matches!(method, Method::Gpu(_)) {
+                    gpu_lost = true;
+                }
+                let row = Row { axis: case.axis, x: case.x, label: case.label.clone(), method, intersect, tally };
+                progress(&row);
+                rows.push(row);
             }
-            let row = Row { axis: case.axis, x: case.x, label: case.label.clone(), method, tally };
-            progress(&row);
-            rows.push(row);
         }
     }
     rows
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tracer_vk::VkError;
+    use tracer_vk::render::VkRenderError;
+
+    #[test]
+    fn device_errors_are_faults_hangs_or_limits() {
+        let lost = Stop::from(VkRenderError::Vulkan(VkError::DeviceLost));
+        assert!(matches!(lost, Stop::Fault(ref m, true) if m.contains("lost")), "{lost:?}");
+        let dropped = VkRenderError::LostWork { method: "LST", what: "primary rays", done: 1, expected: 2 };
+        assert!(matches!(Stop::from(dropped), Stop::Fault(_, false)));
+        assert!(matches!(Stop::from(VkRenderError::Vulkan(VkError::Timeout { seconds: 1 })), Stop::Hang));
+        let memory = VkRenderError::Vulkan(VkError::OutOfDeviceMemory { label: "nodes".into(), bytes: 1 << 30 });
+        assert!(matches!(Stop::from(memory), Stop::Refused(ref m) if m.contains("nodes")));
+    }
+
+    #[test]
+    fn moller_trumbore_lines_fail_only_on_crashes_hangs_faults_and_nans() {
+        let leaks = Tally { pixels: 10, failed: 3, leaks: 2, wrong: 1, ..Tally::default() };
+        assert!(leaks.failed_with(Intersect::Watertight));
+        assert!(!leaks.failed_with(Intersect::MollerTrumbore));
+        let nan = Tally { pixels: 10, failed: 1, non_finite: 1, ..Tally::default() };
+        assert!(nan.failed_with(Intersect::MollerTrumbore));
+        let fault = Tally { fault: Some("the Vulkan device was lost".into()), ..Tally::default() };
+        assert!(fault.failed_with(Intersect::MollerTrumbore) && fault.failure_rate() == Some(1.0));
+        assert!(report::cell(&fault).starts_with("**FAULT**"));
+    }
+
+    #[test]
+    fn triangle_counts_grow_by_ten_up_to_the_cap() {
+        assert_eq!(cases::triangle_counts(100_000), [1000, 10_000, 100_000]);
+        assert_eq!(cases::triangle_counts(3_000_000), [1000, 10_000, 100_000, 1_000_000, 3_000_000]);
+        assert_eq!(cases::triangle_counts(1000), [1000]);
+        for n in [1000u64, 100_000, 3_000_000] {
+            let side = scenes::terrain_side(n) as u64;
+            assert!((2 * side * side).abs_diff(n) <= 4 * side, "{n}: side {side}");
+        }
+    }
+
+    #[test]
+    fn large_frames_get_more_time_than_small_ones() {
+        let scene = scenes::chain(2);
+        let shot = cases::shot(&scene, render_spec::CameraSpec::from(&scene.cameras[0]), 16384, 16384);
+        let mut c = Case {
+            axis: cases::AXES[13],
+            x: 0.0,
+            label: String::new(),
+            scene,
+            shots: vec![shot],
+            expect: Expect::CpuOrdered,
+            near: 0.0,
+            both_tests: false,
+        };
+        assert_eq!(c.time_limit(Duration::from_secs(60)), Duration::from_secs(60 * 64));
+        c.shots[0].width = 64;
+        c.shots[0].height = 48;
+        assert_eq!(c.time_limit(Duration::from_secs(60)), Duration::from_secs(60));
+    }
 }

@@ -1,8 +1,9 @@
 //! docs/stability.md: a table per axis and one chart of failure rates, one line per method.
 
-use super::{Method, Row, Tally};
+use super::{Method, Row, Tally, line_name};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use render_spec::Intersect;
 use std::fmt::Write;
 use std::path::Path;
 
@@ -13,6 +14,9 @@ pub fn cell(t: &Tally) -> String {
     }
     if t.hang {
         return "**HANG**".to_owned();
+    }
+    if let Some(f) = &t.fault {
+        return format!("**FAULT** ({f})");
     }
     if t.refusal.is_some() {
         return "refused".to_owned();
@@ -29,14 +33,19 @@ pub fn cell(t: &Tally) -> String {
     format!("**{:.2}%** ({})", 100.0 * t.failed as f64 / t.pixels.max(1) as f64, parts.join(", "))
 }
 
-fn methods(rows: &[Row]) -> Vec<Method> {
-    let mut m: Vec<Method> = Vec::new();
+/// The lines (method and triangle test) in the order they first ran.
+fn lines(rows: &[Row]) -> Vec<(Method, Intersect)> {
+    let mut m: Vec<(Method, Intersect)> = Vec::new();
     for r in rows {
-        if !m.contains(&r.method) {
-            m.push(r.method);
+        if !m.contains(&(r.method, r.intersect)) {
+            m.push((r.method, r.intersect));
         }
     }
     m
+}
+
+fn row<'a>(rows: &'a [Row], axis: &str, label: &str, line: (Method, Intersect)) -> Option<&'a Row> {
+    rows.iter().find(|r| r.axis == axis && r.label == label && (r.method, r.intersect) == line)
 }
 
 fn points<'a>(rows: &'a [Row], axis: &str) -> Vec<(f64, &'a str)> {
@@ -51,25 +60,25 @@ fn points<'a>(rows: &'a [Row], axis: &str) -> Vec<(f64, &'a str)> {
 
 /// The tables and the list of refusals, as Markdown.
 pub fn markdown(rows: &[Row], axes: &[&str]) -> String {
-    let ms = methods(rows);
+    let all = lines(rows);
     let mut s = String::new();
     for axis in axes {
         let pts = points(rows, axis);
         if pts.is_empty() {
             continue;
         }
+        // The lines that ran on this axis (Möller-Trumbore only where it can differ).
+        let ms: Vec<_> = all
+            .iter()
+            .copied()
+            .filter(|l| rows.iter().any(|r| r.axis == *axis && (r.method, r.intersect) == *l))
+            .collect();
         let _ = writeln!(s, "### {axis}\n");
-        let _ = writeln!(s, "| point | {} |", ms.iter().map(|m| m.name()).collect::<Vec<_>>().join(" | "));
+        let _ = writeln!(s, "| point | {} |", ms.iter().map(|&(m, i)| line_name(m, i)).collect::<Vec<_>>().join(" | "));
         let _ = writeln!(s, "|---|{}", "---|".repeat(ms.len()));
         for (_, label) in &pts {
-            let cells: Vec<String> = ms
-                .iter()
-                .map(|m| {
-                    rows.iter()
-                        .find(|r| r.axis == *axis && r.label == *label && r.method == *m)
-                        .map_or("-".to_owned(), |r| cell(&r.tally))
-                })
-                .collect();
+            let cells: Vec<String> =
+                ms.iter().map(|&l| row(rows, axis, label, l).map_or("-".to_owned(), |r| cell(&r.tally))).collect();
             let _ = writeln!(s, "| {label} | {} |", cells.join(" | "));
         }
         s.push('\n');
@@ -118,7 +127,7 @@ where
 {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
-    let ms = methods(rows);
+    let ms = lines(rows);
     let panels = root.split_evenly((axes.len().div_ceil(cols), cols));
     for (panel, axis) in panels.iter().zip(axes) {
         let pts = points(rows, axis);
@@ -146,20 +155,20 @@ where
             .label_style(("sans-serif", 12))
             .draw()
             .map_err(err)?;
-        for (k, m) in ms.iter().enumerate() {
+        for (k, &line) in ms.iter().enumerate() {
             let colour = Palette99::pick(k).to_rgba();
             let series: Vec<(f64, f64)> = pts
                 .iter()
                 .enumerate()
-                .filter_map(|(i, p)| {
-                    let r = rows.iter().find(|r| r.axis == *axis && r.label == p.1 && r.method == *m)?;
-                    r.tally.failure_rate().map(|f| (i as f64, 100.0 * f))
-                })
+                .filter_map(|(i, p)| row(rows, axis, p.1, line)?.tally.failure_rate().map(|f| (i as f64, 100.0 * f)))
                 .collect();
+            if series.is_empty() {
+                continue;
+            }
             chart
                 .draw_series(LineSeries::new(series.clone(), colour.stroke_width(2)))
                 .map_err(err)?
-                .label(m.name())
+                .label(line_name(line.0, line.1))
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour.stroke_width(2)));
             chart
                 .draw_series(

@@ -371,3 +371,30 @@ fn hand_built(positions: Vec<[Vec3; 3]>, nodes: Vec<Node>, camera: Camera) -> Sc
         lights: vec![light],
     }
 }
+
+/// The side of the [`terrain`] whose triangle count (2 n^2) is nearest `triangles`.
+pub fn terrain_side(triangles: u64) -> u32 {
+    ((triangles as f64 / 2.0).sqrt().round() as u32).max(1)
+}
+
+/// The size axis's scene: a bumpy square 8 units wide of `n` x `n` quads (2 n^2 triangles, every
+/// inner edge and vertex shared), its hills casting shadows, seen obliquely from above. One
+/// surface however fine it is cut, so that frames of every triangle count look alike.
+pub fn terrain(n: u32) -> Scene {
+    let height = |x: f32, y: f32| 0.5 * (7.0 * x).sin() * (5.0 * y).cos() + 0.15 * (23.0 * (x + y)).sin();
+    let vertex = |i: u32, j: u32| {
+        let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
+        Vec3::new(8.0 * x, 8.0 * y, height(x, y))
+    };
+    let mut tris = Vec::with_capacity(2 * n as usize * n as usize);
+    for j in 0..n {
+        for i in 0..n {
+            let (a, b, c, d) = (vertex(i, j), vertex(i + 1, j), vertex(i + 1, j + 1), vertex(i, j + 1));
+            tris.push([a, b, c]);
+            tris.push([a, c, d]);
+        }
+    }
+    let cam = camera([4.0, -2.0, 4.0], [4.0, 3.6, 0.0], [0.0, 0.0, 1.0], 55.0);
+    // Low, from the side: the hills shade their back slopes and cast long shadows.
+    triangles(tris, cam, vec![Light::new([-3.0, 5.0, 1.5], [1.0; 3])], Vec::new())
+}

@@ -4,10 +4,12 @@
 //! Every submission is waited for before the call returns, so the objects here are reused from one
 //! submission to the next instead of being made per call.
 
+use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use ash::vk;
 
+use super::fault::Fault;
 use super::gpu::{Gpu, Inner};
 use super::memory::Buffer;
 use super::pipeline::Pipeline;
@@ -104,6 +106,14 @@ impl Gpu {
                 None => Ok(rec.marks),
             }
         })?;
+        match self.fault() {
+            Some(Fault::DeviceLost) => {
+                self.inner.lost.store(true, Ordering::Relaxed);
+                return Err(VkError::DeviceLost);
+            }
+            Some(Fault::Timeout) => return Err(VkError::Timeout { seconds: self.timeout.as_secs_f64().ceil() as u64 }),
+            _ => {}
+        }
         self.timings(state, marks)
     }
 
@@ -138,6 +148,9 @@ impl Gpu {
         record: impl FnOnce(&mut RunState, vk::CommandBuffer) -> Result<R, VkError>,
     ) -> Result<R, VkError> {
         self.settle(state)?;
+        if self.inner.lost.load(Ordering::Relaxed) {
+            return Err(VkError::DeviceLost);
+        }
         let device = &self.inner.device;
         let cmd = state.cmd;
         // SAFETY: nothing from this pool is pending (settled), and the fence is signalled or new.

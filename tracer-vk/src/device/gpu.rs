@@ -2,6 +2,7 @@
 //! buffer and pipeline holds so that the device outlives them.
 
 use std::ffi::CString;
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::thread::ThreadId;
 use std::time::Duration;
@@ -10,6 +11,7 @@ use ash::vk;
 
 use super::Buffer;
 use super::commands::{RunState, nanos};
+use super::fault::Fault;
 use super::info::DeviceInfo;
 use super::instance::{create_instance, instance_api, load_entry, open_device};
 use super::timestamps::timestamp_mask;
@@ -46,6 +48,10 @@ pub(super) struct Inner {
     log: ValidationLog,
     /// Objects dropped while a submission abandoned by a timeout may still use them.
     retired: Mutex<Retired>,
+    /// The fault the layer simulates ([`Gpu::simulate`]).
+    pub(super) fault: Mutex<Option<Fault>>,
+    /// The device was reported lost (simulated): every later submission fails alike.
+    pub(super) lost: AtomicBool,
 }
 
 /// After a timeout the GPU may go on running the abandoned work (lavapipe's threads do), so a
@@ -174,7 +180,11 @@ impl Gpu {
     /// first discrete GPU, the first integrated one, or the first device of any kind. With
     /// `validation`, the Khronos validation layer is enabled and its errors and warnings are
     /// recorded (see [`Gpu::validation_messages`]).
+    ///
+    /// The variable [`FAULT_VARIABLE`](super::FAULT_VARIABLE) makes the device simulate a fault
+    /// from the start (for tests of whole programs).
     pub fn new(choice: Option<usize>, validation: bool) -> Result<Gpu, VkError> {
+        let fault = Fault::from_env()?;
         let entry = load_entry()?;
         let api = instance_api(&entry)?;
         let log = ValidationLog::default();
@@ -216,6 +226,8 @@ impl Gpu {
             timestamp_mask: timestamp_mask(candidate.timestamp_bits),
             log,
             retired: Mutex::new(Retired::default()),
+            fault: Mutex::new(fault),
+            lost: AtomicBool::new(false),
         });
         // From here on, a failure drops `gpu`, which destroys whatever was made (null handles are
         // valid arguments to vkDestroy*).

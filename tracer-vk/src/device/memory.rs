@@ -100,6 +100,11 @@ impl Inner {
             free(vk::DeviceMemory::null());
             return Err(VkError::OutOfDeviceMemory { label: label.to_string(), bytes });
         }
+        let simulated = *self.fault.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if matches!(simulated, Some(super::Fault::OutOfMemory(most)) if req.size > most) {
+            free(vk::DeviceMemory::null());
+            return Err(VkError::alloc("vkAllocateMemory", vk::Result::ERROR_OUT_OF_DEVICE_MEMORY, label, bytes));
+        }
         let alloc = vk::MemoryAllocateInfo::default().allocation_size(req.size).memory_type_index(type_index);
         // SAFETY: valid allocate info.
         let memory = match unsafe { self.device.allocate_memory(&alloc, None) } {

@@ -22,12 +22,14 @@
 //! | `descriptors.rs` | descriptor pools and the per-dispatch descriptor sets |
 //! | `commands.rs` | command pool, buffer and fence; [`Gpu::run`], [`Recorder`], barriers, timeouts |
 //! | `timestamps.rs` | query pools, [`Recorder::mark`], [`Timings`] |
+//! | `fault.rs` | [`Fault`]: device loss, out of memory and timeouts simulated for tests |
 //!
 //! A second kind of pipeline (ray tracing) and acceleration structures are meant to arrive as
 //! files of their own beside these, on the same [`Gpu`] core.
 
 mod commands;
 mod descriptors;
+mod fault;
 mod gpu;
 mod info;
 mod instance;
@@ -38,6 +40,7 @@ mod timestamps;
 mod validation;
 
 pub use commands::Recorder;
+pub use fault::{FAULT_VARIABLE, Fault};
 pub use gpu::Gpu;
 pub use info::{DeviceInfo, DeviceKind};
 pub use instance::list_devices;
