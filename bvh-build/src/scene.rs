@@ -34,9 +34,7 @@ impl Scene {
 
     /// Bounds of all vertices; `None` for an empty scene.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        let mut it = self.positions.iter().flatten();
-        let first = *it.next()?;
-        Some(it.fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p))))
+        crate::import::geometry::bounds(&self.positions)
     }
 
     /// Appends another scene's triangles and materials (cameras, lights and settings of `other`

@@ -59,11 +59,10 @@ pub fn rescale(file: &mut SceneFile) -> Result<(), BuildError> {
     // exact in f64, so the only rounding is the one to f32 (which changes only what underflows).
     let f = 2f64.powi(-e);
     let s = |v: [f32; 3]| v.map(|x| (f64::from(x) * f) as f32);
-    for v in &mut file.vertices {
-        *v = s(*v);
-    }
-    for n in file.child_pair.iter_mut().chain(file.escape.iter_mut()).flatten() {
-        (n.min, n.max) = (s(n.min), s(n.max));
+    use rayon::prelude::*;
+    file.vertices.par_iter_mut().for_each(|v| *v = s(*v));
+    for nodes in file.child_pair.iter_mut().chain(file.escape.iter_mut()) {
+        nodes.par_iter_mut().for_each(|n| (n.min, n.max) = (s(n.min), s(n.max)));
     }
     let beyond = |what: String, p: [f32; 3]| BuildError::BeyondRange {
         what,

@@ -8,6 +8,7 @@
 
 mod error;
 pub mod layout;
+mod par;
 mod read;
 pub mod tree;
 mod types;

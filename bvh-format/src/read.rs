@@ -9,7 +9,7 @@ use crate::layout::{
     VERSION,
 };
 use crate::tree::{self, Tree};
-use crate::types::{BuildParams, FLAT, SceneSettings, Strategy};
+use crate::types::{BuildParams, FLAT, IndexedTriangle, SceneSettings, Strategy};
 use bytemuck::Pod;
 
 /// Size of one section, as `bvhc info` reports it.
@@ -131,7 +131,7 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
         };
         let r = range(e);
         let data = &bytes[r.start as usize..r.end as usize];
-        if crc32fast::hash(data) != e.crc {
+        if crate::write::section_crc(data) != e.crc {
             return Err(FormatError::Checksum { section: kind });
         }
         Ok(Some(data))
@@ -196,7 +196,7 @@ pub fn read_file(path: &std::path::Path) -> Result<SceneFile, FileError> {
 
 /// The index of the first value that is not finite, if any.
 fn first_non_finite(values: &[f32]) -> Option<usize> {
-    values.iter().position(|v| !v.is_finite())
+    crate::par::position_first(values, |v| !v.is_finite())
 }
 
 fn check_finite<T: Pod>(section: SectionKind, items: &[T]) -> Result<(), FormatError> {
@@ -275,21 +275,20 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     let out_of_range = |section, index: usize, value: u32, limit: usize| {
         Err(FormatError::IndexOutOfRange { section, index: index as u64, value: value as u64, limit: limit as u64 })
     };
-    for (i, t) in s.triangles.iter().enumerate() {
-        if let Some(&v) = t.vertices.iter().find(|&&v| v as usize >= s.vertices.len()) {
-            return out_of_range(SectionKind::Triangles, i, v, s.vertices.len());
+    // The first bad entry, found on every thread, gets the error the serial loop gave.
+    let (nv, nm, nn) = (s.vertices.len(), s.materials.len(), s.normals.len());
+    let bad = |t: &IndexedTriangle| t.vertices.iter().any(|&v| v as usize >= nv) || t.material as usize >= nm;
+    if let Some(i) = crate::par::position_first(&s.triangles, bad) {
+        let t = &s.triangles[i];
+        if let Some(&v) = t.vertices.iter().find(|&&v| v as usize >= nv) {
+            return out_of_range(SectionKind::Triangles, i, v, nv);
         }
-        if t.material as usize >= s.materials.len() {
-            return out_of_range(SectionKind::Triangles, i, t.material, s.materials.len());
-        }
+        return out_of_range(SectionKind::Triangles, i, t.material, nm);
     }
-    for (i, idx) in s.normal_indices.iter().enumerate() {
-        if *idx == FLAT {
-            continue;
-        }
-        if let Some(&v) = idx.iter().find(|&&v| v as usize >= s.normals.len()) {
-            return out_of_range(SectionKind::NormalIndices, i, v, s.normals.len());
-        }
+    let bad = |idx: &[u32; 3]| *idx != FLAT && idx.iter().any(|&v| v as usize >= nn);
+    if let Some(i) = crate::par::position_first(&s.normal_indices, bad) {
+        let v = s.normal_indices[i].into_iter().find(|&v| v as usize >= nn).unwrap_or_default();
+        return out_of_range(SectionKind::NormalIndices, i, v, nn);
     }
     for (i, mat) in s.materials.iter().enumerate() {
         let bad = |reason| Err(FormatError::BadMaterial { index: i as u32, reason });
@@ -307,18 +306,20 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
             return bad("it is refractive with a non-positive index of refraction");
         }
     }
-    let mut seen = vec![false; n as usize];
-    for (i, &src) in s.input_index.iter().enumerate() {
-        if src as u64 >= n {
-            return Err(FormatError::IndexOutOfRange {
-                section: SectionKind::InputIndex,
-                index: i as u64,
-                value: src as u64,
-                limit: n,
-            });
-        }
-        if std::mem::replace(&mut seen[src as usize], true) {
-            return Err(FormatError::PermutationRepeats(src));
+    if !is_permutation(&s.input_index) {
+        let mut seen = vec![false; n as usize];
+        for (i, &src) in s.input_index.iter().enumerate() {
+            if src as u64 >= n {
+                return Err(FormatError::IndexOutOfRange {
+                    section: SectionKind::InputIndex,
+                    index: i as u64,
+                    value: src as u64,
+                    limit: n,
+                });
+            }
+            if std::mem::replace(&mut seen[src as usize], true) {
+                return Err(FormatError::PermutationRepeats(src));
+            }
         }
     }
 
@@ -376,14 +377,21 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
 /// Every leaf's box must hold its triangles' vertices, or a tracer would skip triangles it should
 /// hit. The vertices are stored exactly, so no slack is allowed.
 fn check_leaf_boxes(t: Tree<'_>, s: &SceneFile) -> Result<(), FormatError> {
-    for (i, n) in t.nodes.iter().enumerate().filter(|(_, n)| n.is_leaf()) {
-        for tri in n.index as usize..(n.index + n.count) as usize {
-            for v in s.positions(tri) {
-                if (0..3).any(|a| v[a] < n.min[a] || v[a] > n.max[a]) {
-                    return Err(FormatError::TriangleOutsideLeaf { layout: t.layout, node: i as u32 });
-                }
-            }
-        }
+    let outside = |n: &crate::Node| {
+        n.is_leaf()
+            && (n.index as usize..(n.index + n.count) as usize)
+                .any(|tri| s.positions(tri).iter().any(|v| (0..3).any(|a| v[a] < n.min[a] || v[a] > n.max[a])))
+    };
+    match crate::par::position_first(t.nodes, outside) {
+        Some(i) => Err(FormatError::TriangleOutsideLeaf { layout: t.layout, node: i as u32 }),
+        None => Ok(()),
     }
-    Ok(())
+}
+
+/// Whether `index` holds every number below its length once, decided on every thread; where it
+/// does not, the serial loop of [`validate_scene`] finds the first offending entry.
+fn is_permutation(index: &[u32]) -> bool {
+    use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
+    let seen: Vec<AtomicBool> = (0..index.len()).map(|_| AtomicBool::new(false)).collect();
+    crate::par::all(index, |_, &i| seen.get(i as usize).is_some_and(|f| !f.swap(true, Relaxed)))
 }

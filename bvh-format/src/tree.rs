@@ -7,6 +7,8 @@
 
 use crate::error::{FormatError, LayoutKind};
 use crate::types::Node;
+use std::sync::atomic::AtomicBool;
+use std::sync::atomic::Ordering::Relaxed;
 
 /// A read-only view of one layout, enough to walk the tree top-down.
 #[derive(Clone, Copy)]
@@ -170,6 +172,14 @@ fn inside(child: &Node, parent: &Node) -> bool {
 /// of `triangle_count` triangles exactly once, with finite bounds that nest. Runs in linear time and
 /// memory and never recurses, so a hostile file cannot exhaust the stack.
 pub fn check_shape(tree: Tree<'_>, triangle_count: u32) -> Result<(), FormatError> {
+    if shape_is_sound(tree, triangle_count) {
+        return Ok(());
+    }
+    check_shape_serially(tree, triangle_count)
+}
+
+/// [`check_shape`] on one thread, rule by rule: the error it returns is the one reported.
+fn check_shape_serially(tree: Tree<'_>, triangle_count: u32) -> Result<(), FormatError> {
     let nodes = tree.nodes;
     let layout = tree.layout;
     let len = nodes.len();
@@ -281,9 +291,75 @@ pub fn check_shape(tree: Tree<'_>, triangle_count: u32) -> Result<(), FormatErro
     Ok(())
 }
 
+/// Whether [`check_shape`] accepts `tree`, decided on every thread: each rule holds per node, and
+/// the serial check's walk from the root is replaced by counting each node's parents. True only
+/// where the serial check passes (every rule here is at least as strict), so where it is false the
+/// serial check runs and names the error, the same error whatever the number of threads.
+fn shape_is_sound(tree: Tree<'_>, triangle_count: u32) -> bool {
+    use crate::par;
+    let nodes = tree.nodes;
+    let len = nodes.len();
+    if len == 0 || len > u32::MAX as usize {
+        return false;
+    }
+    let each_node = par::all(nodes, |_, n| {
+        n.min.iter().chain(&n.max).all(|v| v.is_finite())
+            && (0..3).all(|k| n.min[k] <= n.max[k])
+            && (!n.is_leaf() || n.index as u64 + n.count as u64 <= triangle_count as u64)
+    });
+    if !each_node {
+        return false;
+    }
+    let linked = if tree.layout == LayoutKind::ChildPair {
+        // Every node but the root is the child of exactly one node, and children come after their
+        // parent: following parents from any node ends at the root, so the root reaches every
+        // node exactly once.
+        let claimed = flags(len);
+        par::all(nodes, |i, n| {
+            let l = n.index as usize;
+            n.is_leaf()
+                || (l > i
+                    && l + 1 < len
+                    && [l, l + 1].iter().all(|&c| inside(&nodes[c], n) && !claimed[c].swap(true, Relaxed)))
+        }) && par::all(&claimed[1..], |_, c| c.load(Relaxed))
+    } else if tree.layout == LayoutKind::Escape {
+        let end = |j: usize| if nodes[j].is_leaf() { j + 1 } else { nodes[j].index as usize };
+        par::all(nodes, |i, n| {
+            let e = n.index as usize;
+            n.is_leaf()
+                || (e > i && e <= len && e >= i + 3 && {
+                    let r = end(i + 1);
+                    r > i + 1 && r < e && end(r) == e && inside(&nodes[i + 1], n) && inside(&nodes[r], n)
+                })
+        }) && end(0) == len
+    } else {
+        false
+    };
+    if !linked {
+        return false;
+    }
+    // Leaf ranges are in bounds (above) and do not wrap around u32.
+    let covered = flags(triangle_count as usize);
+    par::all(nodes, |_, n| {
+        !n.is_leaf() || (n.index..n.index + n.count).all(|t| !covered[t as usize].swap(true, Relaxed))
+    }) && par::all(&covered, |_, c| c.load(Relaxed))
+}
+
+/// `n` flags, all false, for the parallel checks.
+fn flags(n: usize) -> Vec<AtomicBool> {
+    (0..n).map(|_| AtomicBool::new(false)).collect()
+}
+
 /// Checks that an escape-pointer layout is the depth-first order of a child-pair layout (both
 /// already shape-checked).
 pub fn check_same_tree(child_pair: &[Node], escape: &[Node]) -> Result<(), FormatError> {
+    if same_tree_in_parallel(child_pair, escape) {
+        return Ok(());
+    }
+    check_same_tree_serially(child_pair, escape)
+}
+
+fn check_same_tree_serially(child_pair: &[Node], escape: &[Node]) -> Result<(), FormatError> {
     if child_pair.len() != escape.len() {
         return Err(FormatError::LayoutsDiffer(0));
     }
@@ -303,6 +379,46 @@ pub fn check_same_tree(child_pair: &[Node], escape: &[Node]) -> Result<(), Forma
         Some(k) => Err(FormatError::LayoutsDiffer(k)),
         None => Ok(()),
     }
+}
+
+/// Whether [`check_same_tree`] accepts the pair (both shape-checked), decided on every thread:
+/// both trees are walked together, subtree against subtree. With every node equal the two
+/// depth-first orders coincide, so this is the serial check's comparison; false sends the caller
+/// to the serial check for the error.
+fn same_tree_in_parallel(cp: &[Node], esc: &[Node]) -> bool {
+    fn same(a: &Node, b: &Node) -> bool {
+        a.min == b.min && a.max == b.max && a.count == b.count && (!a.is_leaf() || a.index == b.index)
+    }
+    /// Compares the subtrees at child-pair node `i` and escape node `k`, splitting the work
+    /// between threads while a subtree is large and the recursion shallow (a valid tree may be a
+    /// chain as long as the scene); below that, an explicit stack.
+    fn walk(cp: &[Node], esc: &[Node], i: usize, k: usize, depth: u32) -> bool {
+        let mut stack = vec![(i, k)];
+        while let Some((i, k)) = stack.pop() {
+            let (Some(a), Some(b)) = (cp.get(i), esc.get(k)) else { return false };
+            if !same(a, b) {
+                return false;
+            }
+            if a.is_leaf() {
+                continue;
+            }
+            let l = a.index as usize;
+            let Some(r) = esc.get(k + 1).map(|n| if n.is_leaf() { k + 2 } else { n.index as usize }) else {
+                return false;
+            };
+            if stack.is_empty() && depth < 20 && (b.index as usize).saturating_sub(k) > 1 << 14 {
+                let (x, y) = rayon::join(|| walk(cp, esc, l, k + 1, depth + 1), || walk(cp, esc, l + 1, r, depth + 1));
+                if !(x && y) {
+                    return false;
+                }
+                continue;
+            }
+            stack.push((l + 1, r));
+            stack.push((l, k + 1));
+        }
+        true
+    }
+    cp.len() == esc.len() && !cp.is_empty() && walk(cp, esc, 0, 0, 0)
 }
 
 #[cfg(test)]
@@ -370,6 +486,88 @@ mod tests {
         let mut esc = escape_from_child_pair(&sample());
         esc[2].min[1] = f32::NAN;
         assert!(matches!(check_shape(Tree::escape(&esc), 5), Err(FormatError::NonFinite { .. })));
+    }
+
+    /// A balanced child-pair tree over `tris` triangles, leaves of one or two, each node's box
+    /// spanning its triangles' numbers on x.
+    fn balanced(tris: u32) -> Vec<Node> {
+        let mut nodes = vec![leaf(0.0, 0.0, 0, 0)];
+        let mut todo = vec![(0usize, 0u32, tris)];
+        while let Some((i, a, b)) = todo.pop() {
+            if b - a <= 2 {
+                nodes[i] = leaf(a as f32, b as f32, a, b - a);
+                continue;
+            }
+            let l = nodes.len();
+            nodes[i] = inner(a as f32, b as f32, l as u32);
+            nodes.extend([leaf(0.0, 0.0, 0, 0); 2]);
+            todo.extend([(l, a, (a + b) / 2), (l + 1, (a + b) / 2, b)]);
+        }
+        nodes
+    }
+
+    /// One field of node `at` set to `value`: 0-1 count, 2 index, 3-4 the box on x.
+    fn damage(nodes: &mut [Node], at: usize, field: u8, value: u32) {
+        let len = nodes.len();
+        let n = &mut nodes[at % len];
+        match field {
+            0 => n.count = value % 4,
+            1 => n.count = value,
+            2 => n.index = value % (len as u32 + 4),
+            3 => n.min[0] = if value.is_multiple_of(7) { f32::NAN } else { (value % 100) as f32 },
+            _ => n.max[0] = (value % 100) as f32,
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 2000, failure_persistence: None, ..Default::default() })]
+
+        /// The parallel checks accept exactly what the serial ones accept: a valid tree, and a
+        /// damaged one only where the damage left it valid (then the serial check names the error).
+        #[test]
+        fn parallel_checks_agree_with_the_serial_ones(tris in 1u32..300, damaged in 0usize..3, at in 0usize..1000, field in 0u8..5, value in 0u32..1000, at2 in 0usize..1000, value2 in 0u32..1000) {
+            let mut cp = balanced(tris);
+            let mut esc = escape_from_child_pair(&cp);
+            proptest::prop_assert!(shape_is_sound(Tree::child_pair(&cp), tris));
+            proptest::prop_assert!(shape_is_sound(Tree::escape(&esc), tris));
+            proptest::prop_assert!(same_tree_in_parallel(&cp, &esc));
+            match damaged {
+                0 => {
+                    damage(&mut cp, at, field, value);
+                    damage(&mut cp, at2, field, value2);
+                }
+                1 => {
+                    damage(&mut esc, at, field, value);
+                    damage(&mut esc, at2, field, value2);
+                }
+                _ => {}
+            }
+            for t in [Tree::child_pair(&cp), Tree::escape(&esc)] {
+                let serial = check_shape_serially(t, tris);
+                proptest::prop_assert_eq!(shape_is_sound(t, tris), serial.is_ok(), "{:?}", serial);
+                proptest::prop_assert_eq!(check_shape(t, tris), serial);
+            }
+            if check_shape(Tree::child_pair(&cp), tris).is_ok() && check_shape(Tree::escape(&esc), tris).is_ok() {
+                let serial = check_same_tree_serially(&cp, &esc);
+                proptest::prop_assert_eq!(same_tree_in_parallel(&cp, &esc), serial.is_ok());
+                proptest::prop_assert_eq!(check_same_tree(&cp, &esc), serial);
+            }
+        }
+    }
+
+    #[test]
+    fn large_trees_pass_the_parallel_checks() {
+        // Large enough that the subtree comparison splits between threads.
+        let cp = balanced(200_000);
+        let esc = escape_from_child_pair(&cp);
+        assert!(shape_is_sound(Tree::child_pair(&cp), 200_000));
+        assert!(shape_is_sound(Tree::escape(&esc), 200_000));
+        assert!(same_tree_in_parallel(&cp, &esc));
+        let mut other = esc.clone();
+        let last_leaf = other.iter().rposition(Node::is_leaf).unwrap();
+        other[last_leaf].max[1] = 0.5;
+        assert!(!same_tree_in_parallel(&cp, &other));
+        assert_eq!(check_same_tree(&cp, &other), Err(FormatError::LayoutsDiffer(last_leaf as u32)));
     }
 
     #[test]

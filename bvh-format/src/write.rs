@@ -65,7 +65,7 @@ fn plan(scene: &SceneFile) -> Result<Plan<'_>, FormatError> {
             element_size: kind.element_size(),
             count: *count,
             offset,
-            crc: crc32fast::hash(bytes),
+            crc: section_crc(bytes),
             _reserved: 0,
         });
         offset = align_up(offset + bytes.len() as u64);
@@ -154,6 +154,24 @@ fn emit(plan: &Plan<'_>, out: &mut impl std::io::Write) -> std::io::Result<()> {
         at = offset + bytes.len() as u64;
     }
     out.write_all(&ZEROS[..(plan.len - at) as usize])
+}
+
+/// CRC-32 of a section, the same number as `crc32fast::hash`: pieces of 4 MiB are hashed on every
+/// thread and their CRCs combined in order.
+pub(crate) fn section_crc(bytes: &[u8]) -> u32 {
+    use rayon::prelude::*;
+    bytes
+        .par_chunks(1 << 22)
+        .map(|piece| {
+            let mut h = crc32fast::Hasher::new();
+            h.update(piece);
+            h
+        })
+        .reduce_with(|mut a, b| {
+            a.combine(&b);
+            a
+        })
+        .map_or_else(|| crc32fast::hash(&[]), crc32fast::Hasher::finalize)
 }
 
 /// CRC-32 over the header with its checksum field zeroed, then the section table.

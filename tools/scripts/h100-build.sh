@@ -14,7 +14,7 @@
 # The scenes are tracked files under scenes/ (million.toml places dragon.glb and two bunny.glb,
 # 17 MiB), so the working tree carries them; nothing is generated on the host.
 # Device tool: command `bash tools/scripts/h100-build.sh`, carry [".bin"]. Writes build.md
-# (build_report's tables), others.md, profile.txt, compile.txt, host.txt and log.txt into $OUT
+# (build_report's tables), others.md, profile.txt, phases.txt, compile.txt, host.txt and log.txt into $OUT
 # (default ./out/h100-build). Expected run time: about 3 minutes (the full sweep of million and
 # forest, a few seconds per build, is most of it).
 set -euo pipefail
@@ -53,6 +53,16 @@ echo "== where the time of bvhc compile goes (medians of $RUNS) =="
 for s in million.toml dragon.toml bunny.toml; do
   .bin/compile_profile "scenes/$s" --runs "$RUNS"
 done | tee "$OUT/profile.txt"
+
+echo "== bvhc compile million.toml, its own phases on all $(nproc) threads (medians of $RUNS) =="
+# bvhc's second output line: "  import I s, build B s (binned 16 bins), write W s".
+for _ in $(seq "$RUNS"); do
+  .bin/bvhc compile scenes/million.toml -o "$OUT/scene.bvh" | sed -n 's/.*import \([0-9.]*\) s, build \([0-9.]*\) s.*write \([0-9.]*\) s.*/\1 \2 \3/p'
+done > "$OUT/phases.raw"
+for k in 1 2 3; do
+  name=$(echo "import build write" | cut -d' ' -f"$k")
+  echo "bvhc phase $name: median $(cut -d' ' -f"$k" "$OUT/phases.raw" | sort -n | sed -n "$(((RUNS + 1) / 2))p") s (all: $(cut -d' ' -f"$k" "$OUT/phases.raw" | sort -n | tr '\n' ' '))"
+done | tee "$OUT/phases.txt"
 
 echo "== bvhc compile, whole command timed from outside (medians of $RUNS; 16 threads, then 2) =="
 for threads in "$(nproc)" 2; do

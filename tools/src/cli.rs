@@ -6,6 +6,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::Write;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::RecvTimeoutError;
 use std::time::{Duration, Instant};
 
 /// Parses the command line. Help and version print as clap prints them; a mistake prints clap's
@@ -120,30 +121,37 @@ impl Progress {
 
     /// Runs `work` on this thread (which may hold what cannot move between threads, such as a
     /// Vulkan renderer) while a helper thread redraws the bar every 100 ms, so that the elapsed
-    /// time moves on during long steps that report nothing.
+    /// time moves on during long steps that report nothing. The helper waits on a channel rather
+    /// than sleeping, so that it ends the moment `work` does instead of up to 100 ms later.
     pub fn ticking<T>(&self, work: impl FnOnce() -> T) -> T {
-        let done = AtomicBool::new(false);
+        let (done, finished) = std::sync::mpsc::channel::<()>();
         std::thread::scope(|s| {
-            s.spawn(|| {
-                while !done.load(Ordering::Relaxed) {
+            s.spawn(move || {
+                while finished.recv_timeout(Duration::from_millis(100)) == Err(RecvTimeoutError::Timeout) {
                     self.tick();
-                    std::thread::sleep(Duration::from_millis(100));
                 }
             });
             let result = work();
-            done.store(true, Ordering::Relaxed);
+            drop(done);
             self.finish();
             result
         })
     }
 
     /// Runs `work` on a worker thread while calling `poll` (which updates this bar) every 50 ms.
+    /// The worker's end wakes this thread at once (a sleep here cost `bvhc compile` 25 ms on
+    /// average per phase).
     pub fn around<T: Send>(&self, work: impl FnOnce() -> T + Send, poll: impl Fn(&Progress)) -> T {
+        let (done, finished) = std::sync::mpsc::channel::<()>();
         std::thread::scope(|s| {
-            let worker = s.spawn(work);
-            while !worker.is_finished() {
+            // Dropped when the work ends or panics, which ends the wait below.
+            let worker = s.spawn(move || {
+                let _done = done;
+                work()
+            });
+            poll(self);
+            while finished.recv_timeout(Duration::from_millis(50)) == Err(RecvTimeoutError::Timeout) {
                 poll(self);
-                std::thread::sleep(Duration::from_millis(50));
             }
             self.finish();
             worker.join().unwrap_or_else(|p| std::panic::resume_unwind(p))

@@ -10,6 +10,7 @@ use super::{DEFAULT_MATERIAL_NAME, ImportError, ImportOptions, Kind, ReadFile, d
 use crate::scene::Scene;
 use bvh_format::{CAMERA_NAME_LEN, Camera, Light, Material, SceneSettings};
 use glam::{DMat4, DQuat, DVec3, Vec3};
+use rayon::prelude::*;
 use serde::Deserialize;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
@@ -430,7 +431,7 @@ impl<'a> Builder<'a> {
                 });
             }
             if p.frame
-                && let Some(b) = bounds(&self.scene.positions[p.triangles.clone()])
+                && let Some(b) = geometry::bounds(&self.scene.positions[p.triangles.clone()])
             {
                 framed = Some(framed.map_or(b, |(lo, hi)| (lo.min(b.0), hi.max(b.1))));
             }
@@ -464,12 +465,12 @@ impl<'a> Builder<'a> {
         }
         let range = first..self.scene.triangle_count();
         // World bounds in f64, before anything is rounded: they choose the local origin.
-        let world = self.scene.positions[range.clone()].iter().flatten().try_fold(self.world, |acc, &p| {
-            let w = aff.m.transform_point3(p.as_dvec3());
-            w.is_finite().then(|| Some(acc.map_or((w, w), |(lo, hi): (DVec3, DVec3)| (lo.min(w), hi.max(w)))))
-        });
-        match world {
-            Some(w) => self.world = w,
+        match geometry::world_bounds(&self.scene.positions[range.clone()], &aff) {
+            Some((lo, hi)) => {
+                if !range.is_empty() {
+                    self.world = Some(self.world.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
+                }
+            }
             None => {
                 return Err(ImportError::NonFinite {
                     path: self.path.to_owned(),
@@ -544,8 +545,8 @@ impl<'a> Builder<'a> {
             };
             out_ids.push(id);
         }
-        self.scene.positions.extend_from_slice(&part.positions);
-        self.scene.normals.extend_from_slice(&part.normals);
+        self.scene.positions.par_extend(part.positions.par_iter().copied());
+        self.scene.normals.par_extend(part.normals.par_iter().copied());
         self.scene.material_ids.extend(out_ids);
         Ok(())
     }
@@ -646,10 +647,6 @@ fn material(m: &MaterialDesc) -> Result<Material, String> {
 }
 
 /// Bounds of triangles; `None` for none.
-fn bounds(positions: &[[Vec3; 3]]) -> Option<(Vec3, Vec3)> {
-    positions.iter().flatten().fold(None, |acc, &p| Some(acc.map_or((p, p), |(lo, hi)| (lo.min(p), hi.max(p)))))
-}
-
 /// A described camera, moved to the scene's local `origin`.
 fn camera(c: &CameraDesc, origin: DVec3) -> Result<Camera, String> {
     if c.name.is_empty() || c.name.len() > CAMERA_NAME_LEN || c.name.contains('\0') {

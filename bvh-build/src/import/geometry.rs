@@ -64,20 +64,17 @@ pub(crate) fn emit(
     material: u32,
     smooth: bool,
 ) -> Result<(), EmitError> {
-    for (t, tri) in triangles.iter().enumerate() {
-        for &i in tri {
-            if i as usize >= positions.len() {
-                return Err(EmitError::Index { triangle: t, value: i, limit: positions.len(), normal: false });
-            }
-        }
+    // Each check finds its first offending triangle on every thread, then its first offending
+    // corner: the error a serial pass would report.
+    let out_of = |tri: &[u32; 3], len: usize| tri.iter().copied().find(|&i| i as usize >= len);
+    if let Some(t) = triangles.par_iter().position_first(|tri| out_of(tri, positions.len()).is_some()) {
+        let value = out_of(&triangles[t], positions.len()).unwrap_or_default();
+        return Err(EmitError::Index { triangle: t, value, limit: positions.len(), normal: false });
     }
     // Only referenced vertices matter: an unused NaN vertex harms nothing.
-    for tri in triangles {
-        for &i in tri {
-            if !positions[i as usize].is_finite() {
-                return Err(EmitError::NonFinite { vertex: i as usize });
-            }
-        }
+    let non_finite = |tri: &[u32; 3]| tri.iter().copied().find(|&i| !positions[i as usize].is_finite());
+    if let Some(t) = triangles.par_iter().position_first(|tri| non_finite(tri).is_some()) {
+        return Err(EmitError::NonFinite { vertex: non_finite(&triangles[t]).unwrap_or_default() as usize });
     }
     match normals {
         Normals::PerVertex(n) if n.len() != positions.len() => {
@@ -92,12 +89,9 @@ pub(crate) fn emit(
                     normal: true,
                 });
             }
-            for (t, tri) in idx.iter().enumerate() {
-                for &i in tri {
-                    if i as usize >= n.len() {
-                        return Err(EmitError::Index { triangle: t, value: i, limit: n.len(), normal: true });
-                    }
-                }
+            if let Some(t) = idx.par_iter().position_first(|tri| out_of(tri, n.len()).is_some()) {
+                let value = out_of(&idx[t], n.len()).unwrap_or_default();
+                return Err(EmitError::Index { triangle: t, value, limit: n.len(), normal: true });
             }
         }
         _ => {}
@@ -107,25 +101,24 @@ pub(crate) fn emit(
         Normals::Missing if smooth => Some(smooth_normals(positions, triangles)),
         _ => None,
     };
-    // Every triangle on its own, so in parallel, into the scene's new tail.
-    let first = scene.positions.len();
-    scene.positions.resize(first + triangles.len(), [Vec3::ZERO; 3]);
-    scene.normals.resize(first + triangles.len(), [Vec3::ZERO; 3]);
-    scene.material_ids.resize(first + triangles.len(), material);
-    let out = scene.positions[first..].par_iter_mut().zip(&mut scene.normals[first..]);
-    out.zip(triangles).enumerate().for_each(|(t, ((p_out, n_out), tri))| {
-        let p = tri.map(|i| positions[i as usize]);
+    // Every triangle on its own, so in parallel, straight into the scene's new tail (rayon writes
+    // an indexed iterator's items in place: no serial pass fills the tail first).
+    scene.positions.par_extend(triangles.par_iter().map(|tri| tri.map(|i| positions[i as usize])));
+    scene.normals.par_extend(triangles.par_iter().enumerate().map(|(t, tri)| {
         // The flat normal only where a vertex has none: it costs a square root in f64.
-        let flat = || face_normal(p[0], p[1], p[2]);
+        let flat = || {
+            let p = tri.map(|i| positions[i as usize]);
+            face_normal(p[0], p[1], p[2])
+        };
         let fix = |n: Vec3| unit(n.as_dvec3()).unwrap_or_else(flat);
-        *n_out = match (&normals, &smoothed) {
+        match (&normals, &smoothed) {
             (_, Some(s)) => tri.map(|i| s[i as usize].unwrap_or_else(flat)),
             (Normals::PerVertex(n), None) => tri.map(|i| fix(n[i as usize])),
             (Normals::Indexed(n, idx), None) => idx[t].map(|i| fix(n[i as usize])),
             (Normals::Missing, None) => [flat(); 3],
-        };
-        *p_out = p;
-    });
+        }
+    }));
+    scene.material_ids.resize(scene.positions.len(), material);
     Ok(())
 }
 
@@ -143,6 +136,40 @@ pub(crate) fn smooth_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<
         }
     }
     sum.into_par_iter().map(unit).collect()
+}
+
+/// Triangles per piece of the parallel bounds: a size, so that the pieces, and the order in
+/// which their bounds are combined, do not depend on the number of threads.
+const BOUNDS_PIECE: usize = 1 << 14;
+
+/// Bounds of all vertices, or `None` without any: pieces bounded on every thread, then combined
+/// in order. `Vec3::min` is exact, so this is the serial fold's box.
+pub(crate) fn bounds(positions: &[[Vec3; 3]]) -> Option<(Vec3, Vec3)> {
+    let pieces: Vec<Option<(Vec3, Vec3)>> = positions
+        .par_chunks(BOUNDS_PIECE)
+        .map(|piece| {
+            let mut it = piece.iter().flatten();
+            let first = *it.next()?;
+            Some(it.fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p))))
+        })
+        .collect();
+    pieces.into_iter().flatten().reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+}
+
+/// World bounds in f64 of the vertices under `aff`, or `None` when a transformed vertex is not
+/// finite; pieces as in [`bounds`]. An empty slice gives the empty box (infinite bounds).
+pub(crate) fn world_bounds(positions: &[[Vec3; 3]], aff: &Affine) -> Option<(DVec3, DVec3)> {
+    let empty = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    let pieces: Vec<Option<(DVec3, DVec3)>> = positions
+        .par_chunks(BOUNDS_PIECE)
+        .map(|piece| {
+            piece.iter().flatten().try_fold(empty, |(lo, hi), &p| {
+                let w = aff.m.transform_point3(p.as_dvec3());
+                w.is_finite().then(|| (lo.min(w), hi.max(w)))
+            })
+        })
+        .collect();
+    pieces.into_iter().try_fold(empty, |(lo, hi), b| b.map(|(c, d)| (lo.min(c), hi.max(d))))
 }
 
 /// An affine transform of points, with its normal transform.

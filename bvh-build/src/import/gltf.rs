@@ -266,14 +266,14 @@ impl Reader<'_> {
             let positions_acc =
                 prim.get(&Semantic::Positions).ok_or_else(|| self.err(format!("{label} has no POSITION attribute")))?;
             let raw = self.read_vec3(&positions_acc, "POSITION").map_err(|m| self.err(format!("{label}: {m}")))?;
-            if let Some(i) = raw.iter().position(|p| !p.is_finite()) {
+            if let Some(i) = raw.par_iter().position_first(|p| !p.is_finite()) {
                 return Err(ImportError::NonFinite {
                     path: self.path.to_owned(),
                     what: format!("vertex {i} of {label}"),
                 });
             }
             let positions: Vec<Vec3> = raw.par_iter().map(|&p| aff.point(p)).collect();
-            if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+            if let Some(i) = positions.par_iter().position_first(|p| !p.is_finite()) {
                 return Err(ImportError::NonFinite {
                     path: self.path.to_owned(),
                     what: format!("vertex {i} of {label} after the transform of node {}", node.index()),
@@ -297,7 +297,7 @@ impl Reader<'_> {
             };
             let mut triangles = assemble(mode, &indices);
             if aff.flips {
-                triangles.iter_mut().for_each(|t| t.swap(1, 2));
+                triangles.par_iter_mut().for_each(|t| t.swap(1, 2));
             }
             let material = self.material(&prim.material());
             let normals = normals.as_deref().map_or(Normals::Missing, Normals::PerVertex);
@@ -403,6 +403,7 @@ impl Reader<'_> {
             b.get(4 * k..4 * k + 4).and_then(|s| s.try_into().ok()).map_or(f32::NAN, f32::from_le_bytes)
         };
         Ok((0..acc.count())
+            .into_par_iter()
             .map(|e| {
                 let b = bytes.get(e * stride..).unwrap_or(&[]);
                 Vec3::new(f(b, 0), f(b, 1), f(b, 2))
@@ -424,6 +425,7 @@ impl Reader<'_> {
             return Ok(vec![0; acc.count()]);
         };
         Ok((0..acc.count())
+            .into_par_iter()
             .map(|e| {
                 let b = bytes.get(e * stride..).unwrap_or(&[]);
                 match size {
@@ -444,7 +446,7 @@ impl Reader<'_> {
 fn assemble(mode: Mode, v: &[u32]) -> Vec<[u32; 3]> {
     let n = v.len();
     match mode {
-        Mode::Triangles => v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        Mode::Triangles => v.par_chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
         Mode::TriangleStrip => (0..n.saturating_sub(2))
             .map(|i| if i % 2 == 0 { [v[i], v[i + 1], v[i + 2]] } else { [v[i], v[i + 2], v[i + 1]] })
             .collect(),

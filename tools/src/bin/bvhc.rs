@@ -69,7 +69,8 @@ struct CompileArgs {
     /// Builder.
     #[arg(long, value_enum, default_value = "binned")]
     strategy: StrategyArg,
-    /// Bins per axis for the binned builder (2 to 256).
+    /// Bins per axis for the binned builder (2 to 1024); large nodes get one bin per 16 primitives,
+    /// up to 16 times this count and 1024.
     #[arg(long, default_value_t = BuildParams::default().bins, value_parser = parse_bins, allow_hyphen_values = true)]
     bins: u32,
     /// SAH cost of traversing one inner node (relative to --intersection-cost; 0 or more).
