@@ -53,7 +53,7 @@ fn main() -> ExitCode {
         let a = &cli.eval;
         let cpu = CpuBench { pool: thread_pool(cli.threads)? };
         let gpu = Gpu::new(cli.device, cli.validate).map_err(|e| e.to_string())?;
-        let gpu = VkBench { gpu, workgroup: cli.workgroup, exact: false };
+        let gpu = VkBench { gpu, workgroup: cli.workgroup, exact: false, report_uploads: false };
         let reference = F64Reference { pool: thread_pool(cli.threads)? };
         let cpu = tools::eval::Tracer {
             bench: &cpu,

@@ -7,7 +7,7 @@ use tools::cli::{Progress, duration, rays_per_second};
 use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
 use tools::vk_bench::{VkBench, check_validation};
-use tracer_vk::kernels::Method;
+use tracer_vk::kernels::{Method, Vertices};
 use tracer_vk::render::RT_TRAVERSAL;
 use tracer_vk::render::Renderer;
 use tracer_vk::rt::Support;
@@ -47,9 +47,31 @@ enum Command {
         /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
         #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
         workgroup: (u32, u32),
+        /// How the kernels read triangle corners: expanded (48 bytes per triangle, three reads)
+        /// or indexed (the file's form: 16 bytes per triangle and per vertex, four reads); the
+        /// images are the same. Given, the report says the bytes uploaded [default: expanded].
+        #[arg(long, value_enum)]
+        vertices: Option<VerticesArg>,
         #[command(flatten)]
         device: DeviceArgs,
     },
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum VerticesArg {
+    /// Three vertices per triangle, 48 bytes.
+    Expanded,
+    /// Vertex indices per triangle and every vertex once, 16 bytes each.
+    Indexed,
+}
+
+impl VerticesArg {
+    fn vertices(self) -> Vertices {
+        match self {
+            VerticesArg::Expanded => Vertices::Expanded,
+            VerticesArg::Indexed => Vertices::Indexed,
+        }
+    }
 }
 
 #[derive(clap::Args)]
@@ -65,6 +87,10 @@ struct BenchArgs {
     /// Time the bit-exact kernels (`render --exact`: no fused multiply-adds).
     #[arg(long)]
     exact: bool,
+    /// Vertex forms to time each method with (`render --vertices`), side by side: a form other
+    /// than expanded names its rows METHOD+FORM (lst+indexed), and each prints its bytes uploaded.
+    #[arg(long, value_delimiter = ',', value_enum, default_value = "expanded")]
+    vertices: Vec<VerticesArg>,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -93,7 +119,9 @@ fn main() -> ExitCode {
     tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
-        Command::Render { args, method, workgroup, device } => render(&args, method, workgroup, &device),
+        Command::Render { args, method, workgroup, vertices, device } => {
+            render(&args, method, workgroup, vertices, &device)
+        }
     })
 }
 
@@ -135,7 +163,13 @@ fn open_for(device: &DeviceArgs, methods: &[Method]) -> Result<Gpu, String> {
     Ok(gpu)
 }
 
-fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &DeviceArgs) -> Result<(), String> {
+fn render(
+    args: &RenderArgs,
+    method: MethodArg,
+    workgroup: (u32, u32),
+    vertices: Option<VerticesArg>,
+    device: &DeviceArgs,
+) -> Result<(), String> {
     let outputs = args.check()?;
     let method = method_of(method);
     // A device without rt-pipeline refuses it before the scene is read.
@@ -149,6 +183,10 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     };
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
     renderer.set_exact(args.exact);
+    renderer.set_self_hits(args.self_hits);
+    if let Some(v) = vertices {
+        renderer.set_vertices(v.vertices()).map_err(|e| e.to_string())?;
+    }
     let pixels = u64::from(settings.width) * u64::from(settings.height);
     let bar = Progress::new(pixels, "rendering {bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
     let out = bar
@@ -175,6 +213,12 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
         rays_per_second(r.total(), out.gpu_ms / 1e3),
         outputs.image.path.display()
     )];
+    if args.self_hits {
+        lines.push(tools::render_args::self_hits_line(&r));
+    }
+    if let Some(v) = vertices {
+        lines.push(tools::vk_bench::upload_line(scene, method, v.vertices()));
+    }
     if let Some(b) = renderer.structure_build() {
         let traversal: f64 = out.passes.iter().filter(|(l, _)| l == RT_TRAVERSAL).map(|(_, ms)| ms).sum();
         lines.push(format!(
@@ -205,9 +249,15 @@ fn method_of(m: MethodArg) -> Method {
 }
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
-    let methods: Vec<&str> = b.methods.iter().map(|&m| method_of(m).name()).collect();
+    let names: Vec<String> = b
+        .methods
+        .iter()
+        .flat_map(|&m| b.vertices.iter().map(move |&v| tools::vk_bench::method_name(method_of(m), v.vertices())))
+        .collect();
+    let methods: Vec<&str> = names.iter().map(String::as_str).collect();
     let all: Vec<Method> = b.methods.iter().map(|&m| method_of(m)).collect();
-    let bench = VkBench { gpu: open_for(&b.device, &all)?, workgroup: b.workgroup, exact: b.exact };
+    let report_uploads = b.vertices.iter().any(|&v| v != VerticesArg::Expanded);
+    let bench = VkBench { gpu: open_for(&b.device, &all)?, workgroup: b.workgroup, exact: b.exact, report_uploads };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;
     Ok(())
 }
