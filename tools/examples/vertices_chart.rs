@@ -32,7 +32,9 @@ fn main() {
         match a.as_str() {
             "-o" | "--output" => out = args.next().map(PathBuf::from).unwrap_or_else(|| fail("-o needs a file name")),
             "-h" | "--help" => {
-                println!("vertices_chart CSV SCENE.bvh... [-o chart.svg|chart.png]: memory beside speed per vertex form");
+                println!(
+                    "vertices_chart CSV SCENE.bvh... [-o chart.svg|chart.png]: memory beside speed per vertex form"
+                );
                 return;
             }
             _ => inputs.push(PathBuf::from(a)),
@@ -92,7 +94,9 @@ fn key(p: &Point<'_>) -> (String, String, String, String) {
 }
 
 fn print_table(points: &[Point<'_>]) {
-    println!("| scene | setting | mode | method | expanded: B/tri, ms, Mrays/s | indexed: B/tri, ms, Mrays/s | memory | time |");
+    println!(
+        "| scene | setting | mode | method | expanded: B/tri, ms, Mrays/s | indexed: B/tri, ms, Mrays/s | memory | time |"
+    );
     println!("|---|---|---|---|---|---|--:|--:|");
     let mut done = Vec::new();
     for p in points {

@@ -73,11 +73,12 @@ done
     for m in ${METHODS//,/ }; do
       for v in expanded indexed; do
         "$BIN/trace-vk" render "$WORK/scenes/$s.bvh" --res 640x480 --method "$m" --vertices "$v" \
-          -o "$WORK/img/$s-$m-$v.png" --aov "$WORK/img/$s-$m-$v.exr" >>"$OUT/log.txt" 2>&1 || true
+          -o "$WORK/img/$s-$m-$v.png" >>"$OUT/log.txt" 2>&1 || true
       done
-      if cmp -s "$WORK/img/$s-$m-expanded.png" "$WORK/img/$s-$m-indexed.png" \
-        && cmp -s "$WORK/img/$s-$m-expanded.exr" "$WORK/img/$s-$m-indexed.exr"; then
-        echo "| $s | $m | same (colours and AOVs) |"
+      # The PNGs byte for byte (tests/tests/cross_backend.rs compares the AOVs' bits too; the
+      # EXR files themselves differ between two runs of one setting).
+      if [ -s "$WORK/img/$s-$m-expanded.png" ] && cmp -s "$WORK/img/$s-$m-expanded.png" "$WORK/img/$s-$m-indexed.png"; then
+        echo "| $s | $m | same |"
       else
         echo "| $s | $m | DIFFER (or a render failed: see log.txt) |"
       fi

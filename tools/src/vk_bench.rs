@@ -115,6 +115,13 @@ impl Bench for VkBench {
         Ok(r.render(s).map_err(|e| e.to_string())?.image)
     }
 
+    fn image_with_self_hits(&self, r: &mut Renderer<'_>, s: &Settings) -> Result<Image, String> {
+        r.set_self_hits(true);
+        let image = self.image(r, s);
+        r.set_self_hits(false);
+        image
+    }
+
     fn finish(&self) -> Result<(), String> {
         check_validation(&self.gpu)
     }
