@@ -428,7 +428,7 @@ fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
         assert_eq!(again.rgb, expanded[1].rgb, "{}: back to the expanded form", method.name());
     }
     let mut stand_in = Renderer::rt_stand_in(&gpu, &scene, (8, 8)).expect("the stand-in uploads");
-    let e = stand_in.set_vertices(Vertices::Indexed).err().expect("rt-pipeline refuses the indexed form");
+    let e = stand_in.set_vertices(Vertices::Indexed).expect_err("rt-pipeline refuses the indexed form");
     assert!(e.to_string().contains("rt-pipeline") && !e.to_string().contains('\n'), "{e}");
     let messages = gpu.validation_messages();
     assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
