@@ -451,8 +451,7 @@ impl<'g> Renderer<'g> {
             return Err(VkRenderError::IndexedRtPipeline);
         }
         let info = self.gpu.info();
-        // The old array goes before the new one is made: never both on the device at once.
-        self.tris.clear();
+        // The new array is made before the old one goes, so a refusal leaves the renderer as it was.
         let (tris, split, first_vertex) = match form {
             Vertices::Expanded => {
                 let arrays = SceneArrays::new(self.scene);
