@@ -56,11 +56,46 @@ pub struct RayCounts {
     pub ao: u64,
     /// Diffuse bounces ([`crate::Mode::Diffuse`]).
     pub diffuse: u64,
+    /// Of these, the rays stopped by their own surface; counted only when asked (`--self-hits`),
+    /// else zero.
+    pub self_hits: SelfHits,
 }
 
 impl RayCounts {
+    /// Rays traced (self-hits are some of them, not more).
     pub fn total(&self) -> u64 {
         self.primary + self.shadow + self.secondary + self.ao + self.diffuse
+    }
+}
+
+/// Exact acne: rays leaving a surface that the triangle they leave from meets in `(0, t_max]`
+/// with the frame's triangle test, by kind. Such a ray is stopped by its own surface (a shadow or
+/// AO ray is blocked, a secondary or diffuse ray finds its own triangle at a distance of about
+/// the origin offset; docs/accuracy.md). Deciding it by that one triangle, not by the hit a
+/// traversal reports, makes the count the same for every traversal, any-hit ones included.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SelfHits {
+    pub shadow: u64,
+    pub secondary: u64,
+    pub ao: u64,
+    pub diffuse: u64,
+}
+
+impl SelfHits {
+    pub fn total(&self) -> u64 {
+        self.shadow + self.secondary + self.ao + self.diffuse
+    }
+}
+
+impl std::ops::Add for SelfHits {
+    type Output = SelfHits;
+    fn add(self, o: SelfHits) -> SelfHits {
+        SelfHits {
+            shadow: self.shadow + o.shadow,
+            secondary: self.secondary + o.secondary,
+            ao: self.ao + o.ao,
+            diffuse: self.diffuse + o.diffuse,
+        }
     }
 }
 
@@ -73,6 +108,7 @@ impl std::ops::Add for RayCounts {
             secondary: self.secondary + o.secondary,
             ao: self.ao + o.ao,
             diffuse: self.diffuse + o.diffuse,
+            self_hits: self.self_hits + o.self_hits,
         }
     }
 }

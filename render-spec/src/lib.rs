@@ -23,6 +23,6 @@ pub use bounce::BounceStop;
 pub use camera::{CameraSpec, Frame};
 pub use constants::NO_TRIANGLE;
 pub use error::RenderError;
-pub use image::{Aovs, Image, PrimDiff, RayCounts};
+pub use image::{Aovs, Image, PrimDiff, RayCounts, SelfHits};
 pub use power::phong_pow;
 pub use settings::{Ao, MAX_AO_SAMPLES, MAX_INDIRECTIONS, Mode, Settings};

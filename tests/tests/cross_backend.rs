@@ -379,3 +379,57 @@ fn incoherent_modes_equal_the_cpu_bit_for_bit() {
     let messages = gpu.validation_messages();
     assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
 }
+
+/// `--vertices indexed` (the file's indexed form, read through common.wgsl's `fetch_tri`) renders
+/// the expanded form's images, distances, normals, triangles and costs bit for bit, on every
+/// traversal and in every mode, with less scene data uploaded; switching back restores the
+/// expanded kernels; rt-pipeline, which reads the driver's structures, refuses it in a sentence.
+#[test]
+fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
+    use tracer_vk::kernels::Vertices;
+    let gpu = gpu();
+    let scene = compile("room.toml");
+    let cam = CameraSpec::from(scene.camera("medium").expect("the camera exists"));
+    let aov_bits = |i: &render_spec::Image| {
+        let a = i.aov.as_ref().expect("AOVs were asked for");
+        let t: Vec<u32> = a.t.iter().map(|x| x.to_bits()).collect();
+        let n: Vec<[u32; 3]> = a.normal.iter().map(|n| n.map(f32::to_bits)).collect();
+        (t, n, a.prim.clone(), a.nodes.clone(), a.tris.clone())
+    };
+    for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup] {
+        let expanded = tracer_vk::render::upload_bytes_with(&scene, method, Vertices::Expanded);
+        let indexed = tracer_vk::render::upload_bytes_with(&scene, method, Vertices::Indexed);
+        assert!(indexed < expanded, "{}: indexed {indexed} bytes, expanded {expanded}", method.name());
+        let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the scene uploads");
+        let modes = [Mode::Cast, Mode::Whitted, Mode::Ao(Ao { samples: 2, length: 0.1 }), Mode::Diffuse];
+        let settings = modes.map(|mode| Settings {
+            width: 48,
+            height: 36,
+            camera: cam,
+            mode,
+            lights: scene.lights.clone(),
+            max_indirections: scene.settings.max_indirections,
+            aovs: true,
+            accuracy: Accuracy::default(),
+        });
+        // One form at a time: each switch builds the other form's kernels.
+        let expanded: Vec<_> = settings.iter().map(|s| r.render(s).expect("the GPU renders").image).collect();
+        r.set_vertices(Vertices::Indexed).expect("the indexed form uploads");
+        assert_eq!(r.specialisation().vertices, Vertices::Indexed);
+        for (s, a) in settings.iter().zip(&expanded) {
+            let what = format!("{} {:?}", method.name(), s.mode);
+            let b = r.render(s).expect("the GPU renders the indexed form").image;
+            assert_eq!(a.rgb, b.rgb, "{what}: the indexed form's image differs");
+            assert!(aov_bits(a) == aov_bits(&b), "{what}: the indexed form's AOVs differ");
+            assert_eq!(a.rays, b.rays, "{what}: rays");
+        }
+        r.set_vertices(Vertices::Expanded).expect("the expanded form uploads again");
+        let again = r.render(&settings[1]).expect("the GPU renders the expanded form again").image;
+        assert_eq!(again.rgb, expanded[1].rgb, "{}: back to the expanded form", method.name());
+    }
+    let mut stand_in = Renderer::rt_stand_in(&gpu, &scene, (8, 8)).expect("the stand-in uploads");
+    let e = stand_in.set_vertices(Vertices::Indexed).expect_err("rt-pipeline refuses the indexed form");
+    assert!(e.to_string().contains("rt-pipeline") && !e.to_string().contains('\n'), "{e}");
+    let messages = gpu.validation_messages();
+    assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
+}

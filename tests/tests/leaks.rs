@@ -12,7 +12,8 @@
 //!   vertex, traced through the CPU tracer's traversals.
 //! - Issue 8's `--intersect`: closed meshes (sphere, torus, the toy car's glass) from eyes all
 //!   around, over a million rays through the CPU tracer with the watertight test and with
-//!   Möller-Trumbore, counting the leaks of each.
+//!   Möller-Trumbore, counting the leaks of each; the same rays through the Vulkan kernels (LST
+//!   and stackless, each test) from a ray list.
 //!
 //! Asserted: 0 leaks at edges with the default test on every path; leaks at vertices counted and
 //! bounded; the same rays through the pair (or fan) of triangles at the target with the old
@@ -383,52 +384,93 @@ struct TestLeaks {
     near_ties: usize,
 }
 
-/// Rays from one eye aimed at each target of `t` that it sees from the front, traced through the
-/// ordered traversal and the AVX2 packets (which must agree bit for bit) with both triangle
-/// tests. Returns (edge rays, vertex rays, watertight leaks, Möller-Trumbore leaks). A ray
-/// counts only where the f64 test says it meets one of its target's triangles; it leaks when its
-/// closest hit is missing, or on another triangle farther than that (a grazing ray's distance to
-/// the right triangle may be off by more than rounding).
+/// A ray from an eye aimed exactly at a shared edge or vertex of a closed mesh.
+struct Aimed<'t> {
+    ray: Ray,
+    /// The f64 distance to the nearest of the target's triangles along the (f32) ray.
+    expected: f32,
+    edge: bool,
+    /// The stored triangles at the target.
+    fan: &'t [usize],
+}
+
+impl Aimed<'_> {
+    /// Whether a closest hit (stored triangle, distance) leaks: it is missing, or on another
+    /// triangle farther than the target's (a grazing ray's distance to the right triangle may be
+    /// off by more than rounding).
+    fn leaks(&self, hit: Option<(usize, f32)>) -> bool {
+        hit.is_none_or(|(tri, t)| !self.fan.contains(&tri) && t > self.expected * 1.001)
+    }
+}
+
+/// The rays from `eye` at each target of `t` that it sees from the front, edges first. A ray
+/// counts only where the f64 test says it meets one of its target's triangles.
+fn aimed_rays<'t>(tris: &[Triangle], t: &'t Targets, eye: Vec3) -> Vec<Aimed<'t>> {
+    let edges = t.edges.iter().map(|(p, k)| (*p, &k[..], true));
+    let vertices = t.vertices.iter().map(|(p, k)| (*p, &k[..], false));
+    let mut out = Vec::new();
+    for (target, fan, edge) in edges.chain(vertices) {
+        if !seen_from_one_side(tris, fan, eye.as_dvec3()) {
+            continue;
+        }
+        let ray = Ray::new(eye, (target - eye).normalize());
+        let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+        // The exact ray (as rounded to f32) must meet the target's own triangles: near a
+        // silhouette the rounding can carry it just past the target onto a neighbour behind.
+        let Some(expected) = fan.iter().filter_map(|&k| intersect64(&tris[k], o, d, 0.0)).map(|h| h.0).reduce(f64::min)
+        else {
+            continue;
+        };
+        out.push(Aimed { ray, expected: expected as f32, edge, fan });
+    }
+    out
+}
+
+/// Rays from one eye aimed at each target of `t` that it sees from the front ([`aimed_rays`]),
+/// traced through the ordered traversal and the AVX2 packets (which must agree bit for bit)
+/// with both triangle tests. Returns (edge rays, vertex rays, watertight leaks, Möller-Trumbore
+/// leaks).
 fn leaks_from(scene: &SceneFile, tracer: &Tracer<'_>, t: &Targets, eye: Vec3) -> (usize, usize, TestLeaks, TestLeaks) {
     use render_spec::Intersect;
     let tris = tracer.triangles();
     let nodes = scene.child_pair.as_deref().expect("the child-pair layout");
     let (mut stack, mut pstack, mut cost) = (Stack::default(), Vec::new(), Cost::default());
-    let (mut n_edges, mut n_vertices) = (0, 0);
+    let aimed = aimed_rays(tris, t, eye);
+    let n_edges = aimed.iter().filter(|a| a.edge).count();
     let (mut wt, mut mt) = (TestLeaks::default(), TestLeaks::default());
-    let edges = t.edges.iter().map(|(p, k)| (*p, &k[..], true));
-    let vertices = t.vertices.iter().map(|(p, k)| (*p, &k[..], false));
-    let mut batch: Vec<(Ray, f32, bool, &[usize])> = Vec::with_capacity(tracer_cpu::packet::LANES);
-    let mut flush = |batch: &mut Vec<(Ray, f32, bool, &[usize])>, stack: &mut Stack, pstack: &mut Vec<_>| {
+    for batch in aimed.chunks(tracer_cpu::packet::LANES) {
         for (test, leaks) in [(Intersect::Watertight, &mut wt), (Intersect::MollerTrumbore, &mut mt)] {
             let mut p = tracer_cpu::packet::Rays::default();
             let mut scalar = Vec::with_capacity(batch.len());
-            for (i, (ray, expected, edge, fan)) in batch.iter().enumerate() {
-                p.set(i, ray, f32::INFINITY);
+            for (i, a) in batch.iter().enumerate() {
+                p.set(i, &a.ray, f32::INFINITY);
                 let hit = tracer.walk(Method::Ordered).expect("both layouts").closest_with(
                     test,
-                    ray,
+                    &a.ray,
                     0.0,
                     f32::INFINITY,
-                    stack,
+                    &mut stack,
                     &mut cost,
                 );
                 scalar.push(hit);
-                if hit.is_none_or(|h| !fan.contains(&(h.tri as usize)) && h.t > expected * 1.001) {
-                    *(if *edge { &mut leaks.edges } else { &mut leaks.vertices }) += 1;
+                if a.leaks(hit.map(|h| (h.tri as usize, h.t))) {
+                    *(if a.edge { &mut leaks.edges } else { &mut leaks.vertices }) += 1;
                 }
             }
             if tracer_cpu::packet::available() {
-                let res = match test {
-                    Intersect::Watertight => {
-                        tracer_cpu::packet::trace::<false, tracer_cpu::geometry::Watertight>(nodes, tris, &p, pstack)
-                    }
-                    Intersect::MollerTrumbore => {
-                        tracer_cpu::packet::trace::<false, tracer_cpu::geometry::MollerTrumbore>(
-                            nodes, tris, &p, pstack,
-                        )
-                    }
-                };
+                let res =
+                    match test {
+                        Intersect::Watertight => tracer_cpu::packet::trace::<false, tracer_cpu::geometry::Watertight>(
+                            nodes,
+                            tris,
+                            &p,
+                            &mut pstack,
+                        ),
+                        Intersect::MollerTrumbore => tracer_cpu::packet::trace::<
+                            false,
+                            tracer_cpu::geometry::MollerTrumbore,
+                        >(nodes, tris, &p, &mut pstack),
+                    };
                 for (i, hit) in scalar.iter().enumerate() {
                     // A triangle met at a grazing angle has a distance far less accurate than
                     // its box's, which can then lie behind it by more than the traversal's
@@ -443,28 +485,8 @@ fn leaks_from(scene: &SceneFile, tracer: &Tracer<'_>, t: &Targets, eye: Vec3) ->
                 }
             }
         }
-        batch.clear();
-    };
-    for (target, fan, edge) in edges.chain(vertices) {
-        if !seen_from_one_side(tris, fan, eye.as_dvec3()) {
-            continue;
-        }
-        let ray = Ray::new(eye, (target - eye).normalize());
-        let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
-        // The exact ray (as rounded to f32) must meet the target's own triangles: near a
-        // silhouette the rounding can carry it just past the target onto a neighbour behind.
-        let Some(expected) = fan.iter().filter_map(|&k| intersect64(&tris[k], o, d, 0.0)).map(|h| h.0).reduce(f64::min)
-        else {
-            continue;
-        };
-        *(if edge { &mut n_edges } else { &mut n_vertices }) += 1;
-        batch.push((ray, expected as f32, edge, fan));
-        if batch.len() == tracer_cpu::packet::LANES {
-            flush(&mut batch, &mut stack, &mut pstack);
-        }
     }
-    flush(&mut batch, &mut stack, &mut pstack);
-    (n_edges, n_vertices, wt, mt)
+    (n_edges, aimed.len() - n_edges, wt, mt)
 }
 
 /// `n` directions spread evenly over the sphere (a Fibonacci lattice).
@@ -480,14 +502,9 @@ fn directions(n: usize) -> Vec<Vec3> {
         .collect()
 }
 
-/// Issue 8, `--intersect`: over a million rays aimed exactly at the shared edges and vertices of
-/// closed meshes (a generated sphere and torus, and the glass of scenes/toycar.glb), from eyes
-/// all around them, traced through the whole CPU tracer (ordered traversal, and AVX2 packets that
-/// must find the same hits up to counted near ties) with each triangle test: the watertight test
-/// leaks at no edge and at under 1% of the vertices, Möller-Trumbore leaks at edges on the same
-/// rays, and at more vertices.
-#[test]
-fn moller_trumbore_leaks_through_the_tracer_where_the_watertight_test_does_not() {
+/// The closed meshes of issue 8's leak tests: a generated sphere and torus, and the glass of
+/// scenes/toycar.glb, each with the number of eyes around it.
+fn closed_meshes() -> [(&'static str, SceneFile, usize); 3] {
     // The toy car's glass is a closed shell (the bunny and the dragon have holes, through which a
     // ray can see the inside of the surface at a grazing angle and pass out of it).
     let glass = {
@@ -497,7 +514,7 @@ fn moller_trumbore_leaks_through_the_tracer_where_the_watertight_test_does_not()
         let tris = (0..car.positions.len()).filter(|&k| car.material_ids[k] == glass).map(|k| car.positions[k]);
         scene_of(tris.collect(), None).expect("the mesh compiles")
     };
-    let meshes = [
+    [
         ("sphere", scene_of(shapes::sphere(Vec3::ZERO, 0.4, 96, 48).positions, None).expect("the mesh compiles"), 12),
         (
             "torus",
@@ -505,7 +522,29 @@ fn moller_trumbore_leaks_through_the_tracer_where_the_watertight_test_does_not()
             12,
         ),
         ("toycar.glb glass", glass, 48),
-    ];
+    ]
+}
+
+/// The eyes' distances from a mesh's centre, in radii of its bounding sphere.
+const EYE_DISTANCES: [f32; 2] = [1.5, 4.0];
+
+/// `n` eyes all around `scene` at `distance` radii of its bounding sphere from its centre.
+fn eyes_around(scene: &SceneFile, n: usize, distance: f32) -> Vec<Vec3> {
+    let (lo, hi) = scene.bounds();
+    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+    let (centre, radius) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
+    directions(n).into_iter().map(|d| centre + d * radius * distance).collect()
+}
+
+/// Issue 8, `--intersect`: over a million rays aimed exactly at the shared edges and vertices of
+/// closed meshes (a generated sphere and torus, and the glass of scenes/toycar.glb), from eyes
+/// all around them, traced through the whole CPU tracer (ordered traversal, and AVX2 packets that
+/// must find the same hits up to counted near ties) with each triangle test: the watertight test
+/// leaks at no edge and at under 1% of the vertices, Möller-Trumbore leaks at edges on the same
+/// rays, and at more vertices.
+#[test]
+fn moller_trumbore_leaks_through_the_tracer_where_the_watertight_test_does_not() {
+    let meshes = closed_meshes();
     let workers = std::thread::available_parallelism().map_or(2, |n| n.get());
     let (mut total, mut all_wt, mut all_mt) = (0, TestLeaks::default(), TestLeaks::default());
     println!(
@@ -525,11 +564,8 @@ fn moller_trumbore_leaks_through_the_tracer_where_the_watertight_test_does_not()
             }
             count.values().filter(|&&c| c != 2).count()
         };
-        let (lo, hi) = scene.bounds();
-        let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
-        let (centre, radius) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
-        for distance in [1.5, 4.0] {
-            let eyes: Vec<Vec3> = directions(*n_eyes).into_iter().map(|d| centre + d * radius * distance).collect();
+        for distance in EYE_DISTANCES {
+            let eyes = eyes_around(scene, *n_eyes, distance);
             let per_eye: Vec<(usize, usize, TestLeaks, TestLeaks)> = std::thread::scope(|s| {
                 let chunks: Vec<_> = eyes
                     .chunks(eyes.len().div_ceil(workers))
@@ -579,4 +615,58 @@ fn moller_trumbore_leaks_through_the_tracer_where_the_watertight_test_does_not()
         all_mt.vertices,
         all_wt.vertices
     );
+}
+
+/// Issue 8 on the Vulkan device (lavapipe in CI): the closed-mesh rays of the test above, over a
+/// million, cast from a ray list ([`Renderer::cast_rays`]) through LST and the stackless
+/// traversal with each triangle test: the watertight kernels leak at no shared edge and at under
+/// 1% of the vertices, the Möller-Trumbore kernels leak at edges on the same rays.
+#[test]
+fn the_gpu_kernels_leak_through_closed_meshes_only_with_moller_trumbore() {
+    use render_spec::{Accuracy, Intersect};
+    let gpu = gpu();
+    let (mut total, mut mt_edges) = (0, 0);
+    println!("mesh | edge rays | vertex rays | method | leaks at edges, vertices: watertight | Möller-Trumbore");
+    for (name, scene, n_eyes) in &closed_meshes() {
+        let tris = scene.leaf_triangles();
+        let t = targets(&tris);
+        let mut stored = vec![0usize; scene.input_index.len()];
+        for (k, &src) in scene.input_index.iter().enumerate() {
+            stored[src as usize] = k;
+        }
+        let aimed: Vec<Aimed<'_>> = EYE_DISTANCES
+            .iter()
+            .flat_map(|&d| eyes_around(scene, *n_eyes, d))
+            .flat_map(|eye| aimed_rays(&tris, &t, eye))
+            .collect();
+        let rays: Vec<([f32; 3], [f32; 3])> = aimed.iter().map(|a| (a.ray.origin.into(), a.ray.dir.into())).collect();
+        let edges = aimed.iter().filter(|a| a.edge).count();
+        let vertices = aimed.len() - edges;
+        total += aimed.len();
+        for method in [VkMethod::Lst, VkMethod::Stackless] {
+            let mut r = Renderer::new(&gpu, scene, method, (8, 8)).expect("the mesh uploads");
+            let mut leaks = [(0, 0); 2];
+            for (k, intersect) in [Intersect::Watertight, Intersect::MollerTrumbore].into_iter().enumerate() {
+                let out = r.cast_rays(&rays, Accuracy { intersect, ..Default::default() }).expect("the GPU casts");
+                let aov = out.aov.expect("cast_rays returns the AOVs");
+                assert_eq!((aov.prim.len(), out.rays.primary), (rays.len(), rays.len() as u64), "one result per ray");
+                for (i, a) in aimed.iter().enumerate() {
+                    let hit = (aov.prim[i] != NO_TRIANGLE).then(|| (stored[aov.prim[i] as usize], aov.t[i]));
+                    if a.leaks(hit) {
+                        *(if a.edge { &mut leaks[k].0 } else { &mut leaks[k].1 }) += 1;
+                    }
+                }
+            }
+            let [(wt_e, wt_v), (mt_e, mt_v)] = leaks;
+            println!("{name} | {edges} | {vertices} | {} | {wt_e}, {wt_v} | {mt_e}, {mt_v}", method.name());
+            assert_eq!(wt_e, 0, "{name}: {wt_e} edge rays leaked through the watertight {} kernels", method.name());
+            assert!(wt_v * 100 <= vertices, "{name}: {wt_v} of {vertices} vertex rays leaked on {}", method.name());
+            mt_edges += mt_e;
+        }
+    }
+    println!("all: {total} rays on each of 2 methods x 2 triangle tests");
+    assert!(total >= 1_000_000, "only {total} rays");
+    assert!(mt_edges > 0, "the Möller-Trumbore kernels leaked at no shared edge: these rays do not test edges");
+    let messages = gpu.validation_messages();
+    assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
 }

@@ -153,6 +153,9 @@ pub trait Bench {
     fn frame(&self, r: &mut Self::Renderer<'_>, s: &Settings) -> Result<Timed, String>;
     /// One untimed frame with its pixels, and its AOVs when the settings ask for them.
     fn image(&self, r: &mut Self::Renderer<'_>, s: &Settings) -> Result<Image, String>;
+    /// [`Bench::image`] with the rays stopped by their own triangle counted
+    /// (render_spec::SelfHits, `--self-hits`); the evaluation's exact acne.
+    fn image_with_self_hits(&self, r: &mut Self::Renderer<'_>, s: &Settings) -> Result<Image, String>;
     /// Checked once after the last frame (the Vulkan tracer's validation messages).
     fn finish(&self) -> Result<(), String> {
         Ok(())

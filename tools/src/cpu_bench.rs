@@ -62,4 +62,11 @@ impl Bench for CpuBench {
     fn image(&self, (tracer, method): &mut (Tracer<'_>, Method), s: &Settings) -> Result<Image, String> {
         self.pool.install(|| tracer_cpu::render(tracer, s, *method)).map_err(|e| e.to_string())
     }
+
+    fn image_with_self_hits(&self, r: &mut (Tracer<'_>, Method), s: &Settings) -> Result<Image, String> {
+        r.0.count_self_hits(true);
+        let image = self.image(r, s);
+        r.0.count_self_hits(false);
+        image
+    }
 }

@@ -135,6 +135,10 @@ pub struct RenderArgs {
     /// fuses them, so trace-cpu is always exact.
     #[arg(long, help_heading = "Accuracy")]
     pub exact: bool,
+    /// Count exact acne: the shadow, secondary, AO and diffuse rays that the triangle they leave
+    /// from meets (one more triangle test per such ray), reported on a line of their own.
+    #[arg(long, help_heading = "Accuracy")]
+    pub self_hits: bool,
 }
 
 /// The checked outputs of a render.
@@ -535,6 +539,21 @@ pub fn rays_note(r: &render_spec::RayCounts) -> String {
         s.push_str(&format!(", {} diffuse", r.diffuse));
     }
     s
+}
+
+/// The line both tracers print with `--self-hits`: of each kind of ray that leaves a surface, how
+/// many the triangle it leaves from meets (render_spec::SelfHits).
+pub fn self_hits_line(r: &render_spec::RayCounts) -> String {
+    let h = r.self_hits;
+    let mut parts =
+        vec![format!("{} of {} shadow", h.shadow, r.shadow), format!("{} of {} secondary", h.secondary, r.secondary)];
+    if r.ao > 0 {
+        parts.push(format!("{} of {} AO", h.ao, r.ao));
+    }
+    if r.diffuse > 0 {
+        parts.push(format!("{} of {} diffuse", h.diffuse, r.diffuse));
+    }
+    format!("self-hits (rays stopped by the triangle they leave, exact acne): {}", parts.join(", "))
 }
 
 /// The line both tracers print for a heatmap: its scale, and how many pixels lie above a fixed one.

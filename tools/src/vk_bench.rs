@@ -7,7 +7,7 @@ use bvh_format::SceneFile;
 use render_spec::{Image, Settings};
 use std::path::Path;
 use tracer_vk::Gpu;
-use tracer_vk::kernels::Method;
+use tracer_vk::kernels::{Method, Vertices};
 use tracer_vk::render::Renderer;
 
 /// The method name that picks per setting ([`crate::auto`]).
@@ -16,6 +16,33 @@ pub const AUTO: &str = "auto";
 /// Marks a method name for the exact kernels in [`VkBench::prepare`] (the evaluation's
 /// `--exact on`).
 pub const EXACT_SUFFIX: &str = "+exact";
+
+/// Marks a method name for the indexed vertex form (`trace-vk bench --vertices indexed`).
+pub const INDEXED_SUFFIX: &str = "+indexed";
+
+/// The bench's name of `method` reading triangles in `form`: the method's own for the default
+/// expanded form, with [`INDEXED_SUFFIX`] for the indexed one.
+pub fn method_name(method: Method, form: Vertices) -> String {
+    match form {
+        Vertices::Expanded => method.name().to_owned(),
+        Vertices::Indexed => format!("{}{INDEXED_SUFFIX}", method.name()),
+    }
+}
+
+/// What `method` with triangles in `form` uploads of `scene` (nodes of its layout, triangles,
+/// normals, materials, input indices), in all and per triangle.
+pub fn upload_line(scene: &SceneFile, method: Method, form: Vertices) -> String {
+    let bytes = tracer_vk::render::upload_bytes_with(scene, method, form);
+    let tris = scene.triangles.len();
+    format!(
+        "{} with {} vertices uploads {} bytes of scene data, {:.1} per triangle ({tris} triangles, {} vertices)",
+        method.name(),
+        form.name(),
+        bytes,
+        bytes as f64 / tris.max(1) as f64,
+        scene.vertices.len()
+    )
+}
 
 /// A traversal by the name `trace-vk --method` takes.
 pub fn method_of(name: &str) -> Result<Method, String> {
@@ -46,17 +73,38 @@ pub struct VkBench {
     pub in_flight: u32,
     /// Tiles of at most this many pixels (`--tile-pixels`), below the device's own limit.
     pub tile_pixels: Option<u64>,
+    /// Print each prepared method's bytes uploaded ([`upload_line`]; `trace-vk bench --vertices`).
+    pub report_uploads: bool,
 }
 
 impl VkBench {
     /// A device's bench with one frame per submission and tiles as large as the device allows.
     pub fn new(gpu: Gpu, workgroup: (u32, u32), exact: bool) -> VkBench {
-        VkBench { gpu, workgroup, exact, recalibrate: false, candidates: Vec::new(), in_flight: 1, tile_pixels: None }
+        VkBench {
+            gpu,
+            workgroup,
+            exact,
+            recalibrate: false,
+            candidates: Vec::new(),
+            in_flight: 1,
+            tile_pixels: None,
+            report_uploads: false,
+        }
     }
 
-    fn renderer<'a>(&'a self, scene: &'a SceneFile, method: Method, exact: bool) -> Result<Renderer<'a>, String> {
+    fn renderer<'a>(
+        &'a self,
+        scene: &'a SceneFile,
+        method: Method,
+        exact: bool,
+        form: Vertices,
+    ) -> Result<Renderer<'a>, String> {
         let mut r = Renderer::new(&self.gpu, scene, method, self.workgroup).map_err(|e| e.to_string())?;
         r.set_exact(exact);
+        r.set_vertices(form).map_err(|e| e.to_string())?;
+        if self.report_uploads {
+            crate::say!("{}", upload_line(scene, method, form));
+        }
         r.set_frames_per_submission(self.in_flight);
         if let Some(p) = self.tile_pixels {
             r.limit_tile_pixels(p);
@@ -92,7 +140,7 @@ impl<'a> VkRenderer<'a> {
                     crate::say!("{}x{} {}: {}", s.width, s.height, s.mode.name(), pick.line());
                     let renderer = match current.take() {
                         Some((_, m, r)) if m == pick.method => r,
-                        _ => bench.renderer(picker.scene, pick.method, picker.exact)?,
+                        _ => bench.renderer(picker.scene, pick.method, picker.exact, Vertices::Expanded)?,
                     };
                     *current = Some((s.clone(), pick.method, renderer));
                 }
@@ -129,7 +177,8 @@ impl Bench for VkBench {
         )
     }
 
-    /// `method` is a traversal's name, with [`EXACT_SUFFIX`] for its exact kernels.
+    /// `method` is a traversal's name, with [`EXACT_SUFFIX`] for its exact kernels and
+    /// [`INDEXED_SUFFIX`] for the indexed vertex form (whose bytes uploaded it prints).
     fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<VkRenderer<'a>, String> {
         self.prepare_file(scene, None, method)
     }
@@ -150,7 +199,11 @@ impl Bench for VkBench {
                 Picker::new(&self.gpu, scene, path, self.workgroup, exact, self.recalibrate).among(&self.candidates);
             return Ok(VkRenderer::Auto(Box::new(Auto { bench: self, picker, current: None })));
         }
-        Ok(VkRenderer::Fixed(Box::new(self.renderer(scene, method_of(name)?, exact)?)))
+        let (name, form) = match name.strip_suffix(INDEXED_SUFFIX) {
+            Some(name) => (name, Vertices::Indexed),
+            None => (name, Vertices::Expanded),
+        };
+        Ok(VkRenderer::Fixed(Box::new(self.renderer(scene, method_of(name)?, exact, form)?)))
     }
 
     fn unsupported(&self, method: &str) -> Option<String> {
@@ -177,6 +230,14 @@ impl Bench for VkBench {
 
     fn image(&self, r: &mut VkRenderer<'_>, s: &Settings) -> Result<Image, String> {
         Ok(r.for_settings(s)?.render(s).map_err(|e| e.to_string())?.image)
+    }
+
+    fn image_with_self_hits(&self, r: &mut VkRenderer<'_>, s: &Settings) -> Result<Image, String> {
+        let r = r.for_settings(s)?;
+        r.set_self_hits(true);
+        let image = r.render(s).map_err(|e| e.to_string()).map(|out| out.image);
+        r.set_self_hits(false);
+        image
     }
 
     fn finish(&self) -> Result<(), String> {

@@ -252,6 +252,37 @@ fn accuracy_flags_are_honoured_and_named() {
     }
 }
 
+/// `--self-hits` (exact acne) prints the same line from both tracers where their arithmetic is the
+/// same (`--exact`), with rays stopped by their own triangle under a tiny fixed offset; `trace-vk
+/// --vertices indexed` renders the expanded form's image and says what it uploaded.
+#[test]
+fn self_hits_and_the_vertex_form_are_reported() {
+    let dir = scratch("self-hits");
+    let room = room(&dir);
+    let mut lines = Vec::new();
+    for tracer in ["trace-cpu", "trace-vk"] {
+        let args = ["render", &room, "--res", "32x24", "-o", "s.png", "--self-hits", "--exact", "--offset", "1e-9"];
+        let out = assert_ok(&run(&dir, tracer, &args), tracer);
+        let line = out.lines().find(|l| l.starts_with("self-hits")).unwrap_or_else(|| panic!("{tracer}: {out}"));
+        lines.push(line.to_owned());
+        let plain = assert_ok(&run(&dir, tracer, &["render", &room, "--res", "32x24", "-o", "p.png"]), tracer);
+        assert!(!plain.contains("self-hits"), "{tracer} counted without being asked: {plain}");
+    }
+    assert_eq!(lines[0], lines[1], "the tracers count different self-hits");
+    assert!(!lines[0].contains(": 0 of"), "a fixed offset of 1e-9 stopped no shadow ray on its surface: {}", lines[0]);
+    let e = run(&dir, "trace-cpu", &["render", &room, "--res", "8x8", "-o", "r.png", "--self-hits", "--reference"]);
+    assert_one_sentence_error(&e, "--self-hits");
+    let mut images = Vec::new();
+    for v in ["expanded", "indexed"] {
+        let name = format!("{v}.png");
+        let out =
+            assert_ok(&run(&dir, "trace-vk", &["render", &room, "--res", "32x24", "-o", &name, "--vertices", v]), v);
+        assert!(out.contains(&format!("lst with {v} vertices uploads")), "{v}: {out}");
+        images.push(std::fs::read(dir.join(&name)).expect("the image was written"));
+    }
+    assert_eq!(images[0], images[1], "the indexed form's image differs from the expanded form's");
+}
+
 /// `trace-cpu render ... | head -1`: the reader goes away, the program ends quietly.
 #[test]
 fn a_closed_pipe_ends_the_program_quietly() {

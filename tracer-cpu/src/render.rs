@@ -20,6 +20,8 @@ pub struct Tracer<'a> {
     pub(crate) tris: Vec<Triangle>,
     child_pair: Option<&'a [Node]>,
     escape: Option<&'a [Node]>,
+    /// Count the rays their own triangle meets ([`render_spec::SelfHits`], `--self-hits`).
+    self_hits: bool,
 }
 
 impl<'a> Tracer<'a> {
@@ -29,7 +31,15 @@ impl<'a> Tracer<'a> {
             tris: scene.leaf_triangles(),
             child_pair: scene.child_pair.as_deref(),
             escape: scene.escape.as_deref(),
+            self_hits: false,
         }
+    }
+
+    /// Counts, in the images rendered after this, the shadow, secondary, AO and diffuse rays that
+    /// the triangle they leave from meets (exact acne, [`render_spec::SelfHits`] in
+    /// [`Image::rays`]): one more triangle test per such ray, so off by default.
+    pub fn count_self_hits(&mut self, on: bool) {
+        self.self_hits = on;
     }
 
     /// The triangles as every path intersects them: three vertices each, in leaf order.
@@ -260,7 +270,7 @@ fn render_in<T: TraceLanes>(
     let frame = settings.frame()?;
     tracer.walk(method)?;
     let (w, h) = (settings.width as usize, settings.height as usize);
-    let sh = Shading::new(tracer, settings);
+    let sh = Shading::new(tracer, settings).with_self_hits(tracer.self_hits);
     let samples: Vec<(f32, f32)> = render_spec::accuracy::sample_positions(settings.accuracy.spp).collect();
     let mut rgb = vec![[0u8; 3]; w * h];
     let mut aov = settings.aovs.then(|| Aovs {

@@ -40,6 +40,8 @@ pub struct Shading<'a> {
     offset: Offset,
     /// Whether to fill [`Block::t`], [`Block::normal`] and [`Block::prim`].
     aovs: bool,
+    /// Whether to count the rays their own triangle meets ([`render_spec::SelfHits`]).
+    self_hits: bool,
 }
 
 /// What a block produced per lane, and the rays it traced.
@@ -115,7 +117,30 @@ impl<'a> Shading<'a> {
             intersect: s.accuracy.intersect,
             offset: s.accuracy.offset,
             aovs: s.aovs,
+            self_hits: false,
         }
+    }
+
+    /// Counts the rays leaving a surface that the triangle they leave from meets (exact acne,
+    /// `--self-hits`): one more triangle test per such ray.
+    pub fn with_self_hits(self, on: bool) -> Self {
+        Self { self_hits: on, ..self }
+    }
+
+    /// Of the `valid` lanes of `rays`, leaving triangles `tri`, those that their own triangle
+    /// meets in `(0, t_max]` with the frame's test; zero unless counting was asked for.
+    #[inline(always)]
+    fn count_self_hits(&self, rays: &Rays, tri: &[usize; LANES]) -> u64 {
+        if !self.self_hits {
+            return 0;
+        }
+        let test = match self.intersect {
+            Intersect::Watertight => crate::geometry::intersect,
+            Intersect::MollerTrumbore => crate::geometry::intersect_moller_trumbore,
+        };
+        (0..LANES)
+            .filter(|&i| rays.valid[i] && test(&self.triangles[tri[i]], &rays.ray(i), 0.0, rays.t_max[i]).is_some())
+            .count() as u64
     }
 
     /// Shades the valid lanes of `primary` (rays from the eye, `t_max` +inf) with lanes of type
@@ -165,12 +190,12 @@ impl<'a> Shading<'a> {
                     break;
                 }
                 Mode::Ao(ao) => {
-                    let open = self.unoccluded::<L, T>(ao, &s, hit_lanes, seeds, lanes, &mut out);
+                    let open = self.unoccluded::<L, T>(ao, &s, (hit_lanes, &tri), seeds, lanes, &mut out);
                     colour = V3::select(hit, V3::new(open, open, open), colour);
                     break;
                 }
                 Mode::Diffuse => {
-                    let light = self.diffuse_light::<L, T>(&s, hit_lanes, seeds, lanes, &mut out);
+                    let light = self.diffuse_light::<L, T>(&s, (hit_lanes, &tri), seeds, lanes, &mut out);
                     colour = V3::select(hit, m.kd.mul_each(light), colour);
                     break;
                 }
@@ -198,6 +223,7 @@ impl<'a> Shading<'a> {
                     valid: L::bools(asks),
                 };
                 out.rays.shadow += L::count(asks) as u64;
+                out.rays.self_hits.shadow += self.count_self_hits(&shadow, &tri);
                 let blocked = lanes.occluded(&shadow, self.intersect);
                 add_cost(&mut out.cost, &shadow.valid, &blocked);
                 let lit = asks & !L::mask(blocked.hit);
@@ -225,6 +251,7 @@ impl<'a> Shading<'a> {
                 valid: L::bools(go),
             };
             out.rays.secondary += L::count(go) as u64;
+            out.rays.self_hits.secondary += self.count_self_hits(&rays, &tri);
             hits = lanes.closest(&rays, self.intersect);
         }
         out.colour = colour.to_arrays();
@@ -303,14 +330,14 @@ impl Shading<'_> {
         rays
     }
 
-    /// Ambient occlusion (docs/shading.md): the fraction of the AO rays of each `hit` lane that
-    /// nothing blocks, `open * (1 / samples)`.
+    /// Ambient occlusion (docs/shading.md): the fraction of the AO rays of each `hit` lane (on
+    /// its triangle) that nothing blocks, `open * (1 / samples)`.
     #[inline(always)]
     fn unoccluded<L: Lanes, T: TraceLanes>(
         &self,
         ao: Ao,
         s: &SurfaceOf<L>,
-        hit: [bool; LANES],
+        (hit, tri): ([bool; LANES], &[usize; LANES]),
         seeds: &Seeds,
         lanes: &mut T,
         out: &mut Block,
@@ -320,6 +347,7 @@ impl Shading<'_> {
             let n = sequence::incoherent_sample(seeds.sample, ao.samples, k);
             let rays = self.incoherent_rays(s, hit, seeds, self.ao_distance, n);
             out.rays.ao += rays.count() as u64;
+            out.rays.self_hits.ao += self.count_self_hits(&rays, tri);
             let blocked = lanes.occluded(&rays, self.intersect);
             add_cost(&mut out.cost, &rays.valid, &blocked);
             for i in 0..LANES {
@@ -330,19 +358,21 @@ impl Shading<'_> {
         L::from_fn(|i| open[i] as f32 * inverse)
     }
 
-    /// The light a diffuse bounce brings back to each `hit` lane (docs/shading.md): the bounce
-    /// hit lit by a white light at the bounce's origin (ray casting's rule), or the background.
+    /// The light a diffuse bounce brings back to each `hit` lane (on its triangle;
+    /// docs/shading.md): the bounce hit lit by a white light at the bounce's origin (ray
+    /// casting's rule), or the background.
     #[inline(always)]
     fn diffuse_light<L: Lanes, T: TraceLanes>(
         &self,
         s: &SurfaceOf<L>,
-        hit: [bool; LANES],
+        (hit, tri): ([bool; LANES], &[usize; LANES]),
         seeds: &Seeds,
         lanes: &mut T,
         out: &mut Block,
     ) -> V3<L> {
         let rays = self.incoherent_rays(s, hit, seeds, f32::INFINITY, seeds.sample);
         out.rays.diffuse += rays.count() as u64;
+        out.rays.self_hits.diffuse += self.count_self_hits(&rays, tri);
         let hits = lanes.closest(&rays, self.intersect);
         add_cost(&mut out.cost, &rays.valid, &hits);
         let found: [bool; LANES] = std::array::from_fn(|i| hit[i] && hits.hit[i]);
@@ -350,8 +380,9 @@ impl Shading<'_> {
         if !found.iter().any(|&f| f) {
             return background;
         }
-        let (b, tri) = self.surfaces::<L>(&rays, &hits, found);
-        let kd = V3::from_lanes(|i| Vec3::from(self.scene.materials[self.triangles[tri[i]].material as usize].kd));
+        let (b, bounce_tri) = self.surfaces::<L>(&rays, &hits, found);
+        let kd =
+            V3::from_lanes(|i| Vec3::from(self.scene.materials[self.triangles[bounce_tri[i]].material as usize].kd));
         let lit = shade::cast_of(kd, b.shading, V3::from_arrays(&rays.dir));
         V3::select(L::mask(found), lit, background)
     }

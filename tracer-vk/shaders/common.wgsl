@@ -101,7 +101,14 @@ struct Pass {
 
 @group(0) @binding(0) var<storage, read> frame: Frame;
 @group(0) @binding(1) var<storage, read> nodes: array<Node>;
+//#if EXPANDED_VERTICES
 @group(0) @binding(2) var<storage, read> tris: array<Tri>;
+//#endif
+//#if INDEXED_VERTICES
+// The file's indexed form (`--vertices indexed`): per triangle in leaf order its three vertex
+// indices and material, then from FIRST_VERTEX on the vertex positions (w unused), 16 bytes each.
+@group(0) @binding(2) var<storage, read> tris: array<vec4<u32>>;
+//#endif
 // Three normal indices per triangle (all FLAT_NORMAL for a flat one) and three floats per normal; read
 // only when the scene has smooth triangles (feature SMOOTH), else one-entry placeholders.
 @group(0) @binding(3) var<storage, read> normal_indices: array<u32>;
@@ -451,11 +458,27 @@ fn intersect_watertight(tri: Tri, r: Ray, t_min: f32, t_max: f32) -> vec3<f32> {
     return vec3<f32>(-1.0, 0.0, 0.0);
 }
 
+// Triangle i (leaf order) with its corners and material: every read of a triangle, by the
+// traversals and by shading, goes through this function, so the vertex form the host uploaded
+// (render.rs `Vertices`) is decided here alone. Both forms give the same bits.
+fn fetch_tri(i: u32) -> Tri {
+//#if EXPANDED_VERTICES
+    return tris[i];
+//#endif
+//#if INDEXED_VERTICES
+    let t = tris[i];
+    let p0 = bitcast<vec3<f32>>(tris[FIRST_VERTEX + t.x].xyz);
+    let p1 = bitcast<vec3<f32>>(tris[FIRST_VERTEX + t.y].xyz);
+    let p2 = bitcast<vec3<f32>>(tris[FIRST_VERTEX + t.z].xyz);
+    return Tri(p0, t.w, p1, 0u, p2, 0u);
+//#endif
+}
+
 // Tests a leaf's triangles against the best hit so far (nearer wins, then the lower index).
 fn intersect_leaf(n: Node, r: Ray, t_min: f32, best: ptr<function, HitRec>, any_hit: bool) -> bool {
     for (var i = n.index; i < n.index + n.count; i++) {
         cost_tris += 1u;
-        let h = intersect(tris[i], r, t_min, (*best).t);
+        let h = intersect(fetch_tri(i), r, t_min, (*best).t);
         if h.x >= 0.0 && (h.x < (*best).t || (h.x == (*best).t && i < (*best).tri)) {
             *best = HitRec(h.x, i, h.y, h.z);
             if any_hit {
@@ -507,7 +530,7 @@ fn vertex_normal(i: u32) -> vec3<f32> {
 //#endif
 
 fn surface_at(r: Ray, h: HitRec) -> Surface {
-    let tri = tris[h.tri];
+    let tri = fetch_tri(h.tri);
     let point = r.o + h.t * r.d;
     // A degenerate (zero-area) triangle has no normal of its own: face the ray.
     let ng = normalize_or(cross3(tri.p1 - tri.p0, tri.p2 - tri.p0), -r.d);
@@ -531,7 +554,7 @@ fn surface_at(r: Ray, h: HitRec) -> Surface {
 }
 
 fn material_of(tri: u32) -> Material {
-    return materials[tris[tri].material];
+    return materials[fetch_tri(tri).material];
 }
 
 fn reflect_dir(d: vec3<f32>, n: vec3<f32>) -> vec3<f32> {

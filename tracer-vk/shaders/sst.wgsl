@@ -106,7 +106,7 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
         let node = step.node;
         if node.count > 0u {
             for (var i = lid; i < node.count; i += WG_SIZE) {
-                sst_tris[i] = tris[node.index + i];
+                sst_tris[i] = fetch_tri(node.index + i);
             }
             workgroupBarrier();
             if taking_part {

@@ -52,7 +52,15 @@ fn samples_to_rgba8(total: vec3<f32>) -> u32 {
 
 fn stage_cast(x: u32, y: u32, valid: bool) {
     let p = pixel_index(x, y);
+//#if CAMERA_RAYS
     let r = make_ray(frame.eye.xyz, primary_dir(x, y));
+//#endif
+//#if RAY_LIST
+    // The host's ray for this pixel (Renderer::cast_rays), in the paths buffer, which ray casting
+    // does not use otherwise.
+    let given = paths[select(0u, p, valid)];
+    let r = make_ray(given.origin.xyz, given.dir.xyz);
+//#endif
     let h = trace(r, 0.0, F32_MAX, false, valid);
 //#if RT_EMIT
     return; // rt_pipeline.wgsl: this half only writes the ray
@@ -146,6 +154,11 @@ fn stage_shade(x: u32, y: u32, valid: bool) {
     }
     if wants_shadow {
         count(SLOT_SHADOW);
+//#if SELF_HITS
+        if intersect(fetch_tri(h.tri), shadow, 0.0, shadow_t).x >= 0.0 {
+            count(SLOT_SELF_SHADOW);
+        }
+//#endif
         if !blocked {
             add += colour * term;
         }
@@ -218,6 +231,11 @@ fn stage_bounce(x: u32, y: u32, valid: bool) {
         return;
     }
     count(SLOT_SECONDARY);
+//#if SELF_HITS
+    if intersect(fetch_tri(h.tri), nr, 0.0, F32_MAX).x >= 0.0 {
+        count(SLOT_SELF_SECONDARY);
+    }
+//#endif
     aovs[p].nodes += cost_nodes;
     aovs[p].tris += cost_tris;
     if nh.tri == NO_TRIANGLE {
@@ -278,6 +296,11 @@ fn stage_ao(x: u32, y: u32, valid: bool) {
     if !live {
         return;
     }
+//#if SELF_HITS
+    if intersect(fetch_tri(hits[p].tri), r, 0.0, frame.ao.x).x >= 0.0 {
+        count(SLOT_SELF_AO);
+    }
+//#endif
     let open = select(accum[p].local.x, 0.0, k == 0u) + select(1.0, 0.0, blocked);
     accum[p].local.x = open;
     if k + 1u == frame.samples.z {
@@ -308,6 +331,11 @@ fn stage_diffuse(x: u32, y: u32, valid: bool) {
         return;
     }
     count(SLOT_DIFFUSE);
+//#if SELF_HITS
+    if intersect(fetch_tri(hits[p].tri), r, 0.0, F32_MAX).x >= 0.0 {
+        count(SLOT_SELF_DIFFUSE);
+    }
+//#endif
     var light = frame.background.xyz;
     if h.tri != NO_TRIANGLE {
         let s = surface_at(r, h);

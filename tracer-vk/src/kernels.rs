@@ -119,6 +119,40 @@ pub struct Specialisation {
     pub fixed_offset: bool,
     /// How the node and triangle arrays are spread over storage-buffer bindings.
     pub split: Split,
+    /// Ray casting traces the host's rays, one per pixel, from the `paths` buffer instead of the
+    /// camera's ([`crate::render::Renderer::cast_rays`]: tests that aim rays at chosen points).
+    pub ray_list: bool,
+    /// How the kernels read triangle corners (`--vertices`; `fetch_tri` in common.wgsl).
+    pub vertices: Vertices,
+    /// [`Vertices::Indexed`]: the record where the vertex positions start (the triangle count).
+    pub first_vertex: u32,
+    /// Count the shadow, secondary, AO and diffuse rays that the triangle they leave from meets
+    /// (`--self-hits`; [`counters::SELF_SHADOW`] and after): a variant, so the default kernels
+    /// carry no such test.
+    pub self_hits: bool,
+}
+
+/// How the kernels read the corners of a triangle (`--vertices`), a trade of memory for reads:
+/// both forms give the same bits, so the same images.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Vertices {
+    /// Three vertices per triangle in leaf order, each padded to 16 bytes with the material in
+    /// the first padding word: 48 bytes per triangle, three 16-byte reads.
+    #[default]
+    Expanded,
+    /// The file's indexed form: per triangle three vertex indices and the material (16 bytes),
+    /// then every vertex once (16 bytes): one read more per triangle, through the index, for
+    /// about half the memory of a closed mesh (a vertex is shared by about six triangles).
+    Indexed,
+}
+
+impl Vertices {
+    pub fn name(self) -> &'static str {
+        match self {
+            Vertices::Expanded => "expanded",
+            Vertices::Indexed => "indexed",
+        }
+    }
 }
 
 /// The most bindings one scene array (nodes or triangles) is spread over.
@@ -168,6 +202,10 @@ impl Specialisation {
             intersect: Intersect::Watertight,
             fixed_offset: false,
             split: Split::NONE,
+            ray_list: false,
+            vertices: Vertices::Expanded,
+            first_vertex: 0,
+            self_hits: false,
         }
     }
 
@@ -191,6 +229,14 @@ impl Specialisation {
         features.push(if self.fixed_offset { "FIXED_OFFSET" } else { "SCALE_AWARE_OFFSET" });
         if self.exact {
             features.push("EXACT");
+        }
+        features.push(if self.ray_list { "RAY_LIST" } else { "CAMERA_RAYS" });
+        features.push(match self.vertices {
+            Vertices::Expanded => "EXPANDED_VERTICES",
+            Vertices::Indexed => "INDEXED_VERTICES",
+        });
+        if self.self_hits {
+            features.push("SELF_HITS");
         }
         features
     }
@@ -302,14 +348,20 @@ pub mod counters {
     pub const FINISHED: usize = 10;
     /// FAULT_* bits: a traversal gave up on a ray.
     pub const FAULTS: usize = 12;
+    /// 64-bit counters of the `self_hits` variant: shadow, secondary, AO and diffuse rays that
+    /// the triangle they leave from meets (render_spec::SelfHits).
+    pub const SELF_SHADOW: usize = 13;
+    pub const SELF_SECONDARY: usize = 15;
+    pub const SELF_AO: usize = 17;
+    pub const SELF_DIFFUSE: usize = 19;
     /// Then one word per bounce: paths still alive after it.
-    pub const LIVE: usize = 13;
+    pub const LIVE: usize = 21;
     /// A stack push found the stack full (the tree is deeper than the file's depth).
     pub const FAULT_STACK: u32 = 1;
     /// A walk took more steps than the tree has nodes.
     pub const FAULT_WALK: u32 = 2;
 
-    pub(crate) const WGSL: [(&str, u32); 10] = [
+    pub(crate) const WGSL: [(&str, u32); 14] = [
         ("SLOT_PRIMARY", PRIMARY as u32),
         ("SLOT_SHADOW", SHADOW as u32),
         ("SLOT_SECONDARY", SECONDARY as u32),
@@ -317,6 +369,10 @@ pub mod counters {
         ("SLOT_DIFFUSE", DIFFUSE as u32),
         ("SLOT_FINISHED", FINISHED as u32),
         ("SLOT_FAULTS", FAULTS as u32),
+        ("SLOT_SELF_SHADOW", SELF_SHADOW as u32),
+        ("SLOT_SELF_SECONDARY", SELF_SECONDARY as u32),
+        ("SLOT_SELF_AO", SELF_AO as u32),
+        ("SLOT_SELF_DIFFUSE", SELF_DIFFUSE as u32),
         ("SLOT_LIVE", LIVE as u32),
         ("FAULT_STACK", FAULT_STACK),
         ("FAULT_WALK", FAULT_WALK),
@@ -422,6 +478,11 @@ pub fn compile_stand_in(spec: &Specialisation) -> Result<Vec<u32>, VkError> {
 /// that a test can append its own entry point and call one shared function at a time.
 pub fn prelude(spec: &Specialisation) -> String {
     let counters: String = counters::WGSL.iter().map(|(name, v)| format!("const {name}: u32 = {v}u;\n")).collect();
+    // Only the indexed form's kernels name it, so the default kernels' text is unchanged.
+    let counters = match spec.vertices {
+        Vertices::Indexed => format!("{counters}const FIRST_VERTEX: u32 = {}u;\n", spec.first_vertex),
+        Vertices::Expanded => counters,
+    };
     let text = format!(
         "{}{counters}const STACK_SIZE: u32 = {}u;\nconst LEAF_SIZE: u32 = {}u;\nconst WG_X: u32 = {}u;\nconst WG_Y: u32 = {}u;\n\n{}",
         render_spec::constants::wgsl_header(),
@@ -617,6 +678,56 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The ray-list, self-hit and indexed-vertex variants translate for every method and stage;
+    /// the default kernels carry none of their code; and every read of a triangle goes through
+    /// `fetch_tri`, the one place that knows the vertex form.
+    #[test]
+    fn the_test_and_memory_variants_translate_and_the_default_has_none_of_their_code() {
+        const STAGES_ALL: [Stage; 7] =
+            [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert, Stage::Ao, Stage::Diffuse];
+        for method in Method::ALL {
+            for stage in STAGES_ALL {
+                for (ray_list, self_hits, vertices) in [
+                    (true, false, Vertices::Expanded),
+                    (false, true, Vertices::Expanded),
+                    (false, false, Vertices::Indexed),
+                    (true, true, Vertices::Indexed),
+                ] {
+                    let s = Specialisation {
+                        ray_list,
+                        self_hits,
+                        vertices,
+                        first_vertex: 1000,
+                        ..spec(method, true, true)
+                    };
+                    if let Err(e) = compile(stage, &s) {
+                        panic!("{method:?} {stage:?} ray list {ray_list} self-hits {self_hits} {vertices:?}: {e:?}");
+                    }
+                    let text = source(stage, &s);
+                    let body = &text[text.find("fn fetch_tri(").expect("fetch_tri")..];
+                    let body_end = body.find("\n}\n").expect("fetch_tri ends");
+                    let outside = text.replace(&body[..body_end], "");
+                    let bypass = outside
+                        .match_indices("tris[")
+                        .any(|(at, _)| !outside[..at].ends_with(|c: char| c.is_alphanumeric() || c == '_'));
+                    assert!(!bypass, "{method:?} {stage:?}: a triangle read bypasses fetch_tri");
+                }
+                let plain = source(stage, &spec(method, true, true));
+                assert!(!plain.contains("SLOT_SELF_") || !plain.contains("count(SLOT_SELF_"), "{method:?} {stage:?}");
+                assert!(!plain.contains("given.origin") && !plain.contains("FIRST_VERTEX"), "{method:?} {stage:?}");
+                assert!(
+                    plain.contains("fn fetch_tri(i: u32) -> Tri {\n    return tris[i];\n}"),
+                    "{method:?} {stage:?}"
+                );
+            }
+        }
+        let indexed = source(
+            Stage::Cast,
+            &Specialisation { vertices: Vertices::Indexed, first_vertex: 77, ..spec(Method::Lst, false, false) },
+        );
+        assert!(indexed.contains("const FIRST_VERTEX: u32 = 77u;") && indexed.contains("tris: array<vec4<u32>>"));
     }
 
     #[test]

@@ -10,7 +10,7 @@
 
 use crate::device::{Buffer, DeviceKind, Gpu, Pipeline};
 use crate::error::VkError;
-use crate::kernels::{self, Half, Method, Specialisation, Split, Stage, counters};
+use crate::kernels::{self, Half, Method, Specialisation, Split, Stage, Vertices, counters};
 use crate::rt::RtTracer;
 use crate::tiles::{self, Tile};
 use bvh_format::{Light, SceneFile};
@@ -100,6 +100,10 @@ pub enum VkRenderError {
     LostWork { method: &'static str, what: &'static str, done: u64, expected: u64 },
     #[error("the {method} traversal {what}, so no image was made")]
     Fault { method: &'static str, what: String },
+    #[error(
+        "rt-pipeline traces the driver's own structures, not the file's triangles, so --vertices indexed does not apply to it; use lst, stackless, sst or sst-subgroup"
+    )]
+    IndexedRtPipeline,
 }
 
 #[repr(C)]
@@ -177,6 +181,9 @@ pub struct Renderer<'g> {
     tile_pixels: u64,
     /// Frames recorded back to back into each submission ([`Renderer::set_frames_per_submission`]).
     frames_per_submission: u32,
+    /// [`Renderer::cast_rays`]: the rays of the frame being cast, one per pixel (origin, 1,
+    /// direction, 1: `PathRay` of common.wgsl).
+    ray_list: Option<Vec<[f32; 8]>>,
 }
 
 /// The kernels' storage buffers by binding number, as common.wgsl names them; `render_tile` binds
@@ -357,6 +364,10 @@ impl<'g> Renderer<'g> {
             intersect: Intersect::Watertight,
             fixed_offset: false,
             split,
+            ray_list: false,
+            vertices: Vertices::Expanded,
+            first_vertex: 0,
+            self_hits: false,
         };
         let (wx, wy) = workgroup;
         let limit = info.max_workgroup_invocations.min(info.max_workgroup_size[0]).min(MAX_WORKGROUP_INVOCATIONS);
@@ -410,6 +421,7 @@ impl<'g> Renderer<'g> {
             targets: None,
             tile_pixels: tiles::device_tile_pixels(info),
             frames_per_submission: 1,
+            ray_list: None,
         })
     }
 
@@ -431,11 +443,107 @@ impl<'g> Renderer<'g> {
         self.specialise(Specialisation { exact, ..self.spec });
     }
 
+    /// Reads triangle corners in `form` from the next frame on (`--vertices`): uploads that form's
+    /// triangle array in place of the other's, so a renderer holds one of them only, and builds
+    /// the kernels that read it. Both forms give the same images bit for bit.
+    pub fn set_vertices(&mut self, form: Vertices) -> Result<(), VkRenderError> {
+        if form == self.spec.vertices {
+            return Ok(());
+        }
+        if self.spec.method == Method::RtPipeline {
+            return Err(VkRenderError::IndexedRtPipeline);
+        }
+        let info = self.gpu.info();
+        // The new array is made before the old one goes, so a refusal leaves the renderer as it was.
+        let (tris, split, first_vertex) = match form {
+            Vertices::Expanded => {
+                let arrays = SceneArrays::new(self.scene);
+                let (tri_chunks, tri_chunk) = chunking(info, u64::MAX, "triangles", &arrays.tris)?;
+                (
+                    upload_chunks(self.gpu, &arrays.tris, tri_chunk, "triangles")?,
+                    Split { tri_chunks, tri_chunk, ..self.spec.split },
+                    0,
+                )
+            }
+            Vertices::Indexed => {
+                let records = indexed_records(self.scene);
+                // One binding: the kernels find the vertices at a fixed record after the triangles.
+                fits(info, "indexed triangles and vertices", &records)?;
+                let buffer = self.gpu.create_buffer_with(&records, "indexed triangles and vertices")?;
+                (
+                    vec![buffer],
+                    Split { tri_chunks: 1, tri_chunk: u32::MAX, ..self.spec.split },
+                    self.scene.triangles.len() as u32,
+                )
+            }
+        };
+        self.tris = tris;
+        self.specialise(Specialisation { vertices: form, first_vertex, split, ..self.spec });
+        Ok(())
+    }
+
+    /// Counts the rays that the triangle they leave from meets (`--self-hits`, exact acne:
+    /// [`render_spec::SelfHits`]) in the frames after this: a kernel variant with one more
+    /// triangle test per such ray.
+    pub fn set_self_hits(&mut self, on: bool) {
+        self.specialise(Specialisation { self_hits: on, ..self.spec });
+    }
+
+    /// The closest hits of the given rays (origin, direction; the direction need not be unit),
+    /// cast from 0 to f32::MAX as primary rays are, with `accuracy`'s triangle test: the AOVs
+    /// of a ray-casting frame whose pixel `i` is ray `i` (`t`, `prim` and the rest; the ray
+    /// counts in [`Image::rays`]). For tests that aim rays at chosen points (shared edges and
+    /// vertices): the kernels read them from the `paths` buffer in place of the camera's.
+    pub fn cast_rays(&mut self, rays: &[([f32; 3], [f32; 3])], accuracy: Accuracy) -> Result<Image, VkRenderError> {
+        const WIDTH: usize = 1024;
+        let n = rays.len().max(1);
+        let (width, height) = (n.min(WIDTH), n.div_ceil(WIDTH));
+        let first = rays.first().copied().unwrap_or(([0.0; 3], [0.0, 0.0, 1.0]));
+        // The last row is filled up with copies of the first ray, whose results are dropped.
+        let list = (0..width * height)
+            .map(|i| {
+                let (o, d) = rays.get(i).copied().unwrap_or(first);
+                [o[0], o[1], o[2], 1.0, d[0], d[1], d[2], 1.0]
+            })
+            .collect();
+        let settings = Settings {
+            width: width as u32,
+            height: height as u32,
+            // Unused by the kernels but checked like any frame's.
+            camera: render_spec::CameraSpec {
+                eye: glam::Vec3::Z,
+                at: glam::Vec3::ZERO,
+                up: glam::Vec3::Y,
+                fov_deg: 45.0,
+            },
+            mode: Mode::Cast,
+            lights: Vec::new(),
+            max_indirections: 0,
+            aovs: true,
+            accuracy,
+        };
+        self.ray_list = Some(list);
+        let out = self.render(&settings);
+        self.ray_list = None;
+        let mut image = out?.image;
+        image.rgb.truncate(rays.len());
+        if let Some(a) = &mut image.aov {
+            a.t.truncate(rays.len());
+            a.normal.truncate(rays.len());
+            a.prim.truncate(rays.len());
+            a.nodes.truncate(rays.len());
+            a.tris.truncate(rays.len());
+        }
+        image.rays.primary = rays.len() as u64;
+        Ok(image)
+    }
+
     /// The kernels of the frame's accuracy settings: the triangle test and the kind of origin
     /// offset are kernel variants, so the default kernels carry no code of the others.
     fn specialise_for(&mut self, a: &Accuracy) {
         let fixed_offset = matches!(a.offset, Offset::Fixed(_));
-        self.specialise(Specialisation { intersect: a.intersect, fixed_offset, ..self.spec });
+        let ray_list = self.ray_list.is_some();
+        self.specialise(Specialisation { intersect: a.intersect, fixed_offset, ray_list, ..self.spec });
     }
 
     fn specialise(&mut self, spec: Specialisation) {
@@ -629,6 +737,13 @@ impl<'g> Renderer<'g> {
         let mut done = 0;
         for tile in &plan {
             frame.tile = [tile.x, tile.y, tile.width, tile.height];
+            if let Some(list) = &self.ray_list {
+                let t = self.targets.as_ref().expect("the targets were made above");
+                let rows = (tile.y..tile.y + tile.height).map(|y| (y * s.width + tile.x) as usize);
+                let rays: Vec<[f32; 8]> =
+                    rows.flat_map(|at| list[at..at + tile.width as usize].iter().copied()).collect();
+                g.upload_slice(&t.paths, &rays)?;
+            }
             // Sample by sample (render_spec::accuracy::sample_positions): the kernels sum the
             // colours in this order and the last sample's conversion writes their mean.
             for (k, &(sx, sy)) in samples.iter().enumerate() {
@@ -824,6 +939,10 @@ impl<'g> Renderer<'g> {
             tally.rays.secondary += wide(counters::SECONDARY);
             tally.rays.ao += wide(counters::AO);
             tally.rays.diffuse += wide(counters::DIFFUSE);
+            tally.rays.self_hits.shadow += wide(counters::SELF_SHADOW);
+            tally.rays.self_hits.secondary += wide(counters::SELF_SECONDARY);
+            tally.rays.self_hits.ao += wide(counters::SELF_AO);
+            tally.rays.self_hits.diffuse += wide(counters::SELF_DIFFUSE);
             if mode != Mode::Whitted || end >= indirections || words[counters::LIVE + end as usize - 1] == 0 {
                 return Ok(());
             }
@@ -888,18 +1007,35 @@ impl SceneArrays {
     }
 }
 
+/// The indexed form's triangle array (`Vertices::Indexed`, `tris` in common.wgsl): per triangle
+/// its vertex indices and material, then the vertex positions padded to 16 bytes.
+fn indexed_records(scene: &SceneFile) -> Vec<[u32; 4]> {
+    let tris = scene.triangles.iter().map(|t| [t.vertices[0], t.vertices[1], t.vertices[2], t.material]);
+    let vertices = scene.vertices.iter().map(|v| [v[0].to_bits(), v[1].to_bits(), v[2].to_bits(), 0]);
+    tris.chain(vertices).collect()
+}
+
 /// Bytes of scene data a renderer with `method` uploads (nodes of the one layout it reads,
-/// triangles, normals, materials, input indices), for `bvhc info`.
+/// triangles in the default expanded form, normals, materials, input indices), for `bvhc info`.
 pub fn upload_bytes(scene: &SceneFile, method: Method) -> u64 {
+    upload_bytes_with(scene, method, Vertices::Expanded)
+}
+
+/// [`upload_bytes`] with the triangles in `form` (`--vertices`).
+pub fn upload_bytes_with(scene: &SceneFile, method: Method, form: Vertices) -> u64 {
     let nodes = match method {
         Method::Stackless => scene.escape.as_ref(),
         Method::RtPipeline => None,
         _ => scene.child_pair.as_ref(),
     };
     let a = SceneArrays::new(scene);
+    let tris = match form {
+        Vertices::Expanded => std::mem::size_of_val(&a.tris[..]),
+        Vertices::Indexed => 16 * (scene.triangles.len() + scene.vertices.len()),
+    };
     [
         std::mem::size_of_val(nodes.map_or(&[][..], |n| &n[..])),
-        std::mem::size_of_val(&a.tris[..]),
+        tris,
         std::mem::size_of_val(&a.normal_indices[..]),
         std::mem::size_of_val(&a.normals[..]),
         std::mem::size_of_val(&scene.materials[..]),

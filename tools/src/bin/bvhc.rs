@@ -303,14 +303,16 @@ fn info(file: &Path) -> Result<(), String> {
     }
     say!("    {:<22} {:>10}         {:>12}", "total", "", human_bytes(total));
     let per_tri = |bytes: u64| bytes as f64 / scene.triangles.len().max(1) as f64;
-    let vk = |m| per_tri(tracer_vk::render::upload_bytes(&scene, m));
-    use tracer_vk::kernels::Method as Vk;
+    let vk = |m, v| per_tri(tracer_vk::render::upload_bytes_with(&scene, m, v));
+    use tracer_vk::kernels::{Method as Vk, Vertices};
     say!(
-        "  bytes/triangle  file {:.1}; trace-cpu holds {:.1}; trace-vk uploads {:.1} (lst, sst), {:.1} (stackless)",
+        "  bytes/triangle  file {:.1}; trace-cpu holds {:.1}; trace-vk uploads {:.1} (lst, sst), {:.1} (stackless), with --vertices indexed {:.1}, {:.1}",
         per_tri(total),
         per_tri(tracer_cpu::held_bytes(&scene)),
-        vk(Vk::Lst),
-        vk(Vk::Stackless)
+        vk(Vk::Lst, Vertices::Expanded),
+        vk(Vk::Stackless, Vertices::Expanded),
+        vk(Vk::Lst, Vertices::Indexed),
+        vk(Vk::Stackless, Vertices::Indexed)
     );
     say!(
         "  shading         ambient {:?}, background {:?}, up to {} indirections",

@@ -89,6 +89,9 @@ fn main() -> ExitCode {
 
 fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option<usize>) -> Result<(), String> {
     let outputs = args.check()?;
+    if reference && args.self_hits {
+        return Err("--self-hits counts the fast tracer's rays, not the f64 reference's; leave out one of them".into());
+    }
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
@@ -103,7 +106,9 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
                 tracer_cpu::reference::render_with_progress(scene, &settings, &progress)
                     .map(|r| (r.image, Some(r.linear)))
             } else {
-                tracer_cpu::render_with_progress(&Tracer::new(scene), &settings, method, &progress).map(|i| (i, None))
+                let mut tracer = Tracer::new(scene);
+                tracer.count_self_hits(args.self_hits);
+                tracer_cpu::render_with_progress(&tracer, &settings, method, &progress).map(|i| (i, None))
             }
         })
         .map_err(|e| e.to_string())?;
@@ -129,6 +134,9 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
         rays_per_second(r.total(), seconds),
         outputs.image.path.display()
     ));
+    if args.self_hits {
+        lines.push(tools::render_args::self_hits_line(&r));
+    }
     for line in lines.into_iter().chain(written) {
         say!("{line}");
     }

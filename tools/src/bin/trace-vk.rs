@@ -8,7 +8,7 @@ use tools::cli::{Progress, duration, rays_per_second};
 use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
 use tools::say;
 use tools::vk_bench::{AUTO, VkBench, check_validation};
-use tracer_vk::kernels::Method;
+use tracer_vk::kernels::{Method, Vertices};
 use tracer_vk::render::RT_TRAVERSAL;
 use tracer_vk::render::Renderer;
 use tracer_vk::rt::Support;
@@ -56,9 +56,31 @@ enum Command {
         /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
         #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
         workgroup: (u32, u32),
+        /// How the kernels read triangle corners: expanded (48 bytes per triangle, three reads)
+        /// or indexed (the file's form: 16 bytes per triangle and per vertex, four reads); the
+        /// images are the same. Given, the report says the bytes uploaded [default: expanded].
+        #[arg(long, value_enum)]
+        vertices: Option<VerticesArg>,
         #[command(flatten)]
         device: DeviceArgs,
     },
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum VerticesArg {
+    /// Three vertices per triangle, 48 bytes.
+    Expanded,
+    /// Vertex indices per triangle and every vertex once, 16 bytes each.
+    Indexed,
+}
+
+impl VerticesArg {
+    fn vertices(self) -> Vertices {
+        match self {
+            VerticesArg::Expanded => Vertices::Expanded,
+            VerticesArg::Indexed => Vertices::Indexed,
+        }
+    }
 }
 
 #[derive(clap::Args)]
@@ -90,6 +112,10 @@ struct BenchArgs {
     /// a large frame cut into small frames' dispatches, rays as coherent as the large frame's.
     #[arg(long, value_parser = parse_tile_pixels)]
     tile_pixels: Option<u64>,
+    /// Vertex forms to time each method with (`render --vertices`), side by side: a form other
+    /// than expanded names its rows METHOD+FORM (lst+indexed), and each prints its bytes uploaded.
+    #[arg(long, value_delimiter = ',', value_enum, default_value = "expanded")]
+    vertices: Vec<VerticesArg>,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -129,8 +155,8 @@ fn main() -> ExitCode {
     tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
-        Command::Render { args, method, recalibrate, candidates, workgroup, device } => {
-            render(&args, method, Auto { recalibrate, candidates }, workgroup, &device)
+        Command::Render { args, method, recalibrate, candidates, workgroup, vertices, device } => {
+            render(&args, method, Auto { recalibrate, candidates }, workgroup, vertices, &device)
         }
     })
 }
@@ -194,6 +220,7 @@ fn render(
     method: MethodArg,
     auto: Auto,
     workgroup: (u32, u32),
+    vertices: Option<VerticesArg>,
     device: &DeviceArgs,
 ) -> Result<(), String> {
     let candidates = auto.candidates()?;
@@ -219,6 +246,10 @@ fn render(
     };
     let mut renderer = Renderer::new(&gpu, scene, method, workgroup).map_err(|e| e.to_string())?;
     renderer.set_exact(args.exact);
+    renderer.set_self_hits(args.self_hits);
+    if let Some(v) = vertices {
+        renderer.set_vertices(v.vertices()).map_err(|e| e.to_string())?;
+    }
     let pixels = u64::from(settings.width) * u64::from(settings.height);
     let bar = Progress::new(pixels, "rendering {bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
     let out = bar
@@ -254,6 +285,12 @@ fn render(
             split.tri_chunks
         ));
     }
+    if args.self_hits {
+        lines.push(tools::render_args::self_hits_line(&r));
+    }
+    if let Some(v) = vertices {
+        lines.push(tools::vk_bench::upload_line(scene, method, v.vertices()));
+    }
     if let Some(b) = renderer.structure_build() {
         let traversal: f64 = out.passes.iter().filter(|(l, _)| l == RT_TRAVERSAL).map(|(_, ms)| ms).sum();
         lines.push(format!(
@@ -287,7 +324,19 @@ fn method_of(m: MethodArg) -> Option<Method> {
 }
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
-    let methods: Vec<&str> = b.methods.iter().map(|&m| method_of(m).map_or(AUTO, Method::name)).collect();
+    let mut names: Vec<String> = Vec::new();
+    for &m in &b.methods {
+        for &v in &b.vertices {
+            let name = match method_of(m) {
+                Some(m) => tools::vk_bench::method_name(m, v.vertices()),
+                None => AUTO.to_owned(),
+            };
+            if !names.contains(&name) {
+                names.push(name);
+            }
+        }
+    }
+    let methods: Vec<&str> = names.iter().map(String::as_str).collect();
     let all: Vec<Method> = b.methods.iter().filter_map(|&m| method_of(m)).collect();
     let auto = Auto { recalibrate: b.recalibrate, candidates: b.candidates.clone() };
     let bench = VkBench {
@@ -295,6 +344,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
         candidates: auto.candidates()?,
         in_flight: b.in_flight,
         tile_pixels: b.tile_pixels,
+        report_uploads: b.vertices.iter().any(|&v| v != VerticesArg::Expanded),
         ..VkBench::new(open_for(&b.device, &all)?, b.workgroup, b.exact)
     };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;

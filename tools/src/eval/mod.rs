@@ -419,7 +419,7 @@ fn evaluate<B: Bench>(c: &Context<'_>, t: &Tracer<'_, B>, gpu: bool) -> Result<V
                                 ),
                                 ..f.base.clone()
                             };
-                            hit_renders.push((key, t.bench.image(&mut renderer, &s)?));
+                            hit_renders.push((key, t.bench.image_with_self_hits(&mut renderer, &s)?));
                             hit_renders.len() - 1
                         }
                     };
@@ -449,6 +449,7 @@ fn evaluate<B: Bench>(c: &Context<'_>, t: &Tracer<'_, B>, gpu: bool) -> Result<V
                         image: img,
                         hits,
                         shifts,
+                        self_hits: one.rays.self_hits.total(),
                     });
                     c.bar.inc(1);
                 }

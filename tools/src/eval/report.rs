@@ -38,6 +38,9 @@ pub struct Row {
     pub image: ImageErrors,
     pub hits: HitErrors,
     pub shifts: ShadingShifts,
+    /// Exact acne: of the one-sample render's shadow, secondary, AO and diffuse rays, those the
+    /// triangle they leave from meets (render_spec::SelfHits, both tracers' `--self-hits`).
+    pub self_hits: u64,
 }
 
 /// The mode as `bench` names it (`cast`, `whitted2`, `ao8`, `diffuse`).
@@ -49,7 +52,7 @@ pub fn mode_name(s: &Settings) -> String {
 pub const CSV_HEADER: &str = "scene,triangles,camera,width,height,mode,tracer,device,method,setting,intersect,offset,\
                               spp,cutoff,indirections,exact,median_ms,min_ms,primary,shadow,secondary,flip_mean,\
                               flip_p99,psnr_db,off_1_share,off_8_share,hit_rays,hit_disagree,hit_ties,leaks,\
-                              darker,lighter";
+                              darker,lighter,self_hits";
 
 impl Row {
     /// The frame this row belongs to: its chart and its section of the report.
@@ -67,7 +70,7 @@ impl Row {
         let [p, s, r] = self.rays;
         let (i, h, sh) = (&self.image, &self.hits, &self.shifts);
         format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.5},{:.5},{p},{s},{r},{:.6},{:.6},{:.3},{:.6},{:.6},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.5},{:.5},{p},{s},{r},{:.6},{:.6},{:.3},{:.6},{:.6},{},{},{},{},{},{},{}",
             field(&self.scene),
             self.triangles,
             field(&self.camera),
@@ -97,6 +100,7 @@ impl Row {
             h.leaks,
             sh.darker,
             sh.lighter,
+            self.self_hits,
         )
     }
 }
@@ -169,7 +173,7 @@ fn table_row(r: &Row) -> String {
     let (i, h, s) = (&r.image, &r.hits, &r.shifts);
     let pct = |x: f64| format!("{}%", significant(100.0 * x));
     format!(
-        "| {} {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+        "| {} {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
         r.tracer,
         r.method,
         r.setting,
@@ -183,7 +187,8 @@ fn table_row(r: &Row) -> String {
         h.ties,
         h.leaks,
         s.darker,
-        s.lighter
+        s.lighter,
+        r.self_hits
     )
 }
 
@@ -217,8 +222,9 @@ pub fn markdown(preface: &[String], rows: &[Row]) -> String {
         "\nColumns: median milliseconds per frame; FLIP mean and 99th percentile against the reference image; \
          PSNR; pixels off by more than 1/255 and 8/255; of the primary rays (one sample per pixel, the setting's \
          test and offset): hits on another triangle than the reference's (ties at shared edges apart), ties, leaks \
-         (past a surface the reference ray stops at); of the pixels whose hit agrees, those darker (acne) and \
-         lighter (missed shadows) by more than 8/255.\n",
+         (past a surface the reference ray stops at); of the pixels whose hit agrees, those darker (acne, as the \
+         image shows it) and lighter (missed shadows) by more than 8/255; self-hits: exact acne, the rays of \
+         that render (shadow, secondary, AO, diffuse) that the triangle they leave from meets.\n",
     );
     for f in frames(rows) {
         let group: Vec<&Row> = rows.iter().filter(|r| r.frame() == f).collect();
@@ -243,7 +249,7 @@ pub fn markdown(preface: &[String], rows: &[Row]) -> String {
         }
         s.push_str(
             "\n| tracer, method | setting | ms | FLIP mean | FLIP p99 | PSNR dB | >1/255 | >8/255 | hits differ | ties | \
-             leaks | darker | lighter |\n|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|\n",
+             leaks | darker | lighter | self-hits |\n|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|\n",
         );
         for r in &group {
             let _ = writeln!(s, "{}", table_row(r));
@@ -302,6 +308,7 @@ mod tests {
             image: ImageErrors { flip_mean: flip, flip_p99: flip, psnr: 30.0, off_1: 0.5, off_8: 0.25 },
             hits: HitErrors { rays: 12, leaks, ..Default::default() },
             shifts: ShadingShifts::default(),
+            self_hits: 0,
         }
     }
 
