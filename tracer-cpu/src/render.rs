@@ -2,6 +2,7 @@
 //! driver and written straight into the 8-bit image and, when asked for, the AOVs.
 
 use crate::Method;
+use crate::bvh8::Bvh8;
 use crate::geometry::{Cost, Hit, MollerTrumbore, Ray, TriangleTest, Watertight};
 use crate::lanes::{OneByOne, Packets, TraceLanes};
 use crate::packet::{LANES, Rays};
@@ -20,6 +21,8 @@ pub struct Tracer<'a> {
     pub(crate) tris: Vec<Triangle>,
     child_pair: Option<&'a [Node]>,
     escape: Option<&'a [Node]>,
+    /// The wide BVH, collapsed from the child-pair layout on first use.
+    wide: std::sync::OnceLock<Bvh8>,
 }
 
 impl<'a> Tracer<'a> {
@@ -29,7 +32,15 @@ impl<'a> Tracer<'a> {
             tris: scene.leaf_triangles(),
             child_pair: scene.child_pair.as_deref(),
             escape: scene.escape.as_deref(),
+            wide: std::sync::OnceLock::new(),
         }
+    }
+
+    /// The wide BVH of the child-pair layout, collapsed on the first call (once, whichever thread
+    /// asks); None for a file without that layout.
+    pub fn bvh8(&self) -> Option<&Bvh8> {
+        let nodes = self.child_pair?;
+        Some(self.wide.get_or_init(|| Bvh8::new(nodes, &self.tris)))
     }
 
     /// The triangles as every path intersects them: three vertices each, in leaf order.
@@ -39,7 +50,8 @@ impl<'a> Tracer<'a> {
 
     /// The scalar traversal `method` names, bound to the layout it reads: the child-pair layout
     /// for [`Method::Ordered`] and [`Method::Packet`], the escape-pointer layout for
-    /// [`Method::Stackless`], and for [`Method::Auto`] what [`Method::resolve`] picks. A method
+    /// [`Method::Stackless`], the wide BVH collapsed from the child-pair layout for
+    /// [`Method::Bvh8`], and for [`Method::Auto`] what [`Method::resolve`] picks. A method
     /// whose layout the file lacks is refused here ([`RenderError::MissingLayout`]), never walked
     /// on the other layout: the caller decides, once, which traversal its rays take.
     pub fn walk(&self, method: Method) -> Result<Walk<'_>, RenderError> {
@@ -47,6 +59,7 @@ impl<'a> Tracer<'a> {
         let missing = |layout| RenderError::MissingLayout { method: resolved.name(), layout };
         let layout = match resolved {
             Method::Stackless => Layout::Escape(self.escape.ok_or_else(|| missing("escape-pointer"))?),
+            Method::Bvh8 => Layout::Wide(self.bvh8().ok_or_else(|| missing("child-pair"))?),
             // `resolve` never answers Auto; it is listed so that the match stays exhaustive.
             Method::Ordered | Method::Packet | Method::Auto => {
                 Layout::ChildPair(self.child_pair.ok_or_else(|| missing("child-pair"))?)
@@ -61,6 +74,7 @@ impl<'a> Tracer<'a> {
 enum Layout<'a> {
     ChildPair(&'a [Node]),
     Escape(&'a [Node]),
+    Wide(&'a Bvh8),
 }
 
 /// A scalar traversal bound to its tracer and to the layout it walks, made by [`Tracer::walk`]
@@ -76,12 +90,13 @@ impl<'t> Walk<'t> {
         self.tracer
     }
 
-    /// The traversal this walk runs: [`Method::Ordered`] on the child-pair layout or
-    /// [`Method::Stackless`] on the escape-pointer layout.
+    /// The traversal this walk runs: [`Method::Ordered`] on the child-pair layout,
+    /// [`Method::Stackless`] on the escape-pointer layout or [`Method::Bvh8`] on the wide BVH.
     pub fn method(&self) -> Method {
         match self.layout {
             Layout::ChildPair(_) => Method::Ordered,
             Layout::Escape(_) => Method::Stackless,
+            Layout::Wide(_) => Method::Bvh8,
         }
     }
 
@@ -89,7 +104,7 @@ impl<'t> Walk<'t> {
     pub(crate) fn child_pair(&self) -> Option<&'t [Node]> {
         match self.layout {
             Layout::ChildPair(nodes) => Some(nodes),
-            Layout::Escape(_) => None,
+            Layout::Escape(_) | Layout::Wide(_) => None,
         }
     }
 
@@ -142,6 +157,7 @@ impl<'t> Walk<'t> {
         match self.layout {
             Layout::Escape(nodes) => traverse::escape::<ANY, T>(nodes, tris, ray, t_min, t_max, cost),
             Layout::ChildPair(nodes) => traverse::child_pair::<ANY, T>(nodes, tris, ray, t_min, t_max, stack, cost),
+            Layout::Wide(bvh) => bvh.trace::<ANY, T>(ray, t_min, t_max, stack, cost),
         }
     }
 }
