@@ -58,27 +58,23 @@ impl WideNode {
 /// Up to 8 triangles of a leaf, component by component: the vertices exactly as stored, the
 /// plane normal [`geometry::plane_normal`] computes, and the triangle's index in leaf order.
 /// Empty lanes hold NaN vertices (which no test hits) and index `u32::MAX`.
-#[repr(C, align(32))]
+#[repr(C, align(64))]
 #[derive(Clone, Copy, Debug)]
 pub struct TriBlock {
     /// `p[vertex][axis][lane]`.
     pub p: [[[f32; WIDTH]; 3]; 3],
-    /// `n[axis][lane]`.
-    pub n: [[f32; WIDTH]; 3],
     pub index: [u32; WIDTH],
 }
 
 impl TriBlock {
     fn new(tris: &[Triangle], indices: &[u32]) -> Self {
-        let mut b = Self { p: [[[f32::NAN; WIDTH]; 3]; 3], n: [[f32::NAN; WIDTH]; 3], index: [u32::MAX; WIDTH] };
+        let mut b = Self { p: [[[f32::NAN; WIDTH]; 3]; 3], index: [u32::MAX; WIDTH] };
         for (lane, &i) in indices.iter().enumerate() {
             let t = &tris[i as usize];
-            let n = geometry::plane_normal(t);
             for a in 0..3 {
                 b.p[0][a][lane] = t.p0[a];
                 b.p[1][a][lane] = t.p1[a];
                 b.p[2][a][lane] = t.p2[a];
-                b.n[a][lane] = n[a];
             }
             b.index[lane] = i;
         }
@@ -137,12 +133,12 @@ impl Bvh8 {
             return out;
         }
         let mut work: Vec<(Work, Option<(usize, usize)>)> = vec![(Work::Binary(0), None)];
-        let mut indices = Vec::with_capacity(WIDTH);
+        let (mut indices, mut scratch) = (Vec::with_capacity(WIDTH), Vec::new());
         while let Some((w, parent)) = work.pop() {
             let r = match w {
                 Work::Binary(b) if counts[b as usize] <= WIDTH as u64 => {
                     indices.clear();
-                    leaf_indices(nodes, b, &mut indices);
+                    leaf_indices(nodes, b, &mut indices, &mut scratch);
                     indices.sort_unstable();
                     out.leaf(tris, &indices)
                 }
@@ -356,9 +352,10 @@ fn subtree_counts(nodes: &[Node]) -> Vec<u64> {
     counts
 }
 
-/// The triangles under binary node `b`.
-fn leaf_indices(nodes: &[Node], b: u32, out: &mut Vec<u32>) {
-    let mut stack = vec![b];
+/// The triangles under binary node `b`, with `stack` as scratch.
+fn leaf_indices(nodes: &[Node], b: u32, out: &mut Vec<u32>, stack: &mut Vec<u32>) {
+    stack.clear();
+    stack.push(b);
     while let Some(n) = stack.pop() {
         let node = &nodes[n as usize];
         if node.is_leaf() {
@@ -456,7 +453,22 @@ mod avx2 {
             _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
         );
         let sum = _mm256_add_ps(_mm256_add_ps(w0, w1), w2);
-        let n = [load(&b.n[0]), load(&b.n[1]), load(&b.n[2])];
+        // The plane normal, as geometry::plane_normal computes it.
+        let e1 = [
+            _mm256_sub_ps(load(&b.p[1][0]), load(&b.p[0][0])),
+            _mm256_sub_ps(load(&b.p[1][1]), load(&b.p[0][1])),
+            _mm256_sub_ps(load(&b.p[1][2]), load(&b.p[0][2])),
+        ];
+        let e2 = [
+            _mm256_sub_ps(load(&b.p[2][0]), load(&b.p[0][0])),
+            _mm256_sub_ps(load(&b.p[2][1]), load(&b.p[0][1])),
+            _mm256_sub_ps(load(&b.p[2][2]), load(&b.p[0][2])),
+        ];
+        let n = [
+            _mm256_sub_ps(_mm256_mul_ps(e1[1], e2[2]), _mm256_mul_ps(e1[2], e2[1])),
+            _mm256_sub_ps(_mm256_mul_ps(e1[2], e2[0]), _mm256_mul_ps(e1[0], e2[2])),
+            _mm256_sub_ps(_mm256_mul_ps(e1[0], e2[1]), _mm256_mul_ps(e1[1], e2[0])),
+        ];
         let den = dot(&n, d);
         let t = _mm256_div_ps(dot(&n, &a0), den);
         let mut m = _mm256_or_ps(positive, negative);
@@ -512,6 +524,21 @@ mod avx2 {
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
         [m, t, u, v, one]
     }
+
+    /// Asks for the cache lines of the node or leaf block `r`.
+    #[inline(always)]
+    fn prefetch(bvh: &Bvh8, r: u32) {
+        let (ptr, lines) = if r & LEAF == 0 {
+            (bvh.nodes.as_ptr().wrapping_add(r as usize).cast::<i8>(), size_of::<super::WideNode>() / 64)
+        } else {
+            (bvh.blocks.as_ptr().wrapping_add((r & !LEAF) as usize).cast::<i8>(), size_of::<TriBlock>() / 64)
+        };
+        for l in 0..lines.min(PREFETCH_LINES) {
+            // SAFETY: a prefetch never faults, whatever the address.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(ptr.wrapping_add(64 * l)) };
+        }
+    }
+    const PREFETCH_LINES: usize = 8;
 
     /// [`Bvh8::trace`] with AVX2.
     ///
@@ -573,6 +600,13 @@ mod avx2 {
                         continue;
                     }
                     let near = store(near);
+                    // The children still to visit start loading now, together.
+                    let mut all = mask | (1 << first);
+                    while all != 0 {
+                        let i = all.trailing_zeros() as usize;
+                        prefetch(bvh, node.child[i]);
+                        all &= all - 1;
+                    }
                     if ANY {
                         // Any hit ends the ray: no order needed.
                         while mask != 0 {

@@ -41,8 +41,12 @@ pub enum Method {
     Bvh8,
     /// 8-wide SIMD packets (AVX2) for primary and shadow rays, ordered traversal for the rest.
     Packet,
-    /// [`Method::Packet`] where the CPU has AVX2, else [`Method::Ordered`]; [`Method::Stackless`]
-    /// for a file that holds only the escape-pointer layout.
+    /// Picked per kind of ray (`lanes::Mixed`): incoherent rays (mirror and glass bounces, AO
+    /// and diffuse rays) one at a time on the wide BVH ([`Method::Bvh8`]), which the ray report
+    /// measures ahead of packets on them on every scene; the coherent primary and shadow rays as
+    /// packets ([`Method::Packet`]) where a short measurement at the start of the frame finds
+    /// packets faster on a sample of its primary rays, else on the wide BVH too.
+    /// [`Method::Stackless`] for a file that holds only the escape-pointer layout.
     Auto,
 }
 
@@ -52,8 +56,8 @@ impl Method {
     pub fn resolve(self, scene: &bvh_format::SceneFile) -> Method {
         match self {
             Method::Auto if scene.child_pair.is_none() && scene.escape.is_some() => Method::Stackless,
-            Method::Auto | Method::Packet if packet::available() => Method::Packet,
-            Method::Auto | Method::Packet => Method::Ordered,
+            Method::Packet if packet::available() => Method::Packet,
+            Method::Packet => Method::Ordered,
             m => m,
         }
     }

@@ -9,7 +9,7 @@
 //! image does not depend on how its rays are grouped or traced ([`TraceLanes`]).
 
 use crate::geometry::Cost;
-use crate::lanes::TraceLanes;
+use crate::lanes::{Stage, TraceLanes};
 use crate::packet::{LANES, Rays, Results};
 use crate::shade::{self, SurfaceOf};
 use crate::wide::{Lanes, Mask, V3};
@@ -122,7 +122,7 @@ impl<'a> Shading<'a> {
         let mut out = Block::default();
         let mut colour = V3::<L>::zero();
         let mut rays = *primary;
-        let mut hits = lanes.closest(&rays, self.intersect);
+        let mut hits = lanes.closest_in(Stage::Primary, &rays, self.intersect);
         out.rays.primary = rays.count() as u64;
         let mut weight = L::splat(1.0);
         for depth in 0u32.. {
@@ -191,7 +191,7 @@ impl<'a> Shading<'a> {
                     valid: L::bools(asks),
                 };
                 out.rays.shadow += L::count(asks) as u64;
-                let blocked = lanes.occluded(&shadow, self.intersect);
+                let blocked = lanes.occluded_in(Stage::Shadow, &shadow, self.intersect);
                 add_cost(&mut out.cost, &shadow.valid, &blocked);
                 let lit = asks & !L::mask(blocked.hit);
                 local = V3::select(lit, local + term.mul_each(V3::splat(Vec3::from(light.colour))), local);
@@ -218,7 +218,7 @@ impl<'a> Shading<'a> {
                 valid: L::bools(go),
             };
             out.rays.secondary += L::count(go) as u64;
-            hits = lanes.closest(&rays, self.intersect);
+            hits = lanes.closest_in(Stage::Secondary, &rays, self.intersect);
         }
         out.colour = colour.to_arrays();
         out
@@ -313,7 +313,7 @@ impl Shading<'_> {
             let n = sequence::incoherent_sample(seeds.sample, ao.samples, k);
             let rays = self.incoherent_rays(s, hit, seeds, self.ao_distance, n);
             out.rays.ao += rays.count() as u64;
-            let blocked = lanes.occluded(&rays, self.intersect);
+            let blocked = lanes.occluded_in(Stage::Ao, &rays, self.intersect);
             add_cost(&mut out.cost, &rays.valid, &blocked);
             for i in 0..LANES {
                 open[i] += u32::from(hit[i] && !blocked.hit[i]);
@@ -336,7 +336,7 @@ impl Shading<'_> {
     ) -> V3<L> {
         let rays = self.incoherent_rays(s, hit, seeds, f32::INFINITY, seeds.sample);
         out.rays.diffuse += rays.count() as u64;
-        let hits = lanes.closest(&rays, self.intersect);
+        let hits = lanes.closest_in(Stage::Diffuse, &rays, self.intersect);
         add_cost(&mut out.cost, &rays.valid, &hits);
         let found: [bool; LANES] = std::array::from_fn(|i| hit[i] && hits.hit[i]);
         let background = V3::<L>::splat(self.background);

@@ -23,9 +23,12 @@ enum Command {
     Render {
         #[command(flatten)]
         args: Box<RenderArgs>,
-        /// Traversal: SIMD packets where the CPU has AVX2 (else ordered), ordered child-pair
-        /// traversal, or the stackless escape-pointer walk; auto takes the stackless walk for a
-        /// file compiled with only the escape-pointer layout.
+        /// Traversal: auto picks per kind of ray (incoherent rays one at a time on the wide BVH;
+        /// primary and shadow rays as packets where a short measurement at the start finds them
+        /// faster, else on the wide BVH too; the stackless walk for a file compiled with only the
+        /// escape-pointer layout); packet: SIMD packets where the CPU has AVX2 (else ordered);
+        /// ordered child-pair traversal; the stackless escape-pointer walk; bvh8: the wide BVH
+        /// collapsed at load from the child-pair layout, one ray at a time.
         #[arg(long, value_enum, default_value = "auto")]
         method: MethodArg,
         /// Render the exact reference instead: f64 arithmetic throughout, every bounce up to the
@@ -62,6 +65,7 @@ enum MethodArg {
     Packet,
     Ordered,
     Stackless,
+    Bvh8,
 }
 
 impl MethodArg {
@@ -71,6 +75,7 @@ impl MethodArg {
             MethodArg::Packet => Method::Packet,
             MethodArg::Ordered => Method::Ordered,
             MethodArg::Stackless => Method::Stackless,
+            MethodArg::Bvh8 => Method::Bvh8,
         }
     }
 }

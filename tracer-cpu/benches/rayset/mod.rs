@@ -108,7 +108,13 @@ pub fn generate(scene: &SceneFile, width: u32, height: u32) -> Result<[RaySet; 5
             let secondary = (Ray::new(off, mirror), f32::INFINITY);
             let bounce = sequence::cosine_direction(surf.geometric.into(), sequence::sample_2d(i as u32, 0));
             let bounce = Ray::new(off, Vec3::from(bounce));
-            [Some((ray, f32::INFINITY)), shadow, Some(secondary), Some((bounce, ao_length)), Some((bounce, f32::INFINITY))]
+            [
+                Some((ray, f32::INFINITY)),
+                shadow,
+                Some(secondary),
+                Some((bounce, ao_length)),
+                Some((bounce, f32::INFINITY)),
+            ]
         })
         .collect();
     let mut sets: [Vec<Option<(Ray, f32)>>; 5] = std::array::from_fn(|_| Vec::with_capacity(w * h));
