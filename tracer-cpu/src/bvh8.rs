@@ -689,3 +689,164 @@ mod avx2 {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{MollerTrumbore, Watertight};
+    use glam::Vec3;
+
+    /// A binary tree over `tris` made by halving index ranges down to leaves of `leaf` triangles,
+    /// with boxes from the vertices (what the collapse reads; the builder's trees are tested
+    /// through `tests/hits.rs`).
+    fn halving_tree(tris: &[Triangle], leaf: u32) -> Vec<Node> {
+        fn bounds(tris: &[Triangle]) -> ([f32; 3], [f32; 3]) {
+            let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+            for v in tris.iter().flat_map(|t| t.vertices()) {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(v[a]);
+                    hi[a] = hi[a].max(v[a]);
+                }
+            }
+            (lo, hi)
+        }
+        let mut nodes = vec![Node { min: [0.0; 3], count: 0, max: [0.0; 3], index: 0 }];
+        let mut work = vec![(0usize, 0u32, tris.len() as u32)];
+        while let Some((i, start, n)) = work.pop() {
+            let (min, max) = bounds(&tris[start as usize..(start + n) as usize]);
+            if n <= leaf {
+                nodes[i] = Node { min, count: n, max, index: start };
+            } else {
+                let c = nodes.len();
+                nodes[i] = Node { min, count: 0, max, index: c as u32 };
+                nodes.extend([Node { min: [0.0; 3], count: 0, max: [0.0; 3], index: 0 }; 2]);
+                work.push((c, start, n / 2));
+                work.push((c + 1, start + n / 2, n - n / 2));
+            }
+        }
+        nodes
+    }
+
+    /// `n` small triangles scattered in the unit cube.
+    fn scattered(n: usize, seed: u64) -> Vec<Triangle> {
+        let mut rng = ::tests::Rng(seed);
+        (0..n)
+            .map(|_| {
+                let c = Vec3::new(rng.unit(), rng.unit(), rng.unit());
+                let mut v = || (c + Vec3::new(rng.signed(), rng.signed(), rng.signed()) * 0.05).to_array();
+                Triangle::from_vertices(v(), v(), v())
+            })
+            .collect()
+    }
+
+    /// Every triangle sits in exactly one leaf block, inside every box on its way from the root,
+    /// and the blocks' empty lanes hit nothing.
+    fn check_structure(bvh: &Bvh8, tris: &[Triangle]) {
+        let mut seen = vec![0u32; tris.len()];
+        let mut work = vec![(bvh.root, [f32::NEG_INFINITY; 3], [f32::INFINITY; 3])];
+        while let Some((r, lo, hi)) = work.pop() {
+            if r & LEAF != 0 {
+                let b = &bvh.blocks[(r & !LEAF) as usize];
+                for lane in 0..WIDTH {
+                    let i = b.index[lane];
+                    if i == u32::MAX {
+                        assert!(b.p.iter().all(|v| v.iter().all(|a| a[lane].is_nan())), "empty lanes hold NaN");
+                        continue;
+                    }
+                    seen[i as usize] += 1;
+                    assert_eq!(b.triangle(lane).vertices(), tris[i as usize].vertices(), "the vertices as stored");
+                    for v in tris[i as usize].vertices() {
+                        assert!((0..3).all(|a| lo[a] <= v[a] && v[a] <= hi[a]), "triangle {i} outside its box");
+                    }
+                }
+                continue;
+            }
+            let node = &bvh.nodes[r as usize];
+            assert!(node.valid.count_ones() >= 2 && node.valid < 1 << WIDTH, "a node has 2 to 8 children");
+            for slot in (0..WIDTH).filter(|&s| node.valid & (1 << s) != 0) {
+                let clo = [node.bounds[0][slot], node.bounds[1][slot], node.bounds[2][slot]];
+                let chi = [node.bounds[3][slot], node.bounds[4][slot], node.bounds[5][slot]];
+                work.push((node.child[slot], clo, chi));
+            }
+        }
+        assert!(seen.iter().all(|&n| n == 1), "every triangle in exactly one block");
+    }
+
+    #[test]
+    fn the_collapse_keeps_every_triangle_once_inside_its_boxes() {
+        for (n, leaf) in [(1, 1), (8, 2), (9, 1), (1000, 1), (1000, 3), (777, 8)] {
+            let tris = scattered(n, n as u64);
+            let bvh = Bvh8::new(&halving_tree(&tris, leaf), &tris);
+            check_structure(&bvh, &tris);
+            assert_eq!(bvh.is_empty(), n <= WIDTH, "{n} triangles");
+            // Subtrees of at most 8 triangles are single blocks: at most twice the blocks needed.
+            assert!(bvh.len().1 <= 2 * n.div_ceil(WIDTH) + 1, "{n} triangles in {} blocks", bvh.len().1);
+        }
+    }
+
+    /// A leaf of more triangles than a block (a file from another builder) becomes wide nodes
+    /// over runs of 8, boxed by their triangles, and the hits stay the scalar traversal's.
+    #[test]
+    fn large_leaves_are_split_into_blocks_and_hit_the_same() {
+        for n in [9, 64, 65, 700] {
+            let tris = scattered(n, 7 + n as u64);
+            let nodes = halving_tree(&tris, n as u32);
+            assert_eq!(nodes.len(), 1, "one leaf");
+            let bvh = Bvh8::new(&nodes, &tris);
+            check_structure(&bvh, &tris);
+            let mut rng = ::tests::Rng(n as u64);
+            let (mut stack, mut cost) = (Stack::default(), Cost::default());
+            let mut hits = 0;
+            for _ in 0..2000 {
+                let o = Vec3::new(rng.signed(), rng.signed(), rng.signed()) * 2.0;
+                // Aimed at a triangle's centroid, so that most rays hit something.
+                let t = &tris[rng.below(n)];
+                let centroid = (Vec3::from(t.p0) + Vec3::from(t.p1) + Vec3::from(t.p2)) / 3.0;
+                let d = (centroid - o).normalize();
+                let ray = Ray::new(o, d);
+                let want = crate::traverse::child_pair::<false, Watertight>(
+                    &nodes,
+                    &tris,
+                    &ray,
+                    0.0,
+                    f32::INFINITY,
+                    &mut stack,
+                    &mut cost,
+                );
+                assert_eq!(bvh.trace::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut cost), want);
+                assert_eq!(
+                    bvh.trace_portable::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut cost),
+                    want
+                );
+                let mt = crate::traverse::child_pair::<false, MollerTrumbore>(
+                    &nodes,
+                    &tris,
+                    &ray,
+                    0.0,
+                    f32::INFINITY,
+                    &mut stack,
+                    &mut cost,
+                );
+                assert_eq!(bvh.trace::<false, MollerTrumbore>(&ray, 0.0, f32::INFINITY, &mut stack, &mut cost), mt);
+                hits += usize::from(want.is_some());
+            }
+            assert!(hits > 1000, "{n} triangles: only {hits} rays hit");
+        }
+    }
+
+    /// The traversal's work counts: one box per child of each node entered, one triangle per
+    /// occupied lane of each block tested.
+    #[test]
+    fn costs_count_boxes_and_triangles_tested() {
+        let tris = scattered(300, 3);
+        let bvh = Bvh8::new(&halving_tree(&tris, 2), &tris);
+        let mut stack = Stack::default();
+        let ray = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z);
+        let (mut a, mut b) = (Cost::default(), Cost::default());
+        let hit = bvh.trace::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut a);
+        let same = bvh.trace_portable::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut b);
+        assert_eq!(hit, same);
+        assert_eq!(a, b, "both traversals visit the same nodes and blocks");
+        assert!(a.nodes >= bvh.nodes[0].valid.count_ones() && a.tris > 0, "{a:?}");
+    }
+}
