@@ -15,7 +15,7 @@ use tracer_cpu::{Method, Tracer, packet};
 
 fn primary_rays(c: &mut Criterion) {
     let scene = rayset::load(&rayset::scenes_dir().join("bunny.toml")).expect("the bunny compiles");
-    let [primary, ..]: [RaySet; 3] = rayset::generate(&scene, 640, 480).expect("the bunny has rays");
+    let [primary, ..]: [RaySet; 5] = rayset::generate(&scene, 640, 480).expect("the bunny has rays");
     assert_eq!(primary.kind, Kind::Primary);
     let tracer = Tracer::new(&scene);
     #[cfg(feature = "embree")]

@@ -127,10 +127,7 @@ pub fn intersect(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f
     }
     // The distance from the plane, not from the edge functions: their sum cancels for an origin
     // far from a small triangle.
-    let (p0, p1, p2) = (tri.p0, tri.p1, tri.p2);
-    let e1 = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
-    let e2 = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
-    let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
+    let n = plane_normal(tri);
     let den = n[0] * d.x + n[1] * d.y + n[2] * d.z;
     if den == 0.0 {
         return None;
@@ -141,6 +138,17 @@ pub fn intersect(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f
     }
     let inv = 1.0 / sum;
     Some((t, w1 * inv, w2 * inv))
+}
+
+/// The (unnormalised) normal of the triangle's plane that [`intersect`] measures distances with:
+/// `cross(p1 - p0, p2 - p0)`, operation by operation. A triangle's alone, so the wide BVH's leaf
+/// blocks store it (`bvh8`), and the packet path computes it once per triangle, in this order.
+#[inline(always)]
+pub fn plane_normal(tri: &Triangle) -> [f32; 3] {
+    let (p0, p1, p2) = (tri.p0, tri.p1, tri.p2);
+    let e1 = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
+    let e2 = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
+    [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]]
 }
 
 /// Möller-Trumbore (thesis 4.2.4) on vertex 0 and the two edges from it, as every path tested

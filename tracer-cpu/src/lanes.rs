@@ -15,6 +15,38 @@ use render_spec::Intersect;
 pub trait TraceLanes {
     fn closest(&mut self, rays: &Rays, test: Intersect) -> Results;
     fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results;
+
+    /// [`Self::closest`] for rays of the stage `stage` (the Whitted driver says which), for a
+    /// tracer that picks its way by the kind of ray.
+    fn closest_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
+        let _ = stage;
+        self.closest(rays, test)
+    }
+
+    /// [`Self::occluded`] for rays of the stage `stage`.
+    fn occluded_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
+        let _ = stage;
+        self.occluded(rays, test)
+    }
+}
+
+/// The kinds of ray the Whitted driver traces: coherent (primary rays, the shadow rays of a block
+/// towards one light) or incoherent (mirror and glass bounces, AO and diffuse rays).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    Primary,
+    Shadow,
+    Secondary,
+    Ao,
+    Diffuse,
+}
+
+impl Stage {
+    /// Whether the rays of a block in this stage start (nearly) together and run (nearly) the same
+    /// way, which is where packets can pay.
+    pub fn coherent(self) -> bool {
+        matches!(self, Stage::Primary | Stage::Shadow)
+    }
 }
 
 /// One ray at a time with a scalar traversal (ordered or stackless, as
@@ -102,5 +134,42 @@ impl TraceLanes for Packets<'_> {
     }
     fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results {
         self.trace_with::<true>(rays, test)
+    }
+}
+
+/// `--method auto`: every ray on the wide BVH one at a time ([`crate::bvh8`]), except the coherent
+/// stages ([`Stage::coherent`]), which go as AVX2 packets over the child-pair tree where
+/// `coherent_packets` (decided per frame by [`crate::render`]'s short measurement).
+pub struct Mixed<'a> {
+    single: OneByOne<'a>,
+    packets: Option<Packets<'a>>,
+}
+
+impl<'a> Mixed<'a> {
+    /// Singles on `wide` (a bvh8 walk); packets on `pairs` (a child-pair walk) for the coherent
+    /// stages, or none.
+    pub fn new(wide: Walk<'a>, pairs: Option<Walk<'a>>) -> Self {
+        Self { single: OneByOne::new(wide), packets: pairs.map(Packets::new) }
+    }
+}
+
+impl TraceLanes for Mixed<'_> {
+    fn closest(&mut self, rays: &Rays, test: Intersect) -> Results {
+        self.single.closest(rays, test)
+    }
+    fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results {
+        self.single.occluded(rays, test)
+    }
+    fn closest_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
+        match &mut self.packets {
+            Some(p) if stage.coherent() => p.closest(rays, test),
+            _ => self.single.closest(rays, test),
+        }
+    }
+    fn occluded_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
+        match &mut self.packets {
+            Some(p) if stage.coherent() => p.occluded(rays, test),
+            _ => self.single.occluded(rays, test),
+        }
     }
 }

@@ -3,6 +3,8 @@
 //!
 //! - [`geometry`]: rays, the slab test, Möller-Trumbore, self-intersection offsets.
 //! - [`traverse`]: scalar ordered child-pair traversal and stackless escape-pointer traversal.
+//! - [`bvh8`]: the wide BVH (8 children per node, collapsed at load from the child-pair tree) and
+//!   its single-ray traversal, 8 boxes or 8 triangles per AVX2 sequence.
 //! - [`packet`]: 8-wide AVX2 packets for coherent primary and shadow rays.
 //! - [`reference`]: the exact f64 reference: brute-force and traversed closest hits, and images.
 //! - [`lanes`]: the rays of one stage of a 4 x 2 pixel block, traced as a packet or one by one.
@@ -10,6 +12,7 @@
 //!   tracing for a block of pixels.
 //! - [`render`]: whole images in parallel bands, written straight into the 8-bit image and AOVs.
 
+pub mod bvh8;
 #[cfg(feature = "embree")]
 pub mod embree;
 pub mod geometry;
@@ -32,10 +35,18 @@ pub enum Method {
     Ordered,
     /// Stackless walk of the escape-pointer layout, one ray at a time.
     Stackless,
+    /// The wide BVH ([`bvh8`]), derived at load from the child-pair layout, one ray at a time:
+    /// all 8 children's boxes, or all of a leaf's triangles, tested in one AVX2 sequence (one
+    /// lane at a time without AVX2).
+    Bvh8,
     /// 8-wide SIMD packets (AVX2) for primary and shadow rays, ordered traversal for the rest.
     Packet,
-    /// [`Method::Packet`] where the CPU has AVX2, else [`Method::Ordered`]; [`Method::Stackless`]
-    /// for a file that holds only the escape-pointer layout.
+    /// Picked per kind of ray (`lanes::Mixed`): incoherent rays (mirror and glass bounces, AO
+    /// and diffuse rays) one at a time on the wide BVH ([`Method::Bvh8`]), which the ray report
+    /// measures ahead of packets on them on every scene; the coherent primary and shadow rays as
+    /// packets ([`Method::Packet`]) where a short measurement at the start of the frame finds
+    /// packets faster on a sample of its primary rays, else on the wide BVH too.
+    /// [`Method::Stackless`] for a file that holds only the escape-pointer layout.
     Auto,
 }
 
@@ -45,8 +56,8 @@ impl Method {
     pub fn resolve(self, scene: &bvh_format::SceneFile) -> Method {
         match self {
             Method::Auto if scene.child_pair.is_none() && scene.escape.is_some() => Method::Stackless,
-            Method::Auto | Method::Packet if packet::available() => Method::Packet,
-            Method::Auto | Method::Packet => Method::Ordered,
+            Method::Packet if packet::available() => Method::Packet,
+            Method::Packet => Method::Ordered,
             m => m,
         }
     }
@@ -56,6 +67,7 @@ impl Method {
         match self {
             Method::Ordered => "ordered",
             Method::Stackless => "stackless",
+            Method::Bvh8 => "bvh8",
             Method::Packet => "packet",
             Method::Auto => "auto",
         }

@@ -2,8 +2,9 @@
 //! driver and written straight into the 8-bit image and, when asked for, the AOVs.
 
 use crate::Method;
+use crate::bvh8::Bvh8;
 use crate::geometry::{Cost, Hit, MollerTrumbore, Ray, TriangleTest, Watertight};
-use crate::lanes::{OneByOne, Packets, TraceLanes};
+use crate::lanes::{Mixed, OneByOne, Packets, TraceLanes};
 use crate::packet::{LANES, Rays};
 use crate::shade;
 use crate::traverse::{self, Stack};
@@ -22,6 +23,8 @@ pub struct Tracer<'a> {
     escape: Option<&'a [Node]>,
     /// Count the rays their own triangle meets ([`render_spec::SelfHits`], `--self-hits`).
     self_hits: bool,
+    /// The wide BVH, collapsed from the child-pair layout on first use.
+    wide: std::sync::OnceLock<Bvh8>,
 }
 
 impl<'a> Tracer<'a> {
@@ -32,6 +35,7 @@ impl<'a> Tracer<'a> {
             child_pair: scene.child_pair.as_deref(),
             escape: scene.escape.as_deref(),
             self_hits: false,
+            wide: std::sync::OnceLock::new(),
         }
     }
 
@@ -42,6 +46,13 @@ impl<'a> Tracer<'a> {
         self.self_hits = on;
     }
 
+    /// The wide BVH of the child-pair layout, collapsed on the first call (once, whichever thread
+    /// asks); None for a file without that layout.
+    pub fn bvh8(&self) -> Option<&Bvh8> {
+        let nodes = self.child_pair?;
+        Some(self.wide.get_or_init(|| Bvh8::new(nodes, &self.tris)))
+    }
+
     /// The triangles as every path intersects them: three vertices each, in leaf order.
     pub fn triangles(&self) -> &[Triangle] {
         &self.tris
@@ -49,7 +60,9 @@ impl<'a> Tracer<'a> {
 
     /// The scalar traversal `method` names, bound to the layout it reads: the child-pair layout
     /// for [`Method::Ordered`] and [`Method::Packet`], the escape-pointer layout for
-    /// [`Method::Stackless`], and for [`Method::Auto`] what [`Method::resolve`] picks. A method
+    /// [`Method::Stackless`], the wide BVH collapsed from the child-pair layout for
+    /// [`Method::Bvh8`] and the single rays of [`Method::Auto`], and for [`Method::Auto`] on a
+    /// file with only the escape-pointer layout, the stackless walk. A method
     /// whose layout the file lacks is refused here ([`RenderError::MissingLayout`]), never walked
     /// on the other layout: the caller decides, once, which traversal its rays take.
     pub fn walk(&self, method: Method) -> Result<Walk<'_>, RenderError> {
@@ -57,8 +70,9 @@ impl<'a> Tracer<'a> {
         let missing = |layout| RenderError::MissingLayout { method: resolved.name(), layout };
         let layout = match resolved {
             Method::Stackless => Layout::Escape(self.escape.ok_or_else(|| missing("escape-pointer"))?),
-            // `resolve` never answers Auto; it is listed so that the match stays exhaustive.
-            Method::Ordered | Method::Packet | Method::Auto => {
+            // Auto's rays one at a time: the wide BVH.
+            Method::Bvh8 | Method::Auto => Layout::Wide(self.bvh8().ok_or_else(|| missing("child-pair"))?),
+            Method::Ordered | Method::Packet => {
                 Layout::ChildPair(self.child_pair.ok_or_else(|| missing("child-pair"))?)
             }
         };
@@ -71,6 +85,7 @@ impl<'a> Tracer<'a> {
 enum Layout<'a> {
     ChildPair(&'a [Node]),
     Escape(&'a [Node]),
+    Wide(&'a Bvh8),
 }
 
 /// A scalar traversal bound to its tracer and to the layout it walks, made by [`Tracer::walk`]
@@ -86,12 +101,13 @@ impl<'t> Walk<'t> {
         self.tracer
     }
 
-    /// The traversal this walk runs: [`Method::Ordered`] on the child-pair layout or
-    /// [`Method::Stackless`] on the escape-pointer layout.
+    /// The traversal this walk runs: [`Method::Ordered`] on the child-pair layout,
+    /// [`Method::Stackless`] on the escape-pointer layout or [`Method::Bvh8`] on the wide BVH.
     pub fn method(&self) -> Method {
         match self.layout {
             Layout::ChildPair(_) => Method::Ordered,
             Layout::Escape(_) => Method::Stackless,
+            Layout::Wide(_) => Method::Bvh8,
         }
     }
 
@@ -99,7 +115,7 @@ impl<'t> Walk<'t> {
     pub(crate) fn child_pair(&self) -> Option<&'t [Node]> {
         match self.layout {
             Layout::ChildPair(nodes) => Some(nodes),
-            Layout::Escape(_) => None,
+            Layout::Escape(_) | Layout::Wide(_) => None,
         }
     }
 
@@ -152,6 +168,7 @@ impl<'t> Walk<'t> {
         match self.layout {
             Layout::Escape(nodes) => traverse::escape::<ANY, T>(nodes, tris, ray, t_min, t_max, cost),
             Layout::ChildPair(nodes) => traverse::child_pair::<ANY, T>(nodes, tris, ray, t_min, t_max, stack, cost),
+            Layout::Wide(bvh) => bvh.trace::<ANY, T>(ray, t_min, t_max, stack, cost),
         }
     }
 }
@@ -204,8 +221,57 @@ pub fn render_with_progress(
     let walk = tracer.walk(method)?;
     match method.resolve(tracer.scene) {
         Method::Packet => render_with(tracer, settings, Method::Packet, || Packets::new(walk), tiles, progress),
+        Method::Auto => {
+            let pairs = if packets_pay(tracer, settings, walk)? { Some(tracer.walk(Method::Ordered)?) } else { None };
+            render_with(tracer, settings, Method::Auto, || Mixed::new(walk, pairs), tiles, progress)
+        }
         m => render_with(tracer, settings, m, || OneByOne::new(walk), tiles, progress),
     }
+}
+
+/// `--method auto`'s measurement: whether AVX2 packets over the child-pair tree trace this frame's
+/// primary rays faster than the wide BVH one ray at a time (`wide`), timed on up to 256 of its
+/// 4 x 2 pixel blocks spread evenly over the image (the fastest of 3 alternating rounds; about a
+/// millisecond). Its answer goes for the shadow rays too, the other coherent kind. Images do not
+/// depend on it: every method finds the same hits.
+pub fn packets_pay(tracer: &Tracer<'_>, settings: &Settings, wide: Walk<'_>) -> Result<bool, RenderError> {
+    if !crate::packet::available() || tracer.child_pair.is_none() {
+        return Ok(false);
+    }
+    let frame = settings.frame()?;
+    let (w, h) = (settings.width, settings.height);
+    const GRID: u32 = 16;
+    let mut blocks = Vec::with_capacity((GRID * GRID) as usize);
+    for gy in 0..GRID.min(h.div_ceil(2)) {
+        for gx in 0..GRID.min(w.div_ceil(4)) {
+            let (bx, by) = ((gx * w / GRID) & !3, (gy * h / GRID) & !1);
+            let mut rays = Rays::default();
+            for i in 0..LANES as u32 {
+                let (x, y) = (bx + i % 4, by + i / 4);
+                if x < w && y < h {
+                    rays.set(i as usize, &Ray::new(frame.eye, frame.direction(x, y)), f32::INFINITY);
+                }
+            }
+            blocks.push(rays);
+        }
+    }
+    let test = settings.accuracy.intersect;
+    let mut single = OneByOne::new(wide);
+    let mut packets = Packets::new(tracer.walk(Method::Ordered)?);
+    let (mut t_single, mut t_packets) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..3 {
+        let t = std::time::Instant::now();
+        for b in &blocks {
+            std::hint::black_box(single.closest(b, test));
+        }
+        t_single = t_single.min(t.elapsed().as_secs_f64());
+        let t = std::time::Instant::now();
+        for b in &blocks {
+            std::hint::black_box(packets.closest(b, test));
+        }
+        t_packets = t_packets.min(t.elapsed().as_secs_f64());
+    }
+    Ok(t_packets < t_single)
 }
 
 /// One band of rows and the part of every output it covers.
@@ -470,7 +536,7 @@ mod tests {
         let scene = bvh_build::compile(&scene, &Default::default(), Default::default()).unwrap();
         let tracer = Tracer::new(&scene);
         for mode in [Mode::Cast, Mode::Whitted] {
-            for method in [Method::Packet, Method::Ordered, Method::Stackless] {
+            for method in [Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8] {
                 let settings = Settings {
                     width: 61,
                     height: 37,
@@ -559,7 +625,7 @@ mod tests {
                     want.push(shade::to_u8(sum * (1.0 / spp as f32)));
                 }
             }
-            for method in [Method::Packet, Method::Ordered, Method::Stackless] {
+            for method in [Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8] {
                 let walk = tracer.walk(method).unwrap();
                 for avx in [true, false] {
                     let image = match method.resolve(&scene) {

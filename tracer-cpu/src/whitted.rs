@@ -9,7 +9,7 @@
 //! image does not depend on how its rays are grouped or traced ([`TraceLanes`]).
 
 use crate::geometry::Cost;
-use crate::lanes::TraceLanes;
+use crate::lanes::{Stage, TraceLanes};
 use crate::packet::{LANES, Rays, Results};
 use crate::render::Tracer;
 use crate::shade::{self, SurfaceOf};
@@ -154,7 +154,7 @@ impl<'a> Shading<'a> {
         let mut out = Block::default();
         let mut colour = V3::<L>::zero();
         let mut rays = *primary;
-        let mut hits = lanes.closest(&rays, self.intersect);
+        let mut hits = lanes.closest_in(Stage::Primary, &rays, self.intersect);
         out.rays.primary = rays.count() as u64;
         let mut weight = L::splat(1.0);
         for depth in 0u32.. {
@@ -224,7 +224,7 @@ impl<'a> Shading<'a> {
                 };
                 out.rays.shadow += L::count(asks) as u64;
                 out.rays.self_hits.shadow += self.count_self_hits(&shadow, &tri);
-                let blocked = lanes.occluded(&shadow, self.intersect);
+                let blocked = lanes.occluded_in(Stage::Shadow, &shadow, self.intersect);
                 add_cost(&mut out.cost, &shadow.valid, &blocked);
                 let lit = asks & !L::mask(blocked.hit);
                 local = V3::select(lit, local + term.mul_each(V3::splat(Vec3::from(light.colour))), local);
@@ -252,7 +252,7 @@ impl<'a> Shading<'a> {
             };
             out.rays.secondary += L::count(go) as u64;
             out.rays.self_hits.secondary += self.count_self_hits(&rays, &tri);
-            hits = lanes.closest(&rays, self.intersect);
+            hits = lanes.closest_in(Stage::Secondary, &rays, self.intersect);
         }
         out.colour = colour.to_arrays();
         out
@@ -348,7 +348,7 @@ impl Shading<'_> {
             let rays = self.incoherent_rays(s, hit, seeds, self.ao_distance, n);
             out.rays.ao += rays.count() as u64;
             out.rays.self_hits.ao += self.count_self_hits(&rays, tri);
-            let blocked = lanes.occluded(&rays, self.intersect);
+            let blocked = lanes.occluded_in(Stage::Ao, &rays, self.intersect);
             add_cost(&mut out.cost, &rays.valid, &blocked);
             for i in 0..LANES {
                 open[i] += u32::from(hit[i] && !blocked.hit[i]);
@@ -373,7 +373,7 @@ impl Shading<'_> {
         let rays = self.incoherent_rays(s, hit, seeds, f32::INFINITY, seeds.sample);
         out.rays.diffuse += rays.count() as u64;
         out.rays.self_hits.diffuse += self.count_self_hits(&rays, tri);
-        let hits = lanes.closest(&rays, self.intersect);
+        let hits = lanes.closest_in(Stage::Diffuse, &rays, self.intersect);
         add_cost(&mut out.cost, &rays.valid, &hits);
         let found: [bool; LANES] = std::array::from_fn(|i| hit[i] && hits.hit[i]);
         let background = V3::<L>::splat(self.background);

@@ -9,7 +9,7 @@ use glam::Vec3;
 use render_spec::{Accuracy, CameraSpec, Image, Mode, NO_TRIANGLE, Offset, Settings};
 use tracer_cpu::{Method, Tracer};
 
-const METHODS: [Method; 3] = [Method::Packet, Method::Ordered, Method::Stackless];
+const METHODS: [Method; 5] = [Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8, Method::Auto];
 
 /// A smooth sphere of radius 100 at the origin, one light beside the camera, no mirrors or glass:
 /// convex, so no shadow ray of a point that faces the light can be blocked, except by the surface

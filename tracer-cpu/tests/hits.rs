@@ -6,6 +6,7 @@ mod common;
 use bvh_format::SceneFile;
 use glam::Vec3;
 use rayon::prelude::*;
+use render_spec::Intersect;
 use tracer_cpu::geometry::{MollerTrumbore, TriangleTest, Watertight};
 use tracer_cpu::reference::{self, RefHit};
 use tracer_cpu::traverse::Stack;
@@ -75,6 +76,19 @@ fn fast_hits<T: TriangleTest>(
         let a = tracer.walk(Method::Ordered).unwrap().closest_with(T::KIND, &ray, 0.0, f32::INFINITY, stack, &mut c);
         let b = tracer.walk(Method::Stackless).unwrap().closest_with(T::KIND, &ray, 0.0, f32::INFINITY, stack, &mut c);
         assert_eq!(a, b, "{name}: ordered and stackless disagree on origin {o:?} dir {d:?}");
+        let w = tracer.walk(Method::Bvh8).unwrap().closest_with(T::KIND, &ray, 0.0, f32::INFINITY, stack, &mut c);
+        assert_eq!(a, w, "{name}: ordered and bvh8 disagree on origin {o:?} dir {d:?}");
+        let bvh8 = tracer.bvh8().unwrap();
+        let p = bvh8.trace_portable::<false, T>(&ray, 0.0, f32::INFINITY, stack, &mut c);
+        assert_eq!(a, p, "{name}: ordered and portable bvh8 disagree on origin {o:?} dir {d:?}");
+        // Any hit, up to the closest hit's distance and just short of it (where nothing is).
+        for t_max in a.map_or(vec![f32::INFINITY, 1.0], |h| vec![h.t, f32::INFINITY, h.t * (1.0 - 1e-3)]) {
+            let walk = tracer.walk(Method::Ordered).unwrap();
+            let want = walk.occluded_with(T::KIND, &ray, t_max, stack, &mut c);
+            let got = tracer.walk(Method::Bvh8).unwrap().occluded_with(T::KIND, &ray, t_max, stack, &mut c);
+            let portable = bvh8.trace_portable::<true, T>(&ray, 0.0, t_max, stack, &mut c).is_some();
+            assert_eq!((got, portable), (want, want), "{name}: any hit to {t_max} on origin {o:?} dir {d:?}");
+        }
         ordered.push(a);
     }
     if packet::available() {
@@ -132,7 +146,11 @@ fn check_scene(name: &str, scene: &SceneFile, n: usize, seed: u64) {
             total.ties,
             total.edges,
             total.unexplained.len(),
-            if packet::available() { " (ordered, stackless and AVX2 packets identical)" } else { " (no AVX2 here)" }
+            if packet::available() {
+                " (ordered, stackless, bvh8 and AVX2 packets identical)"
+            } else {
+                " (no AVX2 here; ordered, stackless and bvh8 identical)"
+            }
         );
         let examples: Vec<&String> = total.unexplained.iter().filter(|s| !s.is_empty()).collect();
         assert!(total.unexplained.is_empty(), "{name}: unexplained disagreements, e.g. {examples:#?}");
@@ -179,6 +197,12 @@ fn rays_through_shared_vertices_break_ties_the_same_way_on_every_path() {
         let a = tracer.walk(Method::Ordered).unwrap().closest(&ray, 0.0, f32::INFINITY, &mut stack, &mut c);
         let b = tracer.walk(Method::Stackless).unwrap().closest(&ray, 0.0, f32::INFINITY, &mut stack, &mut c);
         assert_eq!(a, b, "ray {i}");
+        for test in [Intersect::Watertight, Intersect::MollerTrumbore] {
+            let a =
+                tracer.walk(Method::Ordered).unwrap().closest_with(test, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
+            let w = tracer.walk(Method::Bvh8).unwrap().closest_with(test, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
+            assert_eq!(a, w, "ray {i}, {test:?}: bvh8");
+        }
         rays += 1;
         if a.is_none() {
             misses += 1;

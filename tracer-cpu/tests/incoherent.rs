@@ -12,7 +12,7 @@ use tracer_cpu::geometry::{Ray, leave};
 use tracer_cpu::traverse::Stack;
 use tracer_cpu::{Cost, Method, Tracer, shade};
 
-const METHODS: [Method; 3] = [Method::Packet, Method::Ordered, Method::Stackless];
+const METHODS: [Method; 5] = [Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8, Method::Auto];
 
 /// A closed box, 4 x 3 x 5, seen from inside, with a smaller box standing in it (compiled once:
 /// the tests run in parallel and would share its temporary file).

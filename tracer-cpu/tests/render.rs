@@ -45,7 +45,7 @@ fn every_method_renders_the_same_image() {
         let tracer = Tracer::new(scene);
         for mode in [Mode::Cast, Mode::Whitted] {
             let base = render(&tracer, &settings(scene, camera, mode, Method::Ordered, 97, 61)).unwrap();
-            for method in [Method::Stackless, Method::Packet] {
+            for method in [Method::Stackless, Method::Packet, Method::Bvh8, Method::Auto] {
                 let img = render(&tracer, &settings(scene, camera, mode, method, 97, 61)).unwrap();
                 same_image(&base, &img, &format!("{name} {camera} {mode:?} {method:?}"));
             }
@@ -220,7 +220,9 @@ fn a_walk_on_a_missing_layout_is_refused() {
     // What each walk does traverse, and that it finds the roof 2 above the floor.
     assert_eq!(escape.walk(Method::Auto).unwrap().method(), Method::Stackless);
     assert_eq!(escape.walk(Method::Stackless).unwrap().method(), Method::Stackless);
-    assert_eq!(child_pair.walk(Method::Auto).unwrap().method(), Method::Ordered);
+    assert_eq!(child_pair.walk(Method::Auto).unwrap().method(), Method::Bvh8);
+    assert_eq!(child_pair.walk(Method::Bvh8).unwrap().method(), Method::Bvh8);
+    assert!(escape.walk(Method::Bvh8).is_err(), "the wide BVH is collapsed from the child-pair layout");
     let up = Ray::new(Vec3::new(0.0, 1e-3, 0.0), Vec3::Y);
     for walk in [escape.walk(Method::Auto).unwrap(), child_pair.walk(Method::Ordered).unwrap()] {
         let hit = walk.closest(&up, 0.0, f32::INFINITY, &mut Stack::default(), &mut Cost::default());

@@ -9,7 +9,7 @@
 use bvh_format::SceneFile;
 use glam::Vec3;
 use rayon::prelude::*;
-use render_spec::{CameraSpec, Intersect};
+use render_spec::{CameraSpec, Intersect, sequence};
 use std::path::Path;
 use std::time::Instant;
 use tracer_cpu::geometry::{Cost, Ray, Watertight, offset_origin};
@@ -25,16 +25,29 @@ pub enum Kind {
     Shadow,
     /// The mirror reflection of each primary ray at its hit.
     Secondary,
+    /// An ambient-occlusion ray from each primary hit (`--mode ao`'s first: cosine-distributed
+    /// about the geometric normal, the default length), any hit ends it.
+    Ao,
+    /// A diffuse bounce from each primary hit (`--mode diffuse`'s: the same direction as the AO
+    /// ray, no length limit), closest hit.
+    Diffuse,
 }
 
 impl Kind {
-    pub const ALL: [Kind; 3] = [Kind::Primary, Kind::Shadow, Kind::Secondary];
+    pub const ALL: [Kind; 5] = [Kind::Primary, Kind::Shadow, Kind::Secondary, Kind::Ao, Kind::Diffuse];
     pub fn name(self) -> &'static str {
         match self {
             Kind::Primary => "primary",
             Kind::Shadow => "shadow",
             Kind::Secondary => "secondary",
+            Kind::Ao => "ao",
+            Kind::Diffuse => "diffuse",
         }
+    }
+
+    /// Whether any hit ends the ray (occlusion), rather than the closest hit being wanted.
+    pub fn any_hit(self) -> bool {
+        matches!(self, Kind::Shadow | Kind::Ao)
     }
 }
 
@@ -62,22 +75,24 @@ pub fn load(path: &Path) -> Result<SceneFile, String> {
     bvh_build::compile(&scene, &Default::default(), Default::default()).map_err(|e| format!("{}: {e}", path.display()))
 }
 
-/// The primary, shadow and secondary ray sets of a scene at `width` x `height`. Primary hits are
-/// found with our ordered traversal; shadow and secondary origins are offset exactly as the
-/// renderer offsets them.
-pub fn generate(scene: &SceneFile, width: u32, height: u32) -> Result<[RaySet; 3], String> {
+/// The ray sets of a scene at `width` x `height`, one of each [`Kind`] in [`Kind::ALL`]'s order.
+/// Primary hits are found with our ordered traversal; the other rays' origins are offset and
+/// their directions drawn exactly as the renderer does it.
+pub fn generate(scene: &SceneFile, width: u32, height: u32) -> Result<[RaySet; 5], String> {
     let cam = scene.camera("medium").ok_or("the scene has no camera named \"medium\"")?;
     let frame = CameraSpec::from(cam).frame(width, height).map_err(|e| format!("camera: {e:?}"))?;
     let light = Vec3::from(scene.lights.first().ok_or("the scene has no light")?.position);
     let tracer = Tracer::new(scene);
     let walk = tracer.walk(Method::Ordered).map_err(|e| e.to_string())?;
+    let (lo, hi) = scene.bounds();
+    let ao_length = render_spec::Ao::default().distance(lo, hi);
     let (w, h) = (width as usize, height as usize);
     let per_pixel: Vec<_> = (0..w * h)
         .into_par_iter()
         .map_init(Stack::default, |stack, i| {
             let ray = Ray::new(frame.eye, frame.direction((i % w) as u32, (i / w) as u32));
             let hit = walk.closest(&ray, 0.0, f32::INFINITY, stack, &mut Cost::default());
-            let Some(hit) = hit else { return (Some((ray, f32::INFINITY)), None, None) };
+            let Some(hit) = hit else { return [Some((ray, f32::INFINITY)), None, None, None, None] };
             let k = hit.tri as usize;
             let surf =
                 shade::surface(&scene.triangle(k), scene.vertex_normals(k), ray.origin, ray.dir, hit.t, hit.u, hit.v);
@@ -89,23 +104,33 @@ pub fn generate(scene: &SceneFile, width: u32, height: u32) -> Result<[RaySet; 3
                 (Ray::new(o, l), (light - o).length())
             });
             let mirror = shade::reflect(ray.dir, surf.shading);
-            let secondary = (Ray::new(offset_origin(surf.point, surf.geometric), mirror), f32::INFINITY);
-            (Some((ray, f32::INFINITY)), shadow, Some(secondary))
+            let off = offset_origin(surf.point, surf.geometric);
+            let secondary = (Ray::new(off, mirror), f32::INFINITY);
+            let bounce = sequence::cosine_direction(surf.geometric.into(), sequence::sample_2d(i as u32, 0));
+            let bounce = Ray::new(off, Vec3::from(bounce));
+            [
+                Some((ray, f32::INFINITY)),
+                shadow,
+                Some(secondary),
+                Some((bounce, ao_length)),
+                Some((bounce, f32::INFINITY)),
+            ]
         })
         .collect();
-    let (mut p, mut s, mut r) = (Vec::with_capacity(w * h), Vec::with_capacity(w * h), Vec::with_capacity(w * h));
-    for (a, b, c) in per_pixel {
-        p.push(a);
-        s.push(b);
-        r.push(c);
+    let mut sets: [Vec<Option<(Ray, f32)>>; 5] = std::array::from_fn(|_| Vec::with_capacity(w * h));
+    for pixel in per_pixel {
+        for (set, r) in sets.iter_mut().zip(pixel) {
+            set.push(r);
+        }
     }
-    Ok([RaySet::new(Kind::Primary, w, h, p), RaySet::new(Kind::Shadow, w, h, s), RaySet::new(Kind::Secondary, w, h, r)])
+    let mut sets = sets.into_iter();
+    Ok(Kind::ALL.map(|kind| RaySet::new(kind, w, h, sets.next().expect("one set per kind"))))
 }
 
 /// A way of tracing a ray set.
 #[derive(Clone, Copy)]
 pub enum Engine<'a> {
-    /// Ours, one ray at a time (an ordered or a stackless walk) with a triangle test.
+    /// Ours, one ray at a time (an ordered, stackless or bvh8 walk) with a triangle test.
     Scalar(Walk<'a>, Intersect),
     /// Ours, 8-wide AVX2 packets of 4 x 2 pixel blocks.
     Packet(&'a Tracer<'a>),
@@ -125,7 +150,7 @@ pub const NO_RAY: f32 = f32::NAN;
 /// of 4 x 2 blocks).
 pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
     let w = set.width;
-    let any = set.kind == Kind::Shadow;
+    let any = set.kind.any_hit();
     set.rays.par_chunks(2 * w).zip(out.par_chunks_mut(2 * w)).for_each_init(
         || (Stack::default(), Vec::with_capacity(128)),
         |(stack, pstack), (rays, out)| match engine {

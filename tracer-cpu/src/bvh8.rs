@@ -1,0 +1,853 @@
+//! The wide BVH for single rays, Embree's way: the file's binary SAH tree collapsed at load into
+//! nodes of up to 8 children whose boxes lie component by component (structure of arrays), so one
+//! AVX2 sequence tests a ray against all 8; leaves of up to 8 triangles, also structure of arrays,
+//! so one sequence tests the ray against all of a leaf's triangles with the frame's triangle test.
+//!
+//! The collapse (after Embree's BVH8 builder and Wald et al., "Getting Rid of Packets", 2008):
+//! a wide node starts from the two children of a binary node and repeatedly opens the child with
+//! the largest surface area (replacing it by its two children) until it has 8 or no child is left
+//! to open. A subtree of at most 8 triangles is never opened: it becomes one leaf block, whatever
+//! its binary shape (testing 8 triangles costs one sequence, like testing one). The boxes are the
+//! file's own, so every box a wide traversal tests is one the ordered traversal tests too, and
+//! the triangle test is the scalar one, lane by lane, in the same operations: both find exactly
+//! the same hits (closest hit: the nearest, ties to the lower triangle index, whatever the order
+//! of the tests; `tests/hits.rs` holds every path to that).
+//!
+//! Derived at load from the child-pair layout ([`Bvh8::new`], on one thread: 12 ms for the bunny,
+//! 0.3-0.5 s for the dragon and the million-triangle scene on the loaded 2-core VM;
+//! `examples/ray_report.rs` prints it per scene), not stored in the file.
+
+use crate::geometry::{self, Cost, Hit, Ray, TriangleTest, may_hold};
+use crate::traverse::Stack;
+use bvh_format::{Node, Triangle};
+
+/// Children of a wide node, and triangles of a leaf block.
+pub const WIDTH: usize = 8;
+
+/// A child reference: a wide node's index, or with this bit a leaf block's index.
+const LEAF: u32 = 1 << 31;
+
+/// A wide node: the boxes of up to 8 children, component by component.
+#[repr(C, align(64))]
+#[derive(Clone, Copy, Debug)]
+pub struct WideNode {
+    /// Per child: min x, min y, min z, max x, max y, max z. Empty slots hold an inverted
+    /// infinite box and are masked out by `valid` as well.
+    pub bounds: [[f32; WIDTH]; 6],
+    /// Per child: a wide node's index, or [`LEAF`] | a leaf block's index.
+    pub child: [u32; WIDTH],
+    /// Bit `i` set where slot `i` holds a child.
+    pub valid: u32,
+}
+
+impl WideNode {
+    fn empty() -> Self {
+        let mut bounds = [[f32::INFINITY; WIDTH]; 6];
+        bounds[3..].iter_mut().for_each(|b| *b = [f32::NEG_INFINITY; WIDTH]);
+        Self { bounds, child: [u32::MAX; WIDTH], valid: 0 }
+    }
+
+    fn set(&mut self, slot: usize, min: [f32; 3], max: [f32; 3]) {
+        for a in 0..3 {
+            self.bounds[a][slot] = min[a];
+            self.bounds[3 + a][slot] = max[a];
+        }
+        self.valid |= 1 << slot;
+    }
+}
+
+/// Up to 8 triangles of a leaf, component by component: the vertices exactly as stored, the
+/// plane normal [`geometry::plane_normal`] computes, and the triangle's index in leaf order.
+/// Empty lanes hold NaN vertices (which no test hits) and index `u32::MAX`.
+#[repr(C, align(64))]
+#[derive(Clone, Copy, Debug)]
+pub struct TriBlock {
+    /// `p[vertex][axis][lane]`.
+    pub p: [[[f32; WIDTH]; 3]; 3],
+    pub index: [u32; WIDTH],
+}
+
+impl TriBlock {
+    fn new(tris: &[Triangle], indices: &[u32]) -> Self {
+        let mut b = Self { p: [[[f32::NAN; WIDTH]; 3]; 3], index: [u32::MAX; WIDTH] };
+        for (lane, &i) in indices.iter().enumerate() {
+            let t = &tris[i as usize];
+            for a in 0..3 {
+                b.p[0][a][lane] = t.p0[a];
+                b.p[1][a][lane] = t.p1[a];
+                b.p[2][a][lane] = t.p2[a];
+            }
+            b.index[lane] = i;
+        }
+        b
+    }
+
+    /// The triangle in `lane`, as the scalar tests take it.
+    fn triangle(&self, lane: usize) -> Triangle {
+        let v = |k: usize| [self.p[k][0][lane], self.p[k][1][lane], self.p[k][2][lane]];
+        Triangle::from_vertices(v(0), v(1), v(2))
+    }
+
+    /// Lanes holding a triangle.
+    fn count(&self) -> u32 {
+        self.index.iter().filter(|&&i| i != u32::MAX).count() as u32
+    }
+}
+
+/// The wide BVH of a scene: nodes in depth-first order (a node's first child right after it),
+/// leaf blocks in the same order.
+pub struct Bvh8 {
+    nodes: Vec<WideNode>,
+    blocks: Vec<TriBlock>,
+    /// The root's reference (a leaf for a scene of at most 8 triangles).
+    root: u32,
+    /// Whether the AVX2 traversal runs here (else the portable one).
+    avx2: bool,
+}
+
+/// What the collapse still has to make: the wide subtree of a binary node, or of a range of
+/// triangles of one binary leaf larger than a block (boxes then computed from the triangles).
+enum Work {
+    Binary(u32),
+    Range(u32, u32),
+}
+
+/// Half the surface area of a box, the SAH's measure of how likely a ray enters it.
+fn half_area(n: &Node) -> f32 {
+    let d = [n.max[0] - n.min[0], n.max[1] - n.min[1], n.max[2] - n.min[2]];
+    d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+}
+
+impl Bvh8 {
+    /// Collapses the child-pair tree `nodes` over the triangles `tris` (leaf order, as
+    /// [`bvh_format::SceneFile::leaf_triangles`] gives them).
+    pub fn new(nodes: &[Node], tris: &[Triangle]) -> Self {
+        let counts = subtree_counts(nodes);
+        let mut out = Self {
+            nodes: Vec::with_capacity(nodes.len() / 6 + 1),
+            blocks: Vec::with_capacity(tris.len() / 4 + 1),
+            root: LEAF,
+            avx2: crate::packet::available(),
+        };
+        if nodes.is_empty() {
+            out.blocks.push(TriBlock::new(tris, &[]));
+            return out;
+        }
+        let mut work: Vec<(Work, Option<(usize, usize)>)> = vec![(Work::Binary(0), None)];
+        let (mut indices, mut scratch) = (Vec::with_capacity(WIDTH), Vec::new());
+        while let Some((w, parent)) = work.pop() {
+            let r = match w {
+                Work::Binary(b) if counts[b as usize] <= WIDTH as u64 => {
+                    indices.clear();
+                    leaf_indices(nodes, b, &mut indices, &mut scratch);
+                    indices.sort_unstable();
+                    out.leaf(tris, &indices)
+                }
+                Work::Binary(b) if nodes[b as usize].is_leaf() => {
+                    let n = &nodes[b as usize];
+                    out.range_node(tris, n.index, n.count, &mut work)
+                }
+                Work::Binary(b) => {
+                    let n = &nodes[b as usize];
+                    let mut kids = [0u32; WIDTH];
+                    kids[..2].copy_from_slice(&[n.index, n.index + 1]);
+                    let mut len = 2;
+                    while len < WIDTH {
+                        let open = (0..len)
+                            .filter(|&k| {
+                                let c = kids[k] as usize;
+                                !nodes[c].is_leaf() && counts[c] > WIDTH as u64
+                            })
+                            .max_by(|&a, &b| {
+                                half_area(&nodes[kids[a] as usize]).total_cmp(&half_area(&nodes[kids[b] as usize]))
+                            });
+                        let Some(k) = open else { break };
+                        let c = nodes[kids[k] as usize].index;
+                        kids[k] = c;
+                        kids[len] = c + 1;
+                        len += 1;
+                    }
+                    let id = out.nodes.len();
+                    let mut node = WideNode::empty();
+                    for (slot, &k) in kids[..len].iter().enumerate() {
+                        let c = &nodes[k as usize];
+                        node.set(slot, c.min, c.max);
+                    }
+                    out.nodes.push(node);
+                    for slot in (0..len).rev() {
+                        work.push((Work::Binary(kids[slot]), Some((id, slot))));
+                    }
+                    id as u32
+                }
+                Work::Range(start, count) if count as usize <= WIDTH => {
+                    indices.clear();
+                    indices.extend(start..start + count);
+                    out.leaf(tris, &indices)
+                }
+                Work::Range(start, count) => out.range_node(tris, start, count, &mut work),
+            };
+            match parent {
+                Some((p, slot)) => out.nodes[p].child[slot] = r,
+                None => out.root = r,
+            }
+        }
+        out
+    }
+
+    fn leaf(&mut self, tris: &[Triangle], indices: &[u32]) -> u32 {
+        self.blocks.push(TriBlock::new(tris, indices));
+        LEAF | (self.blocks.len() - 1) as u32
+    }
+
+    /// A wide node over `count` (more than 8) triangles from `start`: up to 8 equal runs, each
+    /// boxed by its triangles' vertices.
+    fn range_node(
+        &mut self,
+        tris: &[Triangle],
+        start: u32,
+        count: u32,
+        work: &mut Vec<(Work, Option<(usize, usize)>)>,
+    ) -> u32 {
+        let per = count.div_ceil(WIDTH as u32).max(WIDTH as u32);
+        let id = self.nodes.len();
+        let mut node = WideNode::empty();
+        let runs: Vec<(u32, u32)> =
+            (start..start + count).step_by(per as usize).map(|s| (s, per.min(start + count - s))).collect();
+        for (slot, &(s, n)) in runs.iter().enumerate() {
+            let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+            for t in &tris[s as usize..(s + n) as usize] {
+                for v in t.vertices() {
+                    for a in 0..3 {
+                        lo[a] = lo[a].min(v[a]);
+                        hi[a] = hi[a].max(v[a]);
+                    }
+                }
+            }
+            node.set(slot, lo, hi);
+        }
+        self.nodes.push(node);
+        for (slot, &(s, n)) in runs.iter().enumerate().rev() {
+            work.push((Work::Range(s, n), Some((id, slot))));
+        }
+        id as u32
+    }
+
+    /// Wide nodes and leaf blocks.
+    pub fn len(&self) -> (usize, usize) {
+        (self.nodes.len(), self.blocks.len())
+    }
+
+    /// Whether the tree holds no node (a scene of at most 8 triangles is one leaf block).
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+
+    /// Bytes of nodes and blocks.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of_val(&self.nodes[..]) + std::mem::size_of_val(&self.blocks[..])
+    }
+
+    /// Closest hit in `(t_min, t_max]` (`ANY` false) or any hit there (`ANY` true) with the
+    /// triangle test `T`, adding the boxes and triangles tested to `cost`: the AVX2 traversal
+    /// where the CPU has AVX2, else the portable one (the same tests, one lane at a time).
+    #[inline]
+    pub fn trace<const ANY: bool, T: TriangleTest>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Hit> {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is set only where the CPU has AVX2.
+            return unsafe { avx2::trace::<ANY, T>(self, ray, t_min, t_max, stack, cost) };
+        }
+        self.trace_portable::<ANY, T>(ray, t_min, t_max, stack, cost)
+    }
+
+    /// [`Self::trace`] without SIMD, for CPUs without AVX2 and as the tests' second opinion.
+    pub fn trace_portable<const ANY: bool, T: TriangleTest>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Hit> {
+        let mut best = Hit { t: t_max, tri: u32::MAX, u: 0.0, v: 0.0 };
+        stack.clear();
+        let mut cur = self.root;
+        loop {
+            if cur & LEAF == 0 {
+                let node = &self.nodes[cur as usize];
+                let mut hits: [(f32, u32); WIDTH] = [(0.0, 0); WIDTH];
+                let mut n = 0;
+                for slot in (0..WIDTH).filter(|&s| node.valid & (1 << s) != 0) {
+                    cost.nodes += 1;
+                    let lane = |k: usize| [node.bounds[k][slot], node.bounds[k + 1][slot], node.bounds[k + 2][slot]];
+                    let child = Node { min: lane(0), count: 0, max: lane(3), index: 0 };
+                    if let Some(near) = geometry::slab(&child, ray, best.t) {
+                        hits[n] = (near, node.child[slot]);
+                        n += 1;
+                    }
+                }
+                hits[..n].sort_by(|a, b| b.0.total_cmp(&a.0));
+                if n > 0 {
+                    for &(near, r) in &hits[..n - 1] {
+                        stack.push((r, near));
+                    }
+                    cur = hits[n - 1].1;
+                    continue;
+                }
+            } else {
+                let block = &self.blocks[(cur & !LEAF) as usize];
+                cost.tris += block.count();
+                for lane in (0..WIDTH).filter(|&l| block.index[l] != u32::MAX) {
+                    let i = block.index[lane];
+                    if let Some((t, u, v)) = T::intersect(&block.triangle(lane), ray, t_min, best.t)
+                        && Hit::beats(t, i, best.t, best.tri)
+                    {
+                        best = Hit { t, tri: i, u, v };
+                        if ANY {
+                            return Some(best);
+                        }
+                    }
+                }
+            }
+            loop {
+                match stack.pop() {
+                    None => return (best.tri != u32::MAX).then_some(best),
+                    Some((r, near)) if may_hold(near, best.t) => {
+                        cur = r;
+                        break;
+                    }
+                    Some(_) => {}
+                }
+            }
+        }
+    }
+}
+
+/// Triangles under each binary node.
+fn subtree_counts(nodes: &[Node]) -> Vec<u64> {
+    let mut order = Vec::with_capacity(nodes.len());
+    let mut stack = vec![0u32];
+    while let Some(n) = stack.pop() {
+        order.push(n);
+        let node = &nodes[n as usize];
+        if !node.is_leaf() {
+            stack.extend([node.index, node.index + 1]);
+        }
+    }
+    let mut counts = vec![0u64; nodes.len()];
+    for &n in order.iter().rev() {
+        let node = &nodes[n as usize];
+        counts[n as usize] = if node.is_leaf() {
+            node.count as u64
+        } else {
+            counts[node.index as usize] + counts[node.index as usize + 1]
+        };
+    }
+    counts
+}
+
+/// The triangles under binary node `b`, with `stack` as scratch.
+fn leaf_indices(nodes: &[Node], b: u32, out: &mut Vec<u32>, stack: &mut Vec<u32>) {
+    stack.clear();
+    stack.push(b);
+    while let Some(n) = stack.pop() {
+        let node = &nodes[n as usize];
+        if node.is_leaf() {
+            out.extend(node.index..node.index + node.count);
+        } else {
+            stack.extend([node.index, node.index + 1]);
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{Bvh8, LEAF, TriBlock, WIDTH};
+    use crate::geometry::{Cost, Hit, Ray, TriangleTest, may_hold};
+    use crate::traverse::Stack;
+    use render_spec::Intersect;
+    use render_spec::constants::T_SLACK;
+    use std::arch::x86_64::*;
+
+    /// The ray, splatted.
+    struct Lanes {
+        o: [__m256; 3],
+        d: [__m256; 3],
+        inv: [__m256; 3],
+    }
+
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn load(a: &[f32; WIDTH]) -> __m256 {
+        // SAFETY: `a` holds 8 floats.
+        unsafe { _mm256_loadu_ps(a.as_ptr()) }
+    }
+
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn store(v: __m256) -> [f32; WIDTH] {
+        let mut a = [0f32; WIDTH];
+        // SAFETY: `a` has room for 8 floats.
+        unsafe { _mm256_storeu_ps(a.as_mut_ptr(), v) };
+        a
+    }
+
+    /// `p - o` per axis.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn sub3(p: &[[f32; WIDTH]; 3], o: &[__m256; 3]) -> [__m256; 3] {
+        [_mm256_sub_ps(load(&p[0]), o[0]), _mm256_sub_ps(load(&p[1]), o[1]), _mm256_sub_ps(load(&p[2]), o[2])]
+    }
+
+    /// The distances to the planes `b`, component `a` of the ray.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn dist(b: &[f32; WIDTH], r: &Lanes, a: usize) -> __m256 {
+        _mm256_mul_ps(_mm256_sub_ps(load(b), r.o[a]), r.inv[a])
+    }
+
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn edge_function(a: &[__m256; 3], b: &[__m256; 3], d: &[__m256; 3]) -> __m256 {
+        let e = [_mm256_sub_ps(a[0], b[0]), _mm256_sub_ps(a[1], b[1]), _mm256_sub_ps(a[2], b[2])];
+        let s = [_mm256_add_ps(a[0], b[0]), _mm256_add_ps(a[1], b[1]), _mm256_add_ps(a[2], b[2])];
+        let c = [
+            _mm256_sub_ps(_mm256_mul_ps(e[1], s[2]), _mm256_mul_ps(e[2], s[1])),
+            _mm256_sub_ps(_mm256_mul_ps(e[2], s[0]), _mm256_mul_ps(e[0], s[2])),
+            _mm256_sub_ps(_mm256_mul_ps(e[0], s[1]), _mm256_mul_ps(e[1], s[0])),
+        ];
+        dot(d, &c)
+    }
+
+    /// `x[0] * y[0] + x[1] * y[1] + x[2] * y[2]`, in that order.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn dot(x: &[__m256; 3], y: &[__m256; 3]) -> __m256 {
+        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(x[0], y[0]), _mm256_mul_ps(x[1], y[1])), _mm256_mul_ps(x[2], y[2]))
+    }
+
+    /// [`crate::geometry::intersect`] on the block's 8 triangles, operation by operation; returns
+    /// (hit mask, t, w1, w2, sum) (`u = w1 * (1 / sum)`, computed for the closest hit only).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn watertight(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+        let (o, d) = (&r.o, &r.d);
+        // Written out, not in closures: a closure does not inherit AVX2 (see crate::wide).
+        let (a0, a1, a2) = (sub3(&b.p[0], o), sub3(&b.p[1], o), sub3(&b.p[2], o));
+        let w2 = edge_function(&a0, &a1, d);
+        let w0 = edge_function(&a1, &a2, d);
+        let w1 = edge_function(&a2, &a0, d);
+        let zero = _mm256_setzero_ps();
+        let positive = _mm256_and_ps(
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_GE_OQ>(w1, zero)),
+            _mm256_cmp_ps::<_CMP_GE_OQ>(w2, zero),
+        );
+        let negative = _mm256_and_ps(
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(w1, zero)),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
+        );
+        let sum = _mm256_add_ps(_mm256_add_ps(w0, w1), w2);
+        // The plane normal, as geometry::plane_normal computes it.
+        let e1 = [
+            _mm256_sub_ps(load(&b.p[1][0]), load(&b.p[0][0])),
+            _mm256_sub_ps(load(&b.p[1][1]), load(&b.p[0][1])),
+            _mm256_sub_ps(load(&b.p[1][2]), load(&b.p[0][2])),
+        ];
+        let e2 = [
+            _mm256_sub_ps(load(&b.p[2][0]), load(&b.p[0][0])),
+            _mm256_sub_ps(load(&b.p[2][1]), load(&b.p[0][1])),
+            _mm256_sub_ps(load(&b.p[2][2]), load(&b.p[0][2])),
+        ];
+        let n = [
+            _mm256_sub_ps(_mm256_mul_ps(e1[1], e2[2]), _mm256_mul_ps(e1[2], e2[1])),
+            _mm256_sub_ps(_mm256_mul_ps(e1[2], e2[0]), _mm256_mul_ps(e1[0], e2[2])),
+            _mm256_sub_ps(_mm256_mul_ps(e1[0], e2[1]), _mm256_mul_ps(e1[1], e2[0])),
+        ];
+        let den = dot(&n, d);
+        let t = _mm256_div_ps(dot(&n, &a0), den);
+        let mut m = _mm256_or_ps(positive, negative);
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(sum, zero));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(den, zero));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, t_min));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
+        [m, t, w1, w2, sum]
+    }
+
+    /// [`crate::geometry::intersect_moller_trumbore`] on the block's 8 triangles, operation by
+    /// operation; returns (hit mask, t, u, v, 1).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn moller_trumbore(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+        let (o, d) = (&r.o, &r.d);
+        let v0 = [load(&b.p[0][0]), load(&b.p[0][1]), load(&b.p[0][2])];
+        let e1 = [
+            _mm256_sub_ps(load(&b.p[1][0]), v0[0]),
+            _mm256_sub_ps(load(&b.p[1][1]), v0[1]),
+            _mm256_sub_ps(load(&b.p[1][2]), v0[2]),
+        ];
+        let e2 = [
+            _mm256_sub_ps(load(&b.p[2][0]), v0[0]),
+            _mm256_sub_ps(load(&b.p[2][1]), v0[1]),
+            _mm256_sub_ps(load(&b.p[2][2]), v0[2]),
+        ];
+        let p = [
+            _mm256_sub_ps(_mm256_mul_ps(d[1], e2[2]), _mm256_mul_ps(e2[1], d[2])),
+            _mm256_sub_ps(_mm256_mul_ps(d[2], e2[0]), _mm256_mul_ps(e2[2], d[0])),
+            _mm256_sub_ps(_mm256_mul_ps(d[0], e2[1]), _mm256_mul_ps(e2[0], d[1])),
+        ];
+        let det = dot(&e1, &p);
+        let one = _mm256_set1_ps(1.0);
+        let inv = _mm256_div_ps(one, det);
+        let s = [_mm256_sub_ps(o[0], v0[0]), _mm256_sub_ps(o[1], v0[1]), _mm256_sub_ps(o[2], v0[2])];
+        let u = _mm256_mul_ps(dot(&s, &p), inv);
+        let q = [
+            _mm256_sub_ps(_mm256_mul_ps(s[1], e1[2]), _mm256_mul_ps(e1[1], s[2])),
+            _mm256_sub_ps(_mm256_mul_ps(s[2], e1[0]), _mm256_mul_ps(e1[2], s[0])),
+            _mm256_sub_ps(_mm256_mul_ps(s[0], e1[1]), _mm256_mul_ps(e1[0], s[1])),
+        ];
+        let v = _mm256_mul_ps(dot(d, &q), inv);
+        let t = _mm256_mul_ps(dot(&e2, &q), inv);
+        let zero = _mm256_setzero_ps();
+        // The scalar conditions exactly, NaN included (see packet.rs).
+        let mut m = _mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero);
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GE_OQ>(u, zero));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(u, one));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NLT_UQ>(v, zero));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NGT_UQ>(_mm256_add_ps(u, v), one));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, t_min));
+        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
+        [m, t, u, v, one]
+    }
+
+    /// Asks for the cache lines of the node or leaf block `r`.
+    #[inline(always)]
+    fn prefetch(bvh: &Bvh8, r: u32) {
+        let (ptr, lines) = if r & LEAF == 0 {
+            (bvh.nodes.as_ptr().wrapping_add(r as usize).cast::<i8>(), size_of::<super::WideNode>() / 64)
+        } else {
+            (bvh.blocks.as_ptr().wrapping_add((r & !LEAF) as usize).cast::<i8>(), size_of::<TriBlock>() / 64)
+        };
+        for l in 0..lines.min(PREFETCH_LINES) {
+            // SAFETY: a prefetch never faults, whatever the address.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(ptr.wrapping_add(64 * l)) };
+        }
+    }
+    const PREFETCH_LINES: usize = 8;
+
+    /// [`Bvh8::trace`] with AVX2.
+    ///
+    /// The box test is the scalar slab test's: per axis the entry and exit distances are
+    /// `(plane - origin) * inverse direction`; which plane is entered is known from the sign of
+    /// the inverse direction (for a finite one the rounding is monotonic, so it is the smaller
+    /// distance, as the scalar `min` finds). A NaN distance (`0 * inf`: the origin on the plane of
+    /// an axis the ray is parallel to) goes as the first operand of `max`/`min`, which then return
+    /// the second: the axis is ignored, as the scalar test ignores it (its other distance is then
+    /// infinite or NaN, and ignored alike).
+    #[target_feature(enable = "avx2")]
+    pub fn trace<const ANY: bool, T: TriangleTest>(
+        bvh: &Bvh8,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Hit> {
+        let r = Lanes {
+            o: [_mm256_set1_ps(ray.origin.x), _mm256_set1_ps(ray.origin.y), _mm256_set1_ps(ray.origin.z)],
+            d: [_mm256_set1_ps(ray.dir.x), _mm256_set1_ps(ray.dir.y), _mm256_set1_ps(ray.dir.z)],
+            inv: [_mm256_set1_ps(ray.inv_dir.x), _mm256_set1_ps(ray.inv_dir.y), _mm256_set1_ps(ray.inv_dir.z)],
+        };
+        let near_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { 3 + a } else { a });
+        let far_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { a } else { 3 + a });
+        let zero = _mm256_setzero_ps();
+        let slack = _mm256_set1_ps(T_SLACK);
+        let sign = _mm256_set1_ps(-0.0);
+        let t_min_v = _mm256_set1_ps(t_min);
+        let mut best = Hit { t: t_max, tri: u32::MAX, u: 0.0, v: 0.0 };
+        // The closest hit's w1, w2 and their sum (Möller-Trumbore: u, v and 1).
+        let (mut bw1, mut bw2, mut bsum) = (0.0f32, 0.0f32, 1.0f32);
+        stack.clear();
+        let mut cur = bvh.root;
+        loop {
+            if cur & LEAF == 0 {
+                let node = &bvh.nodes[cur as usize];
+                let b = &node.bounds;
+                let t_best = _mm256_set1_ps(best.t);
+                let near = _mm256_max_ps(dist(&b[near_plane[0]], &r, 0), zero);
+                let near = _mm256_max_ps(dist(&b[near_plane[1]], &r, 1), near);
+                let near = _mm256_max_ps(dist(&b[near_plane[2]], &r, 2), near);
+                let far = _mm256_min_ps(dist(&b[far_plane[0]], &r, 0), t_best);
+                let far = _mm256_min_ps(dist(&b[far_plane[1]], &r, 1), far);
+                let far = _mm256_min_ps(dist(&b[far_plane[2]], &r, 2), far);
+                // `may_hold(near, far)`: near <= far + |far| * T_SLACK.
+                let ok = _mm256_cmp_ps::<_CMP_LE_OQ>(
+                    near,
+                    _mm256_add_ps(far, _mm256_mul_ps(_mm256_andnot_ps(sign, far), slack)),
+                );
+                let mut mask = _mm256_movemask_ps(ok) as u32 & node.valid;
+                cost.nodes += node.valid.count_ones();
+                if mask != 0 {
+                    let first = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if mask == 0 {
+                        cur = node.child[first];
+                        continue;
+                    }
+                    let near = store(near);
+                    // The children still to visit start loading now, together.
+                    let mut all = mask | (1 << first);
+                    while all != 0 {
+                        let i = all.trailing_zeros() as usize;
+                        prefetch(bvh, node.child[i]);
+                        all &= all - 1;
+                    }
+                    if ANY {
+                        // Any hit ends the ray: no order needed.
+                        while mask != 0 {
+                            let i = mask.trailing_zeros() as usize;
+                            stack.push((node.child[i], near[i]));
+                            mask &= mask - 1;
+                        }
+                        cur = node.child[first];
+                        continue;
+                    }
+                    // Nearest first: the others go on the stack farthest first.
+                    let mut hits = [(0f32, 0u32); WIDTH];
+                    hits[0] = (near[first], node.child[first]);
+                    let mut n = 1;
+                    while mask != 0 {
+                        let i = mask.trailing_zeros() as usize;
+                        let e = (near[i], node.child[i]);
+                        let mut k = n;
+                        while k > 0 && hits[k - 1].0 < e.0 {
+                            hits[k] = hits[k - 1];
+                            k -= 1;
+                        }
+                        hits[k] = e;
+                        n += 1;
+                        mask &= mask - 1;
+                    }
+                    for &(d, c) in &hits[..n - 1] {
+                        stack.push((c, d));
+                    }
+                    cur = hits[n - 1].1;
+                    continue;
+                }
+            } else {
+                let block = &bvh.blocks[(cur & !LEAF) as usize];
+                // SAFETY: a load of 8 ints.
+                let index = unsafe { _mm256_loadu_si256(block.index.as_ptr().cast()) };
+                let empty = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(index, _mm256_set1_epi32(-1))));
+                cost.tris += WIDTH as u32 - empty.count_ones();
+                let [m, t, w1, w2, sum] = match T::KIND {
+                    Intersect::Watertight => watertight(block, &r, t_min_v, _mm256_set1_ps(best.t)),
+                    Intersect::MollerTrumbore => moller_trumbore(block, &r, t_min_v, _mm256_set1_ps(best.t)),
+                };
+                let mut hit = _mm256_movemask_ps(m) as u32;
+                if hit != 0 {
+                    let (t, w1, w2, sum) = (store(t), store(w1), store(w2), store(sum));
+                    while hit != 0 {
+                        let i = hit.trailing_zeros() as usize;
+                        hit &= hit - 1;
+                        if Hit::beats(t[i], block.index[i], best.t, best.tri) {
+                            best.t = t[i];
+                            best.tri = block.index[i];
+                            (bw1, bw2, bsum) = (w1[i], w2[i], sum[i]);
+                            if ANY {
+                                break;
+                            }
+                        }
+                    }
+                    if ANY && best.tri != u32::MAX {
+                        let inv = 1.0 / bsum;
+                        return Some(Hit { u: bw1 * inv, v: bw2 * inv, ..best });
+                    }
+                }
+            }
+            loop {
+                match stack.pop() {
+                    None => {
+                        if best.tri == u32::MAX {
+                            return None;
+                        }
+                        let inv = 1.0 / bsum;
+                        return Some(Hit { u: bw1 * inv, v: bw2 * inv, ..best });
+                    }
+                    Some((c, near)) if may_hold(near, best.t) => {
+                        cur = c;
+                        break;
+                    }
+                    Some(_) => {}
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{MollerTrumbore, Watertight};
+    use glam::Vec3;
+
+    /// A binary tree over `tris` made by halving index ranges down to leaves of `leaf` triangles,
+    /// with boxes from the vertices (what the collapse reads; the builder's trees are tested
+    /// through `tests/hits.rs`).
+    fn halving_tree(tris: &[Triangle], leaf: u32) -> Vec<Node> {
+        fn bounds(tris: &[Triangle]) -> ([f32; 3], [f32; 3]) {
+            let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+            for v in tris.iter().flat_map(|t| t.vertices()) {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(v[a]);
+                    hi[a] = hi[a].max(v[a]);
+                }
+            }
+            (lo, hi)
+        }
+        let mut nodes = vec![Node { min: [0.0; 3], count: 0, max: [0.0; 3], index: 0 }];
+        let mut work = vec![(0usize, 0u32, tris.len() as u32)];
+        while let Some((i, start, n)) = work.pop() {
+            let (min, max) = bounds(&tris[start as usize..(start + n) as usize]);
+            if n <= leaf {
+                nodes[i] = Node { min, count: n, max, index: start };
+            } else {
+                let c = nodes.len();
+                nodes[i] = Node { min, count: 0, max, index: c as u32 };
+                nodes.extend([Node { min: [0.0; 3], count: 0, max: [0.0; 3], index: 0 }; 2]);
+                work.push((c, start, n / 2));
+                work.push((c + 1, start + n / 2, n - n / 2));
+            }
+        }
+        nodes
+    }
+
+    /// `n` small triangles scattered in the unit cube.
+    fn scattered(n: usize, seed: u64) -> Vec<Triangle> {
+        let mut rng = ::tests::Rng(seed);
+        (0..n)
+            .map(|_| {
+                let c = Vec3::new(rng.unit(), rng.unit(), rng.unit());
+                let mut v = || (c + Vec3::new(rng.signed(), rng.signed(), rng.signed()) * 0.05).to_array();
+                Triangle::from_vertices(v(), v(), v())
+            })
+            .collect()
+    }
+
+    /// Every triangle sits in exactly one leaf block, inside every box on its way from the root,
+    /// and the blocks' empty lanes hit nothing.
+    fn check_structure(bvh: &Bvh8, tris: &[Triangle]) {
+        let mut seen = vec![0u32; tris.len()];
+        let mut work = vec![(bvh.root, [f32::NEG_INFINITY; 3], [f32::INFINITY; 3])];
+        while let Some((r, lo, hi)) = work.pop() {
+            if r & LEAF != 0 {
+                let b = &bvh.blocks[(r & !LEAF) as usize];
+                for lane in 0..WIDTH {
+                    let i = b.index[lane];
+                    if i == u32::MAX {
+                        assert!(b.p.iter().all(|v| v.iter().all(|a| a[lane].is_nan())), "empty lanes hold NaN");
+                        continue;
+                    }
+                    seen[i as usize] += 1;
+                    assert_eq!(b.triangle(lane).vertices(), tris[i as usize].vertices(), "the vertices as stored");
+                    for v in tris[i as usize].vertices() {
+                        assert!((0..3).all(|a| lo[a] <= v[a] && v[a] <= hi[a]), "triangle {i} outside its box");
+                    }
+                }
+                continue;
+            }
+            let node = &bvh.nodes[r as usize];
+            assert!(node.valid.count_ones() >= 2 && node.valid < 1 << WIDTH, "a node has 2 to 8 children");
+            for slot in (0..WIDTH).filter(|&s| node.valid & (1 << s) != 0) {
+                let clo = [node.bounds[0][slot], node.bounds[1][slot], node.bounds[2][slot]];
+                let chi = [node.bounds[3][slot], node.bounds[4][slot], node.bounds[5][slot]];
+                work.push((node.child[slot], clo, chi));
+            }
+        }
+        assert!(seen.iter().all(|&n| n == 1), "every triangle in exactly one block");
+    }
+
+    #[test]
+    fn the_collapse_keeps_every_triangle_once_inside_its_boxes() {
+        for (n, leaf) in [(1, 1), (8, 2), (9, 1), (1000, 1), (1000, 3), (777, 8)] {
+            let tris = scattered(n, n as u64);
+            let bvh = Bvh8::new(&halving_tree(&tris, leaf), &tris);
+            check_structure(&bvh, &tris);
+            assert_eq!(bvh.is_empty(), n <= WIDTH, "{n} triangles");
+            // Subtrees of at most 8 triangles are single blocks: at most twice the blocks needed.
+            assert!(bvh.len().1 <= 2 * n.div_ceil(WIDTH) + 1, "{n} triangles in {} blocks", bvh.len().1);
+        }
+    }
+
+    /// A leaf of more triangles than a block (a file from another builder) becomes wide nodes
+    /// over runs of 8, boxed by their triangles, and the hits stay the scalar traversal's.
+    #[test]
+    fn large_leaves_are_split_into_blocks_and_hit_the_same() {
+        for n in [9, 64, 65, 700] {
+            let tris = scattered(n, 7 + n as u64);
+            let nodes = halving_tree(&tris, n as u32);
+            assert_eq!(nodes.len(), 1, "one leaf");
+            let bvh = Bvh8::new(&nodes, &tris);
+            check_structure(&bvh, &tris);
+            let mut rng = ::tests::Rng(n as u64);
+            let (mut stack, mut cost) = (Stack::default(), Cost::default());
+            let mut hits = 0;
+            for _ in 0..2000 {
+                let o = Vec3::new(rng.signed(), rng.signed(), rng.signed()) * 2.0;
+                // Aimed at a triangle's centroid, so that most rays hit something.
+                let t = &tris[rng.below(n)];
+                let centroid = (Vec3::from(t.p0) + Vec3::from(t.p1) + Vec3::from(t.p2)) / 3.0;
+                let d = (centroid - o).normalize();
+                let ray = Ray::new(o, d);
+                let want = crate::traverse::child_pair::<false, Watertight>(
+                    &nodes,
+                    &tris,
+                    &ray,
+                    0.0,
+                    f32::INFINITY,
+                    &mut stack,
+                    &mut cost,
+                );
+                assert_eq!(bvh.trace::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut cost), want);
+                assert_eq!(
+                    bvh.trace_portable::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut cost),
+                    want
+                );
+                let mt = crate::traverse::child_pair::<false, MollerTrumbore>(
+                    &nodes,
+                    &tris,
+                    &ray,
+                    0.0,
+                    f32::INFINITY,
+                    &mut stack,
+                    &mut cost,
+                );
+                assert_eq!(bvh.trace::<false, MollerTrumbore>(&ray, 0.0, f32::INFINITY, &mut stack, &mut cost), mt);
+                hits += usize::from(want.is_some());
+            }
+            assert!(hits > 1000, "{n} triangles: only {hits} rays hit");
+        }
+    }
+
+    /// The traversal's work counts: one box per child of each node entered, one triangle per
+    /// occupied lane of each block tested.
+    #[test]
+    fn costs_count_boxes_and_triangles_tested() {
+        let tris = scattered(300, 3);
+        let bvh = Bvh8::new(&halving_tree(&tris, 2), &tris);
+        let mut stack = Stack::default();
+        let ray = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z);
+        let (mut a, mut b) = (Cost::default(), Cost::default());
+        let hit = bvh.trace::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut a);
+        let same = bvh.trace_portable::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut b);
+        assert_eq!(hit, same);
+        assert_eq!(a, b, "both traversals visit the same nodes and blocks");
+        assert!(a.nodes >= bvh.nodes[0].valid.count_ones() && a.tris > 0, "{a:?}");
+    }
+}
