@@ -82,6 +82,10 @@ enum MethodArg {
     /// The GPU vendor's traversal (VK_KHR_ray_tracing_pipeline on the driver's own acceleration
     /// structures) with the same shading; where `trace-vk devices` says the device supports it.
     RtPipeline,
+    /// Compressed 8-wide BVH (Ylitie, Karras and Laine 2017): quantised boxes, children in the
+    /// ray octant's order; needs the wide layout (`bvhc compile --layout all`), which a mesh or
+    /// description compiled on the fly gets.
+    Cwbvh,
 }
 
 fn parse_device(s: &str) -> Result<usize, String> {
@@ -140,7 +144,7 @@ fn render(args: &RenderArgs, method: MethodArg, workgroup: (u32, u32), device: &
     let method = method_of(method);
     // A device without rt-pipeline refuses it before the scene is read.
     let early = if method == Method::RtPipeline { Some(open_for(device, &[method])?) } else { None };
-    let loaded = tools::load_scene(args.scene.as_deref())?;
+    let loaded = tools::load_scene_with(args.scene.as_deref(), tools::layouts_for(&[method.name()]))?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
     let gpu = match early {
@@ -201,6 +205,7 @@ fn method_of(m: MethodArg) -> Method {
         MethodArg::Sst => Method::Sst,
         MethodArg::SstSubgroup => Method::SstSubgroup,
         MethodArg::RtPipeline => Method::RtPipeline,
+        MethodArg::Cwbvh => Method::Cwbvh,
     }
 }
 
