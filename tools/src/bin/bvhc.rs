@@ -45,7 +45,7 @@ enum LayoutArg {
     Both,
     ChildPair,
     Escape,
-    /// The 8-wide compressed layout for `trace-vk --method cwbvh`, beside a binary one (about 6
+    /// The 8-wide compressed layout for `trace-vk --method cwbvh`, beside a binary one (about 11
     /// bytes per triangle; it also stores the triangles in its leaves' order).
     Wide,
     /// Child-pair, escape-pointer and wide.
