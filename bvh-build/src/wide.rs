@@ -279,7 +279,9 @@ mod tests {
 
     #[test]
     fn axis_quantisation_encloses_every_child_and_uses_the_smallest_step() {
-        let cases: &[(f32, f32, &[(f32, f32)])] = &[
+        // (origin, top, children's intervals)
+        type Case<'a> = (f32, f32, &'a [(f32, f32)]);
+        let cases: &[Case] = &[
             (0.0, 1.0, &[(0.0, 1.0), (0.3, 0.30001), (0.999, 1.0)]),
             (-3.5, 7.25, &[(-3.5, -3.4), (0.1, 0.2), (7.0, 7.25)]),
             (5.0, 5.0, &[(5.0, 5.0)]),
