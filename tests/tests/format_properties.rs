@@ -700,3 +700,31 @@ fn traverse_escape(ray: &Ray, nodes: &[Node], tris: &[Triangle]) -> Option<(f32,
     }
     best
 }
+
+/// The collapse on the shipped scenes: every wide tree walked as above (every triangle in one
+/// leaf, at most eight children, every decoded box around its triangles), no deeper than the
+/// binary tree, and fuller than a binary tree's two children per node.
+#[test]
+fn shipped_scenes_collapse_into_sound_wide_trees() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    for name in ["room.toml", "bunny.toml", "forest.toml", "car.toml"] {
+        let scene = bvh_build::import::load(&dir.join(name), &Default::default()).expect("the scene imports");
+        let file = bvh_build::compile(&scene, &BuildParams::default(), Layouts::ALL).expect("the scene compiles");
+        let wide = file.wide.as_deref().expect("the wide layout");
+        // The stored triangles by input index, as walk_wide looks them up.
+        let mut tris = vec![[[0.0f32; 3]; 3]; file.triangles.len()];
+        for (k, &src) in file.input_index.iter().enumerate() {
+            tris[src as usize] = file.positions(k);
+        }
+        let depth = walk_wide(wide, &tris, &file.input_index).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let children: usize = wide.iter().map(|n| (0..WIDTH).filter(|&s| n.slot(s) != Slot::Empty).count()).sum();
+        let per_node = children as f64 / wide.len() as f64;
+        println!(
+            "{name}: {} wide nodes, depth {depth} (binary {}), {per_node:.2} children per node",
+            wide.len(),
+            file.stats().max_depth
+        );
+        assert!(depth < file.stats().max_depth, "{name}: the wide tree is shallower");
+        assert!(per_node > 3.0, "{name}: {per_node} children per node");
+    }
+}
