@@ -16,11 +16,23 @@ use std::sync::atomic::AtomicUsize;
 pub struct Layouts {
     pub child_pair: bool,
     pub escape: bool,
+    /// The wide layout ([`crate::wide`]), beside at least one of the binary ones; it also puts the
+    /// triangles in the order its leaves need.
+    pub wide: bool,
+}
+
+impl Layouts {
+    /// The two binary layouts (the default).
+    pub const BINARY: Layouts = Layouts { child_pair: true, escape: true, wide: false };
+    /// Every layout.
+    pub const ALL: Layouts = Layouts { child_pair: true, escape: true, wide: true };
 }
 
 impl Default for Layouts {
+    /// The binary layouts: the wide one costs about 11 bytes per triangle more, which only a scene
+    /// traced with `cwbvh` needs.
     fn default() -> Self {
-        Self { child_pair: true, escape: true }
+        Self::BINARY
     }
 }
 
@@ -118,13 +130,25 @@ pub fn compile_for_writing(
     progress: Option<&AtomicUsize>,
 ) -> Result<SceneFile, BuildError> {
     if !layouts.child_pair && !layouts.escape {
-        return Err(BuildError::Params("at least one node layout must be chosen".to_owned()));
+        let msg = if layouts.wide {
+            "the wide layout needs a binary one beside it (child-pair or escape)"
+        } else {
+            "at least one node layout must be chosen"
+        };
+        return Err(BuildError::Params(msg.to_owned()));
     }
     let n = scene.triangle_count();
     if scene.normals.len() != n || scene.material_ids.len() != n {
         return Err(BuildError::Params("the scene's normals or material ids do not match its triangles".to_owned()));
     }
-    let tree = tree_with(&scene.positions, params, progress, layouts.escape)?;
+    let mut tree = tree_with(&scene.positions, params, progress, layouts.escape)?;
+    let plan = if layouts.wide {
+        let plan = crate::wide::collapse(&tree.nodes)?;
+        plan.reorder(&mut tree.nodes, tree.escape.as_deref_mut(), &mut tree.order);
+        Some(plan)
+    } else {
+        None
+    };
     let geometry = index_geometry(scene, &tree.order);
     let mut file = SceneFile {
         build: *params,
@@ -138,13 +162,21 @@ pub fn compile_for_writing(
         materials: scene.materials.clone(),
         material_names: scene.material_names.clone(),
         input_index: tree.order,
-        child_pair: layouts.child_pair.then_some(tree.nodes),
+        // Kept until the wide layout is quantised around its (rescaled) boxes.
+        child_pair: Some(tree.nodes),
         escape: tree.escape,
+        wide: None,
         cameras: scene.cameras.clone(),
         lights: scene.lights.clone(),
     };
     // After the build: a power of two changes no SAH decision, and this way no copy is made.
     crate::unit::rescale(&mut file)?;
+    if let (Some(plan), Some(cp)) = (&plan, &file.child_pair) {
+        file.wide = Some(plan.quantise(cp)?);
+    }
+    if !layouts.child_pair {
+        file.child_pair = None;
+    }
     Ok(file)
 }
 

@@ -16,6 +16,7 @@ pub mod scene;
 pub mod sweep;
 pub mod unit;
 mod weld;
+pub mod wide;
 
 pub use compile::{
     Layouts, MAX_BINS, build_tree, build_tree_with_progress, check_params, compile, compile_for_writing,

@@ -90,6 +90,16 @@ pub enum FormatError {
     Empty,
     #[error("leaf {node} of the {layout} layout does not contain all of its triangles")]
     TriangleOutsideLeaf { layout: LayoutKind, node: u32 },
+    #[error("node {node} of the wide layout is malformed: {reason}")]
+    WideShape { node: u32, reason: &'static str },
+    #[error("triangle {triangle} is referenced by {times} leaves of the wide layout instead of exactly one")]
+    WideCoverage { triangle: u32, times: u32 },
+    #[error("slot {slot} of node {node} of the wide layout has a box that does not contain all of its triangles")]
+    WideBoxTooSmall { node: u32, slot: u32 },
+    #[error(
+        "the wide layout is present without a binary one (child-pair or escape-pointer), which the header describes"
+    )]
+    WideAlone,
     #[error("entry {index} of the {section} section has non-zero padding")]
     NonZeroPadding { section: SectionKind, index: u64 },
 }

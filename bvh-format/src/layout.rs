@@ -2,10 +2,11 @@
 //! `FORMAT.md` beside this crate documents the same layout for readers in other languages.
 
 use crate::types::{Camera, IndexedTriangle, Light, Material, Node};
+use crate::wide::WideNode;
 use bytemuck::{Pod, Zeroable};
 
 pub const MAGIC: [u8; 8] = *b"BVHSCENE";
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 /// Every section starts at a multiple of this.
 pub const ALIGN: u64 = 16;
 
@@ -13,6 +14,8 @@ pub const ALIGN: u64 = 16;
 pub const FLAG_CHILD_PAIR: u32 = 1;
 /// Header flag: the escape-pointer layout is present.
 pub const FLAG_ESCAPE: u32 = 2;
+/// Header flag: the wide (8-wide, compressed) layout is present.
+pub const FLAG_WIDE: u32 = 4;
 
 /// The fixed header at offset 0, 184 bytes, little-endian.
 #[repr(C)]
@@ -88,10 +91,11 @@ pub enum SectionKind {
     NodesEscape = 9,
     Cameras = 10,
     Lights = 11,
+    NodesWide = 12,
 }
 
 impl SectionKind {
-    pub const ALL: [SectionKind; 11] = [
+    pub const ALL: [SectionKind; 12] = [
         SectionKind::Vertices,
         SectionKind::Triangles,
         SectionKind::Normals,
@@ -103,6 +107,7 @@ impl SectionKind {
         SectionKind::NodesEscape,
         SectionKind::Cameras,
         SectionKind::Lights,
+        SectionKind::NodesWide,
     ];
 
     pub fn from_u32(v: u32) -> Option<Self> {
@@ -120,6 +125,7 @@ impl SectionKind {
             SectionKind::NodesChildPair | SectionKind::NodesEscape => std::mem::size_of::<Node>(),
             SectionKind::Cameras => std::mem::size_of::<Camera>(),
             SectionKind::Lights => std::mem::size_of::<Light>(),
+            SectionKind::NodesWide => std::mem::size_of::<WideNode>(),
         }) as u32
     }
 
@@ -136,6 +142,7 @@ impl SectionKind {
             SectionKind::NodesEscape => "escape-pointer nodes",
             SectionKind::Cameras => "cameras",
             SectionKind::Lights => "lights",
+            SectionKind::NodesWide => "wide nodes",
         }
     }
 }

@@ -12,6 +12,7 @@ mod par;
 mod read;
 pub mod tree;
 mod types;
+pub mod wide;
 mod write;
 
 pub use error::{FileError, FormatError, LayoutKind};
@@ -22,6 +23,7 @@ pub use types::{
     BuildParams, CAMERA_NAME_LEN, Camera, FLAT, IndexedTriangle, Light, Material, Node, SceneSettings, Strategy,
     Triangle,
 };
+pub use wide::WideNode;
 pub use write::{WriteError, write, write_file, write_to};
 
 /// Largest magnitude of [`SceneFile::scale_log2`] a file may hold: a rescaled f32 scene spans at
@@ -64,6 +66,10 @@ pub struct SceneFile {
     pub input_index: Vec<u32>,
     pub child_pair: Option<Vec<Node>>,
     pub escape: Option<Vec<Node>>,
+    /// The wide layout (8 children per node, quantised boxes): its own tree over the same
+    /// triangles, collapsed from the binary one by the compiler ([`wide`]). Never alone: the
+    /// header's tree statistics describe the binary tree.
+    pub wide: Option<Vec<WideNode>>,
     pub cameras: Vec<Camera>,
     pub lights: Vec<Light>,
 }

@@ -5,8 +5,8 @@
 use crate::SceneFile;
 use crate::error::{FileError, FormatError, LayoutKind};
 use crate::layout::{
-    ALIGN, FLAG_CHILD_PAIR, FLAG_ESCAPE, HEADER_SIZE, Header, MAGIC, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
-    VERSION,
+    ALIGN, FLAG_CHILD_PAIR, FLAG_ESCAPE, FLAG_WIDE, HEADER_SIZE, Header, MAGIC, SECTION_ENTRY_SIZE, SectionEntry,
+    SectionKind, VERSION,
 };
 use crate::tree::{self, Tree};
 use crate::types::{BuildParams, FLAT, IndexedTriangle, SceneSettings, Strategy};
@@ -141,8 +141,11 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
         bytemuck::pod_collect_to_vec(data)
     }
 
-    if header.flags & !(FLAG_CHILD_PAIR | FLAG_ESCAPE) != 0 || header.flags == 0 {
+    if header.flags & !(FLAG_CHILD_PAIR | FLAG_ESCAPE | FLAG_WIDE) != 0 || header.flags == 0 {
         return Err(FormatError::NoLayout(header.flags));
+    }
+    if header.flags & (FLAG_CHILD_PAIR | FLAG_ESCAPE) == 0 {
+        return Err(FormatError::WideAlone);
     }
     let layout = |flag, kind| -> Result<Option<Vec<crate::Node>>, FormatError> {
         match (header.flags & flag != 0, section(kind)?) {
@@ -180,11 +183,23 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
         input_index: pod(required(SectionKind::InputIndex)?),
         child_pair: layout(FLAG_CHILD_PAIR, SectionKind::NodesChildPair)?,
         escape: layout(FLAG_ESCAPE, SectionKind::NodesEscape)?,
+        wide: wide_layout(&header, section(SectionKind::NodesWide)?)?,
         cameras: pod(required(SectionKind::Cameras)?),
         lights: pod(required(SectionKind::Lights)?),
     };
     validate_scene(&scene, Some(&header))?;
     Ok(scene)
+}
+
+/// The wide nodes when the flags announce them (their own function, like their validation in
+/// `wide.rs`: the binary layouts' reading above is shared by two layouts of one node type).
+fn wide_layout(header: &Header, data: Option<&[u8]>) -> Result<Option<Vec<crate::WideNode>>, FormatError> {
+    match (header.flags & FLAG_WIDE != 0, data) {
+        (true, Some(d)) => Ok(Some(bytemuck::pod_collect_to_vec(d))),
+        (true, None) => Err(FormatError::MissingSection(SectionKind::NodesWide)),
+        (false, Some(_)) => Err(FormatError::BadHeader("a node section is present that the flags do not announce")),
+        (false, None) => Ok(None),
+    }
 }
 
 /// Reads and validates a scene file from disk.
@@ -324,7 +339,7 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     }
 
     if s.child_pair.is_none() && s.escape.is_none() {
-        return Err(FormatError::NoLayout(0));
+        return Err(if s.wide.is_some() { FormatError::WideAlone } else { FormatError::NoLayout(0) });
     }
     let trees = [s.child_pair.as_deref().map(Tree::child_pair), s.escape.as_deref().map(Tree::escape)];
     for t in trees.into_iter().flatten() {
@@ -366,6 +381,9 @@ pub(crate) fn validate_scene(s: &SceneFile, header: Option<&Header>) -> Result<(
     }
     let t = s.tree();
     check_leaf_boxes(t, s)?;
+    if let Some(w) = &s.wide {
+        crate::wide::validate(w, &s.triangles, &s.vertices)?;
+    }
     if let Some(h) = header
         && (h.bounds_min != t.nodes[0].min || h.bounds_max != t.nodes[0].max)
     {

@@ -3,8 +3,8 @@
 use crate::SceneFile;
 use crate::error::{FileError, FormatError};
 use crate::layout::{
-    ALIGN, FLAG_CHILD_PAIR, FLAG_ESCAPE, HEADER_SIZE, Header, MAGIC, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
-    VERSION,
+    ALIGN, FLAG_CHILD_PAIR, FLAG_ESCAPE, FLAG_WIDE, HEADER_SIZE, Header, MAGIC, SECTION_ENTRY_SIZE, SectionEntry,
+    SectionKind, VERSION,
 };
 
 fn align_up(v: u64) -> u64 {
@@ -52,6 +52,10 @@ fn plan(scene: &SceneFile) -> Result<Plan<'_>, FormatError> {
     if let Some(n) = &scene.escape {
         flags |= FLAG_ESCAPE;
         sections.push((SectionKind::NodesEscape, n.len() as u64, bytemuck::cast_slice(n).into()));
+    }
+    if let Some(n) = &scene.wide {
+        flags |= FLAG_WIDE;
+        sections.push((SectionKind::NodesWide, n.len() as u64, bytemuck::cast_slice(n).into()));
     }
     sections.push((SectionKind::Cameras, scene.cameras.len() as u64, bytemuck::cast_slice(&scene.cameras).into()));
     sections.push((SectionKind::Lights, scene.lights.len() as u64, bytemuck::cast_slice(&scene.lights).into()));

@@ -97,6 +97,7 @@ mod tests {
             input_index: vec![],
             child_pair: None,
             escape: None,
+            wide: None,
             cameras: vec![],
             lights: vec![],
         };

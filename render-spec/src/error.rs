@@ -12,7 +12,7 @@ pub enum RenderError {
     #[error("{0} indirections are more than the {max} a frame may trace", max = crate::settings::MAX_INDIRECTIONS)]
     TooManyIndirections(u32),
     #[error(
-        "the {method} traversal needs the {layout} layout, which the scene file does not contain (compile it with --layout both)"
+        "the {method} traversal needs the {layout} layout, which the scene file does not contain (compile it with `bvhc compile --layout all`)"
     )]
     MissingLayout { method: &'static str, layout: &'static str },
     #[error("{0} samples per pixel are not a square of a whole number from 1 to {max} (1, 4, 9, 16, ...)", max = crate::accuracy::MAX_SPP)]

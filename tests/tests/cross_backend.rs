@@ -6,8 +6,9 @@
 
 mod common;
 
+use bvh_build::Layouts;
 use bvh_format::SceneFile;
-use common::{compile, gpu};
+use common::{compile, compile_with, gpu};
 use render_spec::{Accuracy, Ao, CameraSpec, Intersect, Mode, Offset, Settings};
 use tracer_cpu::{Method, Tracer};
 use tracer_vk::Gpu;
@@ -30,7 +31,9 @@ fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32,
             accuracy: render_spec::Accuracy::default(),
         };
         let cpu = tracer_cpu::render(&tracer, &settings, Method::Ordered).expect("the CPU renders");
-        for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup] {
+        let wide = scene.wide.is_some().then_some(VkMethod::Cwbvh);
+        let binary = [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup];
+        for method in binary.into_iter().chain(wide) {
             let mut r = Renderer::new(gpu, scene, method, (8, 8)).expect("the scene uploads");
             let out = r.render(&settings).expect("the GPU renders").image;
             common::assert_matches_cpu(&format!("{scene_name} {camera} {mode:?} {}", method.name()), &cpu, &out);
@@ -43,14 +46,14 @@ fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32,
 #[test]
 fn bunny_on_a_mirror_floor_matches_the_cpu() {
     let gpu = gpu();
-    let scene = compile("bunny.toml");
+    let scene = compile_with("bunny.toml", Layouts::ALL);
     compare("bunny", &scene, "medium", &gpu, 160, 120);
 }
 
 #[test]
 fn room_with_mirror_and_glass_matches_the_cpu() {
     let gpu = gpu();
-    let scene = compile("room.toml");
+    let scene = compile_with("room.toml", Layouts::ALL);
     compare("room", &scene, "medium", &gpu, 160, 120);
     compare("room", &scene, "close-up", &gpu, 120, 90);
 }
@@ -78,7 +81,7 @@ fn deep_scene() -> SceneFile {
     scene.cameras.push(bvh_format::Camera::new("medium", [0.0; 3], [0.2, 0.1, 1.0], [0.0, 1.0, 0.0], 100.0));
     scene.lights.push(bvh_format::Light::new([0.5, 1.0, 2.0], [1.0; 3]));
     let params = bvh_format::BuildParams { max_leaf_size: 1, ..Default::default() };
-    bvh_build::compile(&scene, &params, Default::default()).expect("the deep scene compiles")
+    bvh_build::compile(&scene, &params, Layouts::ALL).expect("the deep scene compiles")
 }
 
 #[test]
@@ -89,6 +92,14 @@ fn a_tree_deeper_than_32_levels_renders_with_stacks_sized_from_the_file() {
     let gpu = gpu();
     let mut r = Renderer::new(&gpu, &scene, VkMethod::Lst, (8, 8)).unwrap();
     assert_eq!(r.specialisation().stack_size, depth, "the stacks hold exactly the file's depth");
+    let wide_depth = bvh_format::wide::depth(scene.wide.as_deref().expect("the wide layout"));
+    let w = Renderer::new(&gpu, &scene, VkMethod::Cwbvh, (8, 8)).unwrap();
+    assert_eq!(w.specialisation().stack_size, wide_depth, "cwbvh's stack holds the wide tree's depth");
+    assert!(
+        wide_depth > 0 && wide_depth < depth,
+        "the wide tree ({wide_depth}) is shallower than the binary ({depth})"
+    );
+    drop(w);
     let cam = CameraSpec::from(&scene.cameras[0]);
     let out = r
         .render(&Settings {
@@ -176,9 +187,11 @@ fn exact_kernels_equal_the_cpu_bit_for_bit() {
         ("room.toml", "close-up", Mode::Whitted, VkMethod::Stackless),
         ("room.toml", "close-up", Mode::Whitted, VkMethod::SstSubgroup),
         ("bunny.toml", "medium", Mode::Whitted, VkMethod::Sst),
+        ("room.toml", "close-up", Mode::Whitted, VkMethod::Cwbvh),
+        ("bunny.toml", "medium", Mode::Whitted, VkMethod::Cwbvh),
     ];
     for (name, camera, mode, method) in cases {
-        let scene = compile(name);
+        let scene = compile_with(name, Layouts::ALL);
         let cam = CameraSpec::from(scene.camera(camera).expect("the camera exists"));
         let settings = Settings {
             width: 160,
@@ -294,7 +307,7 @@ fn accuracy_settings_equal_the_cpu_bit_for_bit() {
 #[test]
 fn nodes_and_triangles_split_over_bindings_match_the_cpu() {
     let gpu = gpu();
-    let scene = compile("room.toml");
+    let scene = compile_with("room.toml", Layouts::ALL);
     // Whitted only: its primary rays are Cast's, and its shadow and secondary rays start anywhere
     // in the tree, so every chunk is read.
     let settings = Settings {
@@ -309,9 +322,12 @@ fn nodes_and_triangles_split_over_bindings_match_the_cpu() {
     };
     let cpu = tracer_cpu::render(&Tracer::new(&scene), &settings, Method::Ordered).expect("the CPU renders");
     let tri_bytes = scene.triangles.len() as u64 * 48;
-    for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup] {
-        let nodes = if method == VkMethod::Stackless { &scene.escape } else { &scene.child_pair };
-        let node_bytes = nodes.as_ref().expect("both layouts").len() as u64 * 32;
+    for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup, VkMethod::Cwbvh] {
+        let node_bytes = match method {
+            VkMethod::Stackless => scene.escape.as_ref().expect("every layout").len() as u64 * 32,
+            VkMethod::Cwbvh => scene.wide.as_ref().expect("every layout").len() as u64 * 80,
+            _ => scene.child_pair.as_ref().expect("every layout").len() as u64 * 32,
+        };
         // Above a quarter of the larger array (so at most 4 bindings each), below the smaller.
         let limit = node_bytes.max(tri_bytes) / 4 + 64;
         assert!(limit < node_bytes.min(tri_bytes), "{node_bytes} and {tri_bytes} bytes cannot both be split");
@@ -335,7 +351,7 @@ fn nodes_and_triangles_split_over_bindings_match_the_cpu() {
 #[test]
 fn incoherent_modes_equal_the_cpu_bit_for_bit() {
     let gpu = gpu();
-    let scene = compile("room.toml");
+    let scene = compile_with("room.toml", Layouts::ALL);
     let tracer = Tracer::new(&scene);
     let cam = CameraSpec::from(scene.camera("medium").expect("the camera exists"));
     let settings = |mode, spp| Settings {
@@ -358,6 +374,8 @@ fn incoherent_modes_equal_the_cpu_bit_for_bit() {
         (Mode::Diffuse, 4, VkMethod::Lst),
         (Mode::Diffuse, 1, VkMethod::Stackless),
         (Mode::Diffuse, 1, VkMethod::SstSubgroup),
+        (Mode::Ao(ao), 4, VkMethod::Cwbvh),
+        (Mode::Diffuse, 1, VkMethod::Cwbvh),
     ] {
         let s = settings(mode, spp);
         let cpu_method = match method {
@@ -441,4 +459,17 @@ fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
     assert!(e.to_string().contains("rt-pipeline") && !e.to_string().contains('\n'), "{e}");
     let messages = gpu.validation_messages();
     assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
+}
+
+/// A file without the wide layout refuses cwbvh before any work, in one sentence that says how to
+/// compile one with it.
+#[test]
+fn cwbvh_without_the_wide_layout_is_refused_in_one_sentence() {
+    let gpu = gpu();
+    let scene = compile("room.toml");
+    assert!(scene.wide.is_none(), "the default layouts are the binary ones");
+    let e = Renderer::new(&gpu, &scene, VkMethod::Cwbvh, (8, 8)).err().expect("cwbvh must refuse the file");
+    let msg = e.to_string();
+    assert!(msg.contains("cwbvh") && msg.contains("wide") && msg.contains("--layout all"), "{msg}");
+    assert!(!msg.contains('\n'), "{msg}");
 }

@@ -5,8 +5,10 @@
 use bvh_build::Layouts;
 use bvh_build::scene::Scene;
 use bvh_format::layout::{HEADER_SIZE, Header, SECTION_ENTRY_SIZE, SectionEntry};
+use bvh_format::wide::{Slot, WIDTH};
 use bvh_format::{
     BuildParams, Camera, FormatError, LayoutKind, Light, Material, Node, SceneFile, SceneSettings, SectionKind,
+    WideNode,
 };
 use glam::Vec3;
 
@@ -51,8 +53,9 @@ fn bytes_of(file: &SceneFile) -> Vec<u8> {
     bytes
 }
 
+/// Every layout, so that each damage below reaches the wide one too.
 fn big_file() -> Vec<u8> {
-    bytes_of(&scene(300, Layouts::default()))
+    bytes_of(&scene(300, Layouts::ALL))
 }
 
 fn header(bytes: &[u8]) -> Header {
@@ -189,9 +192,13 @@ fn truncation_at_every_section_boundary() {
 
 #[test]
 fn truncation_at_every_byte_of_small_files() {
-    for layouts in
-        [Layouts::default(), Layouts { child_pair: true, escape: false }, Layouts { child_pair: false, escape: true }]
-    {
+    for layouts in [
+        Layouts::default(),
+        Layouts { child_pair: true, escape: false, wide: false },
+        Layouts { child_pair: false, escape: true, wide: false },
+        Layouts { child_pair: false, escape: true, wide: true },
+        Layouts::ALL,
+    ] {
         let bytes = bytes_of(&scene(3, layouts));
         for len in 0..bytes.len() {
             check_cut(&bytes, len);
@@ -207,22 +214,23 @@ fn wrong_magic_and_version() {
         b[i] ^= 0x20;
         assert_eq!(rejected(&b), FormatError::BadMagic);
     }
-    for version in [4u32, 7, u32::MAX] {
+    for version in [5u32, 7, u32::MAX] {
         let mut b = bytes.clone();
         b[8..12].copy_from_slice(&version.to_le_bytes());
-        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 3 });
+        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 4 });
         // A correct checksum does not make an unknown version readable.
         reseal_header(&mut b);
-        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 3 });
+        assert_eq!(rejected(&b), FormatError::UnsupportedVersion { found: version, supported: 4 });
     }
     // A file of an older version (version 1 stored one vertex and two edges per triangle;
     // version 2 had no scale exponent, so a tiny or huge scene in it renders with offsets that
-    // do not fit it) is named as such, with what to do about it.
-    for version in [0u32, 1, 2] {
+    // do not fit it; version 3 had no wide layout, so `--method cwbvh` could not trace it) is
+    // named as such, with what to do about it.
+    for version in [0u32, 1, 2, 3] {
         let mut b = bytes.clone();
         b[8..12].copy_from_slice(&version.to_le_bytes());
         let e = rejected(&b);
-        assert_eq!(e, FormatError::OldVersion { found: version, supported: 3 });
+        assert_eq!(e, FormatError::OldVersion { found: version, supported: 4 });
         assert!(e.to_string().contains("recompile it from its source with `bvhc compile`"), "{e}");
     }
 }
@@ -511,10 +519,22 @@ fn forged_header_statistics() {
     assert!(matches!(e, FormatError::CountMismatch { section: SectionKind::Triangles, .. }), "{e:?}");
     let e = forge(|b| edit_header(b, |h| Header { node_count: truth.node_count + 2, ..h }));
     assert!(matches!(e, FormatError::CountMismatch { section: SectionKind::NodesChildPair, .. }), "{e:?}");
+    let e = forge(|b| edit_header(b, |h| Header { flags: 8, ..h }));
+    assert_eq!(e, FormatError::NoLayout(8));
     let e = forge(|b| edit_header(b, |h| Header { flags: 4, ..h }));
-    assert_eq!(e, FormatError::NoLayout(4));
-    let e = forge(|b| edit_header(b, |h| Header { flags: 1, ..h }));
+    assert_eq!(e, FormatError::WideAlone, "the wide layout without a binary one");
+    let e = forge(|b| edit_header(b, |h| Header { flags: 5, ..h }));
     assert!(matches!(e, FormatError::BadHeader(_)), "an unannounced escape section: {e:?}");
+    let e = forge(|b| edit_header(b, |h| Header { flags: 3, ..h }));
+    assert!(matches!(e, FormatError::BadHeader(_)), "an unannounced wide section: {e:?}");
+    let e = forge(|b| {
+        let mut t = table(b);
+        t.retain(|e| e.kind != SectionKind::NodesWide as u32);
+        let count = t.len() as u32;
+        set_table(b, &t);
+        edit_header(b, |h| Header { section_count: count, ..h });
+    });
+    assert_eq!(e, FormatError::MissingSection(SectionKind::NodesWide), "an announced wide section that is missing");
     let e = forge(|b| edit_header(b, |h| Header { traversal_cost: f32::NAN, ..h }));
     assert!(matches!(e, FormatError::BadHeader(_)), "{e:?}");
 }
@@ -692,4 +712,197 @@ fn an_invalid_scene_is_not_written_and_the_message_blames_the_scene_not_a_file()
     assert!(msg.starts_with("the scene was not written to") && !msg.contains("is not a valid scene file"), "{msg}");
     assert!(!path.exists(), "nothing was written");
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+fn wide_nodes(bytes: &[u8]) -> Vec<WideNode> {
+    bytemuck::pod_collect_to_vec(&bytes[range(&entry(bytes, SectionKind::NodesWide))])
+}
+
+fn set_wide(bytes: &mut [u8], i: usize, n: WideNode) {
+    section_mut(bytes, SectionKind::NodesWide)[i * 80..i * 80 + 80].copy_from_slice(bytemuck::bytes_of(&n));
+}
+
+/// Forges wide node `i` (of the big file) with `f`, and returns the error.
+fn forge_wide(pick: impl Fn(&[WideNode]) -> usize, f: impl FnOnce(&mut WideNode, &[WideNode])) -> FormatError {
+    forge(|b| {
+        let ws = wide_nodes(b);
+        let i = pick(&ws);
+        let mut n = ws[i];
+        f(&mut n, &ws);
+        set_wide(b, i, n);
+    })
+}
+
+fn slot_where(n: &WideNode, f: impl Fn(Slot) -> bool) -> Option<usize> {
+    (0..WIDTH).find(|&s| f(n.slot(s)))
+}
+
+fn with_leaf(ws: &[WideNode]) -> usize {
+    ws.iter().position(|n| slot_where(n, |s| matches!(s, Slot::Leaf { .. })).is_some()).unwrap()
+}
+
+fn with_inner(ws: &[WideNode]) -> usize {
+    ws.iter().position(|n| n.inner_mask != 0).unwrap()
+}
+
+fn is_leaf(s: Slot) -> bool {
+    matches!(s, Slot::Leaf { .. })
+}
+
+#[test]
+fn the_wide_layout_round_trips_and_is_checked_like_the_others() {
+    let bytes = big_file();
+    let file = bvh_format::read(&bytes).unwrap();
+    let wide = file.wide.as_deref().expect("the big file has the wide layout");
+    assert!(wide.len() > 3, "the big file's wide tree has several levels ({} nodes)", wide.len());
+    let inner = |n: &WideNode| n.inner_mask.count_ones() as usize;
+    assert_eq!(wide.iter().map(inner).sum::<usize>(), wide.len() - 1, "every node but the root is one slot's child");
+    // Damage caught by the section checksum names the wide section.
+    let r = range(&entry(&bytes, SectionKind::NodesWide));
+    let mut b = bytes.clone();
+    b[r.start + 40] ^= 1;
+    assert_eq!(rejected(&b), FormatError::Checksum { section: SectionKind::NodesWide });
+    let e = forge(|b| {
+        let mut t = table(b);
+        let w = t.iter_mut().find(|e| e.kind == SectionKind::NodesWide as u32).unwrap();
+        w.element_size = 64;
+        set_table(b, &t);
+    });
+    assert_eq!(e, FormatError::ElementSize { section: SectionKind::NodesWide, expected: 80, found: 64 });
+}
+
+#[test]
+fn forged_wide_boxes_that_do_not_contain_their_triangles() {
+    for axis in 0..3 {
+        // A leaf's box pulled in by one step at its high corner (a leaf's vertex lies on it).
+        let e = forge_wide(with_leaf, |n, _| {
+            let s = slot_where(n, is_leaf).unwrap();
+            let lo = n.lo[axis][s];
+            n.hi[axis][s] = n.hi[axis][s].saturating_sub(1).max(lo);
+            n.lo[axis][s] = n.lo[axis][s].min(n.hi[axis][s]);
+        });
+        // Either the box is now too small, or (where the grid step is below the vertex's spacing)
+        // the same box: the forge must not pass silently either way.
+        assert!(matches!(e, FormatError::WideBoxTooSmall { .. }), "axis {axis}: {e:?}");
+        // An inner child's box collapsed to its low corner.
+        let e = forge_wide(with_inner, |n, _| {
+            let s = slot_where(n, |s| matches!(s, Slot::Inner(_))).unwrap();
+            n.hi[axis][s] = n.lo[axis][s];
+        });
+        assert!(matches!(e, FormatError::WideBoxTooSmall { .. }), "axis {axis}: {e:?}");
+        // A grid step halved: every box shrinks towards the origin.
+        let e = forge_wide(|_| 0, |n, _| n.exponents[axis] -= 1);
+        assert!(matches!(e, FormatError::WideBoxTooSmall { node: 0, .. }), "axis {axis}: {e:?}");
+        // The grid moved up by a tenth of the scene.
+        let e = forge_wide(|_| 0, |n, _| n.origin[axis] += 2.0);
+        assert!(matches!(e, FormatError::WideBoxTooSmall { node: 0, .. }), "axis {axis}: {e:?}");
+    }
+}
+
+#[test]
+fn forged_wide_fields_out_of_range() {
+    let shape = |e: FormatError, what: &str| {
+        assert!(matches!(e, FormatError::WideShape { .. }), "{what}: {e:?}");
+    };
+    for v in [f32::NAN, f32::INFINITY] {
+        shape(forge_wide(|_| 0, |n, _| n.origin[1] = v), "non-finite origin");
+    }
+    for e in [0u8, 255] {
+        shape(forge_wide(|_| 0, |n, _| n.exponents[2] = e), "exponent out of range");
+    }
+    // A huge step decodes to infinity.
+    shape(forge_wide(|_| 0, |n, _| n.exponents[0] = 254), "a box beyond f32");
+    shape(
+        forge_wide(with_leaf, |n, _| {
+            let s = slot_where(n, is_leaf).unwrap();
+            n.hi[0][s] = 0;
+            n.lo[0][s] = 1;
+        }),
+        "inverted quantised box",
+    );
+    shape(
+        forge_wide(
+            |ws| ws.iter().position(|n| (0..WIDTH).any(|s| n.slot(s) == Slot::Empty)).unwrap(),
+            |n, _| {
+                let s = slot_where(n, |s| s == Slot::Empty).unwrap();
+                n.hi[1][s] = 3;
+            },
+        ),
+        "an empty slot with a box",
+    );
+    shape(
+        forge_wide(with_inner, |n, _| {
+            let s = slot_where(n, |s| matches!(s, Slot::Inner(_))).unwrap();
+            n.meta[s] = 5;
+        }),
+        "an inner child with a meta byte",
+    );
+    // A leaf past the 32-triangle window: offset 31, 8 triangles (0xFF is the empty slot).
+    shape(
+        forge_wide(with_leaf, |n, _| {
+            let s = slot_where(n, is_leaf).unwrap();
+            n.meta[s] = (7 << 5) | 30;
+        }),
+        "a leaf past its window",
+    );
+    for base in [300, 1000, u32::MAX - 3] {
+        shape(forge_wide(with_leaf, |n, _| n.triangle_base = base), "a leaf past the last triangle");
+    }
+}
+
+#[test]
+fn forged_wide_trees_that_are_not_trees() {
+    let shape = |e: FormatError, what: &str| {
+        assert!(matches!(e, FormatError::WideShape { .. }), "{what}: {e:?}");
+    };
+    // A cycle: a node's children start at itself, or at the root.
+    shape(forge_wide(|ws| with_inner(&ws[1..]) + 1, |n, _| n.child_base = 0), "children before the parent");
+    shape(forge_wide(with_inner, |n, ws| n.child_base = ws.len() as u32), "children past the last node");
+    // Two nodes sharing a child: the root's first child's children moved onto the root's.
+    shape(
+        forge_wide(
+            |ws| ws.iter().position(|n| n.inner_mask != 0 && n.child_base > 1).unwrap(),
+            |n, ws| {
+                let first = ws.iter().position(|m| m.inner_mask != 0).unwrap();
+                n.child_base = ws[first].child_base;
+            },
+        ),
+        "a shared child",
+    );
+    // An inner child turned into an empty slot: its subtree is unreachable.
+    shape(
+        forge_wide(with_inner, |n, _| {
+            let s = (0..WIDTH).rev().find(|&s| n.inner_mask & (1 << s) != 0).unwrap();
+            n.inner_mask &= !(1 << s);
+            n.meta[s] = bvh_format::wide::EMPTY;
+            (n.lo[0][s], n.lo[1][s], n.lo[2][s], n.hi[0][s], n.hi[1][s], n.hi[2][s]) = (0, 0, 0, 0, 0, 0);
+        }),
+        "an orphaned subtree",
+    );
+}
+
+#[test]
+fn forged_wide_leaf_coverage() {
+    // A leaf shortened by one triangle: that triangle is in no leaf.
+    let e = forge_wide(
+        |ws| ws.iter().position(|n| (0..WIDTH).any(|s| matches!(n.slot(s), Slot::Leaf { count: 2.., .. }))).unwrap(),
+        |n, _| {
+            let s = slot_where(n, |s| matches!(s, Slot::Leaf { count: 2.., .. })).unwrap();
+            n.meta[s] -= 1 << 5;
+        },
+    );
+    assert!(matches!(e, FormatError::WideCoverage { times: 0, .. }), "{e:?}");
+    // A leaf moved onto another's triangles.
+    let e = forge_wide(
+        |ws| {
+            ws.iter()
+                .position(|n| (0..WIDTH).filter(|&s| is_leaf(n.slot(s))).count() >= 2)
+                .expect("a node with two leaves")
+        },
+        |n, _| {
+            let leaves: Vec<usize> = (0..WIDTH).filter(|&s| is_leaf(n.slot(s))).collect();
+            n.meta[leaves[1]] = n.meta[leaves[0]];
+        },
+    );
+    assert!(matches!(e, FormatError::WideCoverage { times: 2, .. } | FormatError::WideBoxTooSmall { .. }), "{e:?}");
 }

@@ -6,7 +6,8 @@ use bvh_build::Layouts;
 use bvh_build::build::DEPTH_LIMIT;
 use bvh_build::scene::Scene;
 use bvh_format::Strategy as Builder;
-use bvh_format::{BuildParams, Camera, Light, Material, Node, SceneFile, SceneSettings, Triangle};
+use bvh_format::wide::{Slot, WIDTH};
+use bvh_format::{BuildParams, Camera, Light, Material, Node, SceneFile, SceneSettings, Triangle, WideNode};
 use glam::Vec3;
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
@@ -227,6 +228,75 @@ fn check_escape_is_depth_first(cp: &[Node], esc: &[Node], order: &[(usize, u32)]
     Ok(())
 }
 
+/// Walks the wide tree from the root, independently of the validator: every node reached once
+/// and after its parent, at most eight children, every decoded child box holding every vertex
+/// of every triangle beneath the child (recomputed here by walking down), every triangle in
+/// exactly one leaf. Returns the wide tree's depth.
+fn walk_wide(wide: &[WideNode], tris: &[Tri], input_index: &[u32]) -> Result<u32, TestCaseError> {
+    let n = input_index.len();
+    let mut seen_node = vec![false; wide.len()];
+    let mut seen_tri = vec![0u32; n];
+    // Triangles beneath each node, gathered bottom-up after the walk.
+    let mut stack = vec![(0usize, 0u32)];
+    let mut order = Vec::new();
+    seen_node[0] = true;
+    let mut depth = 0;
+    while let Some((i, d)) = stack.pop() {
+        order.push(i);
+        depth = depth.max(d);
+        let w = &wide[i];
+        let mut children = 0;
+        for s in 0..WIDTH {
+            match w.slot(s) {
+                Slot::Empty => {}
+                Slot::Inner(c) => {
+                    children += 1;
+                    prop_assert!((c as usize) > i && (c as usize) < wide.len(), "node {} child {}", i, c);
+                    prop_assert!(!std::mem::replace(&mut seen_node[c as usize], true), "node {} reached twice", c);
+                    stack.push((c as usize, d + 1));
+                }
+                Slot::Leaf { first, count } => {
+                    children += 1;
+                    prop_assert!(count as usize <= 8 && first as usize + count as usize <= n);
+                    for t in first..first + count {
+                        seen_tri[t as usize] += 1;
+                    }
+                }
+            }
+        }
+        prop_assert!((1..=8).contains(&children), "node {} has {} children", i, children);
+    }
+    prop_assert!(seen_node.iter().all(|&s| s), "a wide node is unreachable");
+    prop_assert!(seen_tri.iter().all(|&c| c == 1), "a triangle is not in exactly one wide leaf");
+    // Conservative boxes: each slot's box against the vertices of every triangle beneath it.
+    let mut beneath: Vec<Vec<u32>> = vec![Vec::new(); wide.len()];
+    for &i in order.iter().rev() {
+        let w = &wide[i];
+        let mut all = Vec::new();
+        for s in 0..WIDTH {
+            let ts: Vec<u32> = match w.slot(s) {
+                Slot::Empty => continue,
+                Slot::Inner(c) => beneath[c as usize].clone(),
+                Slot::Leaf { first, count } => (first..first + count).collect(),
+            };
+            let (lo, hi) = w.child_box(s);
+            for &t in &ts {
+                for v in tris[input_index[t as usize] as usize] {
+                    prop_assert!(
+                        (0..3).all(|a| lo[a] <= v[a] && v[a] <= hi[a]),
+                        "node {} slot {} misses a vertex",
+                        i,
+                        s
+                    );
+                }
+            }
+            all.extend(ts);
+        }
+        beneath[i] = all;
+    }
+    Ok(depth)
+}
+
 fn roundtrip(file: &SceneFile) -> Result<(), TestCaseError> {
     prop_assert_eq!(file.validate(), Ok(()));
     let bytes = bvh_format::write(file).map_err(|e| TestCaseError::fail(e.to_string()))?;
@@ -274,9 +344,9 @@ proptest! {
         roundtrip(&cp_only)?;
         roundtrip(&esc_only)?;
         // Compiling with one layout must give the same file as dropping the other.
-        let one = Layouts { child_pair: true, escape: false };
+        let one = Layouts { child_pair: true, escape: false, wide: false };
         prop_assert!(bvh_build::compile(&scene, &p, one).ok().as_ref() == Some(&cp_only));
-        let one = Layouts { child_pair: false, escape: true };
+        let one = Layouts { child_pair: false, escape: true, wide: false };
         prop_assert!(bvh_build::compile(&scene, &p, one).ok().as_ref() == Some(&esc_only));
 
         // The builder alone gives the same tree as the compiler stored.
@@ -285,6 +355,43 @@ proptest! {
             built.nodes.iter().map(|n| Node { min: stored(&file, n.min), max: stored(&file, n.max), ..*n }).collect();
         prop_assert_eq!(&nodes[..], cp);
         prop_assert_eq!(&built.order, &file.input_index);
+    }
+
+    #[test]
+    fn wide_layouts_are_sound_and_only_renumber_the_binary_leaves((_kind, tris) in soup(), p in params()) {
+        let scene = scene_of(&tris, 2);
+        let all = bvh_build::compile(&scene, &p, Layouts::ALL);
+        let binary = bvh_build::compile(&scene, &p, Layouts::BINARY).map_err(|e| TestCaseError::fail(e.to_string()))?;
+        // A tree with a leaf a wide leaf cannot hold is refused, in a sentence that says what to do.
+        let largest = binary.child_pair.as_deref().unwrap().iter().map(|n| n.count).max().unwrap_or(0);
+        if largest > bvh_format::wide::MAX_LEAF {
+            let e = all.err().map(|e| e.to_string()).unwrap_or_default();
+            prop_assert!(e.contains("--max-leaf-size 8 or less"), "{}", e);
+            return Ok(());
+        }
+        let all = all.map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let tris = stored_tris(&all, &tris);
+        let wide = all.wide.as_deref().expect("the wide layout was asked for");
+        let depth = walk_wide(wide, &tris, &all.input_index)?;
+        prop_assert_eq!(depth, bvh_format::wide::depth(wide));
+        prop_assert!(depth <= all.stats().max_depth, "a wide tree is never deeper than its binary one");
+        roundtrip(&all)?;
+        roundtrip(&SceneFile { escape: None, ..all.clone() })?;
+        // The binary tree is the one compiled without the wide layout, its leaves renumbered: same
+        // boxes and counts, and each leaf holds the same input triangles in the same order.
+        let (a, b) = (all.child_pair.as_deref().unwrap(), binary.child_pair.as_deref().unwrap());
+        prop_assert_eq!(a.len(), b.len());
+        for (x, y) in a.iter().zip(b) {
+            prop_assert!(x.min == y.min && x.max == y.max && x.count == y.count);
+            if x.is_leaf() {
+                let r = |n: &Node| n.index as usize..(n.index + n.count) as usize;
+                prop_assert_eq!(&all.input_index[r(x)], &binary.input_index[r(y)]);
+            } else {
+                prop_assert_eq!(x.index, y.index);
+            }
+        }
+        prop_assert_eq!(SceneFile { escape: None, wide: None, ..all.clone() }.validate(), Ok(()));
+        prop_assert_eq!(&all.escape, &Some(bvh_format::tree::escape_from_child_pair(a)));
     }
 
     #[test]
@@ -592,4 +699,32 @@ fn traverse_escape(ray: &Ray, nodes: &[Node], tris: &[Triangle]) -> Option<(f32,
         }
     }
     best
+}
+
+/// The collapse on the shipped scenes: every wide tree walked as above (every triangle in one
+/// leaf, at most eight children, every decoded box around its triangles), no deeper than the
+/// binary tree, and fuller than a binary tree's two children per node.
+#[test]
+fn shipped_scenes_collapse_into_sound_wide_trees() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    for name in ["room.toml", "bunny.toml", "forest.toml", "car.toml"] {
+        let scene = bvh_build::import::load(&dir.join(name), &Default::default()).expect("the scene imports");
+        let file = bvh_build::compile(&scene, &BuildParams::default(), Layouts::ALL).expect("the scene compiles");
+        let wide = file.wide.as_deref().expect("the wide layout");
+        // The stored triangles by input index, as walk_wide looks them up.
+        let mut tris = vec![[[0.0f32; 3]; 3]; file.triangles.len()];
+        for (k, &src) in file.input_index.iter().enumerate() {
+            tris[src as usize] = file.positions(k);
+        }
+        let depth = walk_wide(wide, &tris, &file.input_index).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let children: usize = wide.iter().map(|n| (0..WIDTH).filter(|&s| n.slot(s) != Slot::Empty).count()).sum();
+        let per_node = children as f64 / wide.len() as f64;
+        println!(
+            "{name}: {} wide nodes, depth {depth} (binary {}), {per_node:.2} children per node",
+            wide.len(),
+            file.stats().max_depth
+        );
+        assert!(depth < file.stats().max_depth, "{name}: the wide tree is shallower");
+        assert!(per_node > 3.0, "{name}: {per_node} children per node");
+    }
 }

@@ -451,7 +451,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "bunny (built-in)".to_owned());
         bar.set_message(format!("loading {name}"));
-        let scene = crate::load_scene(path.as_deref())?.file;
+        let scene = crate::load_scene_with(path.as_deref(), crate::layouts_for(methods))?.file;
         // Every camera is looked up before the first frame, so a misspelt one fails at once.
         let cameras: Vec<(&String, CameraSpec)> =
             m.cameras.iter().map(|c| Ok((c, stored_camera(&scene, c)?))).collect::<Result<_, String>>()?;

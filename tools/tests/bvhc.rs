@@ -74,6 +74,32 @@ fn layout_and_strategy_options_reach_the_file() {
     assert!(scene.stats().leaf_sizes.len() <= 5, "no leaf above 4 triangles");
 }
 
+/// `--layout` lists: `all` (or `both,wide`) adds the wide layout, which `info` and `verify` report;
+/// the wide layout alone, without a binary one, is refused in one sentence.
+#[test]
+fn the_wide_layout_is_compiled_on_request_and_reported() {
+    let dir = scratch("wide");
+    let input = repo().join("scenes/bunny.glb");
+    for (layout, file) in [("all", "all.bvh"), ("escape,wide", "escape-wide.bvh")] {
+        let out = dir.join(file);
+        let o = bvhc(&["compile", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--quiet", "--layout", layout]);
+        assert!(o.status.success(), "{layout}: {:?}", text(&o));
+        let scene = bvh_format::read_file(&out).unwrap();
+        let wide = scene.wide.as_deref().expect("the wide layout was asked for");
+        assert_eq!(scene.child_pair.is_some(), layout == "all", "{layout}");
+        let o = bvhc(&["info", out.to_str().unwrap()]);
+        let (info, _) = text(&o);
+        let line = format!("wide layout     {} nodes, depth {}", wide.len(), bvh_format::wide::depth(wide));
+        assert!(info.contains(&line) && info.contains("wide nodes") && info.contains("(cwbvh)"), "{info}");
+        let o = bvhc(&["verify", out.to_str().unwrap()]);
+        assert!(o.status.success() && text(&o).0.contains("wide)"), "{:?}", text(&o));
+    }
+    let out = dir.join("never.bvh");
+    let o = bvhc(&["compile", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--layout", "wide"]);
+    assert_one_sentence_error(&o, "binary one beside it");
+    assert!(!out.exists());
+}
+
 #[test]
 fn bad_input_gives_one_sentence_and_no_output() {
     let dir = scratch("bad");

@@ -88,5 +88,6 @@ pub fn held_bytes(scene: &bvh_format::SceneFile) -> u64 {
         + std::mem::size_of_val(&s.input_index[..])
         + nodes(&s.child_pair)
         + nodes(&s.escape)
+        + s.wide.as_ref().map_or(0, |w| std::mem::size_of_val(&w[..]))
         + s.triangles.len() * std::mem::size_of::<bvh_format::Triangle>()) as u64
 }

@@ -14,6 +14,7 @@ const COMMON: &str = include_str!("../shaders/common.wgsl");
 const LST: &str = include_str!("../shaders/lst.wgsl");
 const STACKLESS: &str = include_str!("../shaders/stackless.wgsl");
 const SST: &str = include_str!("../shaders/sst.wgsl");
+const CWBVH: &str = include_str!("../shaders/cwbvh.wgsl");
 const RT_PIPELINE: &str = include_str!("../shaders/rt_pipeline.wgsl");
 const STAGES: &str = include_str!("../shaders/stages.wgsl");
 
@@ -31,11 +32,16 @@ pub enum Method {
     /// The vendor's traversal: VK_KHR_ray_tracing_pipeline on the driver's acceleration structures
     /// ([`crate::rt`]), the stages' shading unchanged (rt_pipeline.wgsl).
     RtPipeline,
+    /// Ylitie, Karras and Laine's compressed wide BVH: 8 quantised children per node, a stack of
+    /// node groups, children visited in the order of the ray's octant (cwbvh.wgsl); reads the
+    /// file's wide layout.
+    Cwbvh,
 }
 
 impl Method {
     /// Every method, in the order `trace-vk` lists them.
-    pub const ALL: [Method; 5] = [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup, Method::RtPipeline];
+    pub const ALL: [Method; 6] =
+        [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup, Method::RtPipeline, Method::Cwbvh];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -44,6 +50,7 @@ impl Method {
             Method::Sst => "sst",
             Method::SstSubgroup => "sst-subgroup",
             Method::RtPipeline => "rt-pipeline",
+            Method::Cwbvh => "cwbvh",
         }
     }
 
@@ -395,6 +402,7 @@ pub fn source_half(stage: Stage, spec: &Specialisation, half: Half) -> String {
         Method::Lst => LST,
         Method::Stackless => STACKLESS,
         Method::Sst | Method::SstSubgroup => SST,
+        Method::Cwbvh => CWBVH,
         Method::RtPipeline => {
             features.push(if half == Half::Emit { "RT_EMIT" } else { "RT_COLLECT" });
             RT_PIPELINE
@@ -437,8 +445,19 @@ pub fn source_half(stage: Stage, spec: &Specialisation, half: Half) -> String {
         strip_features(STAGES, &features),
         entry
     );
-    let text = split_arrays(&text, &spec.split);
+    let text = if spec.method == Method::Cwbvh { text.replacen(BINARY_NODES, WIDE_NODES, 1) } else { text };
+    let text = split_arrays(&text, &spec.split, node_record(spec.method));
     if spec.exact { text } else { with_device_rounding(&text) }
+}
+
+/// common.wgsl's declaration of the node array, and the one cwbvh's kernels have instead: the
+/// binding holds the wide layout's records (cwbvh.wgsl's `WideNode`) for that method.
+const BINARY_NODES: &str = "var<storage, read> nodes: array<Node>;";
+const WIDE_NODES: &str = "var<storage, read> nodes: array<WideNode>;";
+
+/// The record of the node array a method's kernels read.
+fn node_record(method: Method) -> &'static str {
+    if method == Method::Cwbvh { "WideNode" } else { "Node" }
 }
 
 /// rt-pipeline's traversal done by LST in a compute kernel, one invocation per pixel's ray record
@@ -501,12 +520,12 @@ const FIRST_SPLIT_BINDING: u32 = 14;
 /// With one chunk per array, `text` unchanged. Otherwise every read `nodes[i]` / `tris[i]` becomes
 /// `node_at(i)` / `tri_at(i)`, which picks the binding by index range, and the extra bindings and
 /// the two functions are declared.
-fn split_arrays(text: &str, split: &Split) -> String {
+fn split_arrays(text: &str, split: &Split, node_record: &str) -> String {
     let mut text = text.to_string();
     let mut binding = FIRST_SPLIT_BINDING;
     let mut decls = String::new();
     for (array, record, accessor, chunks, chunk) in [
-        ("nodes", "Node", "node_at", split.node_chunks, split.node_chunk),
+        ("nodes", node_record, "node_at", split.node_chunks, split.node_chunk),
         ("tris", "Tri", "tri_at", split.tri_chunks, split.tri_chunk),
     ] {
         if chunks <= 1 {
@@ -642,7 +661,7 @@ mod tests {
 
     #[test]
     fn every_kernel_translates_for_every_specialisation() {
-        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup, Method::RtPipeline] {
+        for method in Method::ALL {
             for (r, t) in [(false, false), (true, false), (false, true), (true, true)] {
                 for stage in [
                     Stage::Cast,
@@ -777,9 +796,14 @@ mod tests {
             }
         }
         // No kernel file spells a shared value itself.
-        for (file, text) in
-            [("common", COMMON), ("lst", LST), ("stackless", STACKLESS), ("sst", SST), ("stages", STAGES)]
-        {
+        for (file, text) in [
+            ("common", COMMON),
+            ("lst", LST),
+            ("stackless", STACKLESS),
+            ("sst", SST),
+            ("stages", STAGES),
+            ("cwbvh", CWBVH),
+        ] {
             for (name, _) in SHARED {
                 assert!(!text.contains(&format!("const {name}")), "{file}.wgsl declares {name} again");
             }
@@ -799,7 +823,7 @@ mod tests {
              let r = Ray(o, d, ((vec3<f32>(1.0)) / d));\n\
              let t = ((n.x * a.x + n.y) / den) + sqrt(dot3(v, v)) + (1.0 / m.kt_ior.y);\n"
         );
-        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
+        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup, Method::Cwbvh] {
             let plain = source(Stage::Bounce, &spec(method, true, true));
             let code = plain.lines().map(|l| l.split("//").next().unwrap_or_default());
             assert!(code.clone().all(|l| !l.contains("_rn(")) && code.clone().any(|l| l.contains(" / ")), "{method:?}");
@@ -827,10 +851,28 @@ mod tests {
             assert!(!collect.contains("this half only writes the ray"));
             assert!(emit.contains("rt_slot = select(RT_NO_SLOT, pixel_index(x, y), valid);"));
         }
-        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
+        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup, Method::Cwbvh] {
             let text = source(Stage::Bounce, &spec(method, true, true));
             assert!(!text.contains("rt_slot") && !text.contains("this half only writes the ray"), "{method:?}");
         }
+    }
+
+    /// cwbvh's kernels read the node binding as wide records, every other method's as binary
+    /// nodes; the triangle test and leaf loop are the shared ones (no copy in cwbvh.wgsl).
+    #[test]
+    fn cwbvh_reads_wide_nodes_through_the_shared_leaf_code() {
+        assert_eq!(COMMON.matches(BINARY_NODES).count(), 1, "common.wgsl declares the node array once");
+        let wide = source(Stage::Bounce, &spec(Method::Cwbvh, true, true));
+        assert!(wide.contains(WIDE_NODES) && !wide.contains(BINARY_NODES));
+        assert!(wide.contains("const STACK_SIZE: u32 = 23u;"));
+        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
+            let text = source(Stage::Bounce, &spec(method, true, true));
+            assert!(text.contains(BINARY_NODES) && !text.contains("WideNode"), "{method:?}");
+        }
+        for shared in ["fn intersect", "fn slab", "fn edge_function", "tris["] {
+            assert!(!CWBVH.contains(shared), "cwbvh.wgsl has its own `{shared}`");
+        }
+        assert!(CWBVH.contains("intersect_leaf(") && CWBVH.contains("slab("));
     }
 
     #[test]
@@ -846,7 +888,7 @@ mod tests {
     #[test]
     fn split_kernels_translate_and_unsplit_ones_are_unchanged() {
         let split = Split { node_chunks: 3, node_chunk: 1000, tri_chunks: 2, tri_chunk: 700 };
-        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
+        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup, Method::Cwbvh] {
             for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce] {
                 let plain = spec(method, true, true);
                 let unsplit = source(stage, &plain);

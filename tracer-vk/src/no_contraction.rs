@@ -223,7 +223,7 @@ mod tests {
     #[test]
     fn every_float_result_of_every_kernel_is_decorated() {
         let gpu = gpu();
-        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup] {
+        for method in [Method::Lst, Method::Stackless, Method::Sst, Method::SstSubgroup, Method::Cwbvh] {
             for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert] {
                 let spec = Specialisation { exact: true, ..Specialisation::every_feature(method) };
                 // The exact kernel's text as naga writes it, then with the pass.

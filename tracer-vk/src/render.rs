@@ -324,7 +324,12 @@ impl<'g> Renderer<'g> {
         }
         // rt-pipeline reads no tree of the file; the binding gets one unused node.
         let placeholder = [bvh_format::Node::zeroed()];
-        let nodes = match method {
+        let binary = match method {
+            // Refused in one sentence before any work when the file lacks the wide layout.
+            Method::Cwbvh => {
+                scene.wide.as_deref().ok_or(RenderError::MissingLayout { method: method.name(), layout: "wide" })?;
+                &placeholder[..]
+            }
             Method::RtPipeline if !stand_in => &placeholder[..],
             Method::RtPipeline => scene
                 .child_pair
@@ -339,22 +344,37 @@ impl<'g> Renderer<'g> {
                 .as_deref()
                 .ok_or(RenderError::MissingLayout { method: method.name(), layout: "escape-pointer" })?,
         };
+        let nodes = match (method, &scene.wide) {
+            (Method::Cwbvh, Some(w)) => NodeArray::Wide(w),
+            _ => NodeArray::Binary(binary),
+        };
         let info = gpu.info();
-        let node_what = if method == Method::Stackless { "escape-pointer nodes" } else { "child-pair nodes" };
+        let node_what = match method {
+            Method::Stackless => "escape-pointer nodes",
+            Method::Cwbvh => "wide nodes",
+            _ => "child-pair nodes",
+        };
         let arrays = SceneArrays::new(scene);
         // rt-pipeline's ray and hit records take the binding numbers the split would use, so its
         // arrays must each fit one binding, as before the split.
         if method == Method::RtPipeline {
-            fits(info, node_what, nodes)?;
+            fits(info, node_what, binary)?;
             fits(info, "triangles", &arrays.tris)?;
         }
-        let (node_chunks, node_chunk) = chunking(info, binding_bytes, node_what, nodes)?;
+        let (node_chunks, node_chunk) = match nodes {
+            NodeArray::Binary(n) => chunking(info, binding_bytes, node_what, n)?,
+            NodeArray::Wide(n) => chunking(info, binding_bytes, node_what, n)?,
+        };
         let (tri_chunks, tri_chunk) = chunking(info, binding_bytes, "triangles", &arrays.tris)?;
         let split = Split { node_chunks, node_chunk, tri_chunks, tri_chunk };
         let stats = scene.stats();
         let spec = Specialisation {
             method,
-            stack_size: stats.max_depth.max(1),
+            // cwbvh's node groups: one per level of the wide tree at most.
+            stack_size: match nodes {
+                NodeArray::Wide(w) => bvh_format::wide::depth(w).max(1),
+                NodeArray::Binary(_) => stats.max_depth.max(1),
+            },
             leaf_size: (stats.leaf_sizes.len().max(2) - 1) as u32,
             workgroup,
             reflection: scene.materials.iter().any(|m| m.kr > 0.0),
@@ -377,7 +397,10 @@ impl<'g> Renderer<'g> {
         if method == Method::SstSubgroup && !info.supports_subgroup_ops {
             return Err(VkRenderError::NoSubgroups(info.name.clone()));
         }
-        if method == Method::Lst && info.kind == DeviceKind::Cpu && spec.stack_size > CPU_DEVICE_STACK_LIMIT {
+        if matches!(method, Method::Lst | Method::Cwbvh)
+            && info.kind == DeviceKind::Cpu
+            && spec.stack_size > CPU_DEVICE_STACK_LIMIT
+        {
             return Err(VkRenderError::PrivateStack {
                 depth: spec.stack_size,
                 limit: CPU_DEVICE_STACK_LIMIT,
@@ -409,7 +432,10 @@ impl<'g> Renderer<'g> {
             gpu,
             scene,
             spec,
-            nodes: upload_chunks(gpu, nodes, node_chunk, "nodes")?,
+            nodes: match nodes {
+                NodeArray::Binary(n) => upload_chunks(gpu, n, node_chunk, "nodes")?,
+                NodeArray::Wide(n) => upload_chunks(gpu, n, node_chunk, "nodes")?,
+            },
             tris: upload_chunks(gpu, &arrays.tris, tri_chunk, "triangles")?,
             normal_indices: gpu.create_buffer_with(&arrays.normal_indices, "normal indices")?,
             normals: gpu.create_buffer_with(&arrays.normals, "normals")?,
@@ -1015,6 +1041,13 @@ fn indexed_records(scene: &SceneFile) -> Vec<[u32; 4]> {
     tris.chain(vertices).collect()
 }
 
+/// The node array a renderer uploads: the binary nodes of one layout, or the wide layout's.
+#[derive(Clone, Copy)]
+enum NodeArray<'a> {
+    Binary(&'a [bvh_format::Node]),
+    Wide(&'a [bvh_format::WideNode]),
+}
+
 /// Bytes of scene data a renderer with `method` uploads (nodes of the one layout it reads,
 /// triangles in the default expanded form, normals, materials, input indices), for `bvhc info`.
 pub fn upload_bytes(scene: &SceneFile, method: Method) -> u64 {
@@ -1025,16 +1058,17 @@ pub fn upload_bytes(scene: &SceneFile, method: Method) -> u64 {
 pub fn upload_bytes_with(scene: &SceneFile, method: Method, form: Vertices) -> u64 {
     let nodes = match method {
         Method::Stackless => scene.escape.as_ref(),
-        Method::RtPipeline => None,
+        Method::RtPipeline | Method::Cwbvh => None,
         _ => scene.child_pair.as_ref(),
     };
+    let wide = if method == Method::Cwbvh { scene.wide.as_deref().unwrap_or_default() } else { &[] };
     let a = SceneArrays::new(scene);
     let tris = match form {
         Vertices::Expanded => std::mem::size_of_val(&a.tris[..]),
         Vertices::Indexed => 16 * (scene.triangles.len() + scene.vertices.len()),
     };
     [
-        std::mem::size_of_val(nodes.map_or(&[][..], |n| &n[..])),
+        std::mem::size_of_val(nodes.map_or(&[][..], |n| &n[..])) + std::mem::size_of_val(wide),
         tris,
         std::mem::size_of_val(&a.normal_indices[..]),
         std::mem::size_of_val(&a.normals[..]),

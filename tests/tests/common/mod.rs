@@ -11,12 +11,17 @@ use tracer_vk::Gpu;
 /// A scene of `scenes/` (or of $SCENES_DIR, for a test binary run on another machine), compiled
 /// with default settings.
 pub fn compile(name: &str) -> SceneFile {
+    compile_with(name, Default::default())
+}
+
+/// [`compile`] with the given node layouts (`Layouts::ALL` for the tests of `cwbvh`).
+pub fn compile_with(name: &str, layouts: bvh_build::Layouts) -> SceneFile {
     let dir = std::env::var_os("SCENES_DIR")
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes"));
     let p = dir.join(name);
     let scene = bvh_build::import::load(&p, &Default::default()).expect("the scene imports");
-    bvh_build::compile(&scene, &Default::default(), Default::default()).expect("the scene compiles")
+    bvh_build::compile(&scene, &Default::default(), layouts).expect("the scene compiles")
 }
 
 /// The first Vulkan device, with the validation layer on. Fails, never skips, without one.

@@ -45,6 +45,11 @@ enum LayoutArg {
     Both,
     ChildPair,
     Escape,
+    /// The 8-wide compressed layout for `trace-vk --method cwbvh`, beside a binary one (about 11
+    /// bytes per triangle; it also stores the triangles in its leaves' order).
+    Wide,
+    /// Child-pair, escape-pointer and wide.
+    All,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -63,9 +68,9 @@ struct CompileArgs {
     /// Output file [default: the input's name with the extension .bvh].
     #[arg(short, long)]
     output: Option<PathBuf>,
-    /// Node layouts to store.
-    #[arg(long, value_enum, default_value = "both")]
-    layout: LayoutArg,
+    /// Node layouts to store, comma-separated (`--layout both,wide`); `wide` needs a binary one beside it.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "both")]
+    layout: Vec<LayoutArg>,
     /// Builder.
     #[arg(long, value_enum, default_value = "binned")]
     strategy: StrategyArg,
@@ -128,11 +133,16 @@ fn compile(args: &CompileArgs) -> Result<(), String> {
         max_leaf_size: args.max_leaf_size,
     };
     bvh_build::check_params(&params).map_err(|e| e.to_string())?;
-    let layouts = match args.layout {
-        LayoutArg::Both => Layouts { child_pair: true, escape: true },
-        LayoutArg::ChildPair => Layouts { child_pair: true, escape: false },
-        LayoutArg::Escape => Layouts { child_pair: false, escape: true },
-    };
+    let mut layouts = Layouts { child_pair: false, escape: false, wide: false };
+    for l in &args.layout {
+        match l {
+            LayoutArg::Both => (layouts.child_pair, layouts.escape) = (true, true),
+            LayoutArg::ChildPair => layouts.child_pair = true,
+            LayoutArg::Escape => layouts.escape = true,
+            LayoutArg::Wide => layouts.wide = true,
+            LayoutArg::All => layouts = Layouts::ALL,
+        }
+    }
 
     let t0 = Instant::now();
     let reading = Progress::new(0, "reading {msg} ({elapsed})", args.quiet);
@@ -225,12 +235,13 @@ fn verify(file: &Path) -> Result<(), String> {
     Ok(())
 }
 
-fn layout_names(scene: &SceneFile) -> &'static str {
-    match (scene.child_pair.is_some(), scene.escape.is_some()) {
-        (true, true) => "child-pair, escape-pointer",
-        (true, false) => "child-pair",
-        _ => "escape-pointer",
-    }
+fn layout_names(scene: &SceneFile) -> String {
+    let names = [
+        (scene.child_pair.is_some(), "child-pair"),
+        (scene.escape.is_some(), "escape-pointer"),
+        (scene.wide.is_some(), "wide"),
+    ];
+    names.iter().filter(|(present, _)| *present).map(|(_, name)| *name).collect::<Vec<_>>().join(", ")
 }
 
 fn human_bytes(b: u64) -> String {
@@ -289,6 +300,23 @@ fn info(file: &Path) -> Result<(), String> {
     say!("  nodes           {} ({} inner, {} leaves)", s.node_count, s.node_count - s.leaf_count, s.leaf_count);
     say!("  depth           max {}, mean leaf depth {:.2}", s.max_depth, s.mean_leaf_depth);
     say!("  SAH cost        {:.4}", s.sah_cost);
+    if let Some(w) = &scene.wide {
+        let children: usize = w
+            .iter()
+            .map(|n| {
+                (0..bvh_format::wide::WIDTH)
+                    .filter(|&s| n.meta[s] != bvh_format::wide::EMPTY || n.inner_mask & (1 << s) != 0)
+                    .count()
+            })
+            .sum();
+        say!(
+            "  wide layout     {} nodes, depth {}, {:.2} children per node, {:.1} bytes per triangle",
+            w.len(),
+            bvh_format::wide::depth(w),
+            children as f64 / w.len().max(1) as f64,
+            std::mem::size_of_val(&w[..]) as f64 / scene.triangles.len().max(1) as f64
+        );
+    }
     say!("  mean leaf size  {:.2}", scene.triangles.len() as f64 / s.leaf_count.max(1) as f64);
     say!("  leaf sizes");
     let widest = s.leaf_sizes.iter().copied().max().unwrap_or(1).max(1);
@@ -306,13 +334,18 @@ fn info(file: &Path) -> Result<(), String> {
     let vk = |m, v| per_tri(tracer_vk::render::upload_bytes_with(&scene, m, v));
     use tracer_vk::kernels::{Method as Vk, Vertices};
     say!(
-        "  bytes/triangle  file {:.1}; trace-cpu holds {:.1}; trace-vk uploads {:.1} (lst, sst), {:.1} (stackless), with --vertices indexed {:.1}, {:.1}",
+        "  bytes/triangle  file {:.1}; trace-cpu holds {:.1}; trace-vk uploads {:.1} (lst, sst), {:.1} (stackless), with --vertices indexed {:.1}, {:.1}{}",
         per_tri(total),
         per_tri(tracer_cpu::held_bytes(&scene)),
         vk(Vk::Lst, Vertices::Expanded),
         vk(Vk::Stackless, Vertices::Expanded),
         vk(Vk::Lst, Vertices::Indexed),
-        vk(Vk::Stackless, Vertices::Indexed)
+        vk(Vk::Stackless, Vertices::Indexed),
+        if scene.wide.is_some() {
+            format!(", {:.1} (cwbvh)", vk(Vk::Cwbvh, Vertices::Expanded))
+        } else {
+            String::new()
+        }
     );
     say!(
         "  shading         ambient {:?}, background {:?}, up to {} indirections",

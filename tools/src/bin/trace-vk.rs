@@ -141,6 +141,10 @@ enum MethodArg {
     /// The GPU vendor's traversal (VK_KHR_ray_tracing_pipeline on the driver's own acceleration
     /// structures) with the same shading; where `trace-vk devices` says the device supports it.
     RtPipeline,
+    /// Compressed 8-wide BVH (Ylitie, Karras and Laine 2017): quantised boxes, children in the
+    /// ray octant's order; needs the wide layout (`bvhc compile --layout all`), which a mesh or
+    /// description compiled on the fly gets.
+    Cwbvh,
     /// The fastest of the methods above that the device supports, for this scene, mode and size:
     /// picked by timing a few frames of each, cached beside the scene file (`SCENE.methods`).
     Auto,
@@ -228,7 +232,8 @@ fn render(
     let chosen = method_of(method);
     // A device without rt-pipeline refuses it before the scene is read.
     let early = if chosen == Some(Method::RtPipeline) { Some(open_for(device, &[Method::RtPipeline])?) } else { None };
-    let loaded = tools::load_scene(args.scene.as_deref())?;
+    let loaded =
+        tools::load_scene_with(args.scene.as_deref(), tools::layouts_for(&[chosen.map_or(AUTO, Method::name)]))?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
     let gpu = match early {
@@ -319,6 +324,7 @@ fn method_of(m: MethodArg) -> Option<Method> {
         MethodArg::Sst => Method::Sst,
         MethodArg::SstSubgroup => Method::SstSubgroup,
         MethodArg::RtPipeline => Method::RtPipeline,
+        MethodArg::Cwbvh => Method::Cwbvh,
         MethodArg::Auto => return None,
     })
 }

@@ -367,6 +367,7 @@ fn hand_built(positions: Vec<[Vec3; 3]>, nodes: Vec<Node>, camera: Camera) -> Sc
         input_index: (0..n).collect(),
         escape: Some(bvh_format::tree::escape_from_child_pair(&nodes)),
         child_pair: Some(nodes),
+        wide: None,
         cameras: vec![camera],
         lights: vec![light],
     }
