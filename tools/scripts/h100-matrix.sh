@@ -40,7 +40,8 @@ log "methods $METHODS, modes $MODES, $RES"
 SCENES=()
 for t in scenes/*.toml; do
   n=$(basename "$t" .toml)
-  if "$BIN/bvhc" compile "$t" -o "$WORK/scenes/$n.bvh" >>"$WORK/bvhc.txt" 2>&1; then
+  # --layout all: the wide layout too, for cwbvh (and auto among the methods).
+  if "$BIN/bvhc" compile "$t" --layout all -o "$WORK/scenes/$n.bvh" >>"$WORK/bvhc.txt" 2>&1; then
     SCENES+=("$WORK/scenes/$n.bvh")
   else
     log "bvhc failed on $t"; tail -3 "$WORK/bvhc.txt"

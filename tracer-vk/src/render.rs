@@ -1097,6 +1097,27 @@ fn upload_chunks<T: bytemuck::Pod>(gpu: &Gpu, data: &[T], per_chunk: u32, what: 
     data.chunks(per_chunk as usize).enumerate().map(|(i, c)| gpu.create_buffer_with(c, &label(i))).collect()
 }
 
+/// The most bytes one storage-buffer binding may hold, and the limit that sets it: the device's
+/// range and allocation limits, and never more than 2 GiB. The H100 (driver 580.159.04) reported a
+/// range of 4 GiB but rendered wrong images, silently, once the node array passed 2 GiB (75 M
+/// nodes: stackless missed most hits, LST ran away; 60 M nodes rendered right), the classic sign
+/// of signed 32-bit byte offsets; bindings of at most 2 GiB rendered right at every size measured
+/// (docs/measurements/h100-2026-11-25-size). Splitting costs one comparison per read, only for
+/// scenes that large.
+pub fn binding_limit(info: &crate::device::DeviceInfo) -> (&'static str, u64) {
+    const SIGNED_32_BIT_OFFSETS: u64 = 1 << 31;
+    let (name, limit) = if info.max_storage_buffer_range <= info.max_memory_allocation {
+        ("maxStorageBufferRange", info.max_storage_buffer_range)
+    } else {
+        ("maxMemoryAllocationSize", info.max_memory_allocation)
+    };
+    if limit > SIGNED_32_BIT_OFFSETS {
+        ("2 GiB (signed 32-bit byte offsets)", SIGNED_32_BIT_OFFSETS)
+    } else {
+        (name, limit)
+    }
+}
+
 /// How many bindings of at most `binding_bytes` (and the device's limits) the array `data` needs,
 /// up to [`kernels::MAX_CHUNKS`], and the records per binding. An empty array still takes one.
 fn chunking<T>(
@@ -1106,11 +1127,7 @@ fn chunking<T>(
     data: &[T],
 ) -> Result<(u32, u32), VkRenderError> {
     let bytes = std::mem::size_of_val(data) as u64;
-    let (limit_name, limit) = if info.max_storage_buffer_range <= info.max_memory_allocation {
-        ("maxStorageBufferRange", info.max_storage_buffer_range)
-    } else {
-        ("maxMemoryAllocationSize", info.max_memory_allocation)
-    };
+    let (limit_name, limit) = binding_limit(info);
     let limit = limit.min(binding_bytes);
     let per_chunk = (limit / size_of::<T>().max(1) as u64).clamp(1, u32::MAX as u64);
     let chunks = (data.len() as u64).div_ceil(per_chunk).max(1);
@@ -1128,11 +1145,7 @@ fn chunking<T>(
 /// Checks that a scene array fits one storage buffer binding and one allocation.
 fn fits<T>(info: &crate::device::DeviceInfo, what: &'static str, data: &[T]) -> Result<(), VkRenderError> {
     let bytes = std::mem::size_of_val(data) as u64;
-    let (limit_name, limit) = if info.max_storage_buffer_range <= info.max_memory_allocation {
-        ("maxStorageBufferRange", info.max_storage_buffer_range)
-    } else {
-        ("maxMemoryAllocationSize", info.max_memory_allocation)
-    };
+    let (limit_name, limit) = binding_limit(info);
     if bytes > limit {
         let fits = limit / size_of::<T>().max(1) as u64;
         return Err(VkRenderError::SceneTooLarge { what, bytes, limit_name, limit, fits });

@@ -285,7 +285,7 @@ fn render(
     if split.node_chunks > 1 || split.tri_chunks > 1 {
         lines.push(format!(
             "the scene is split over storage buffer bindings of at most {} MiB: nodes {}, triangles {}",
-            gpu.info().max_storage_buffer_range.min(gpu.info().max_memory_allocation) >> 20,
+            tracer_vk::render::binding_limit(gpu.info()).1 >> 20,
             split.node_chunks,
             split.tri_chunks
         ));
