@@ -17,7 +17,7 @@
 # faster (time < 1) on the H100 as well.
 #
 # Env: RES (default 1920x1440), METHODS (default lst,stackless,sst), FRAMES (default 50), ROUNDS
-# (default 2).
+# (default 2). Run on the H100 on 2026-11-25 (docs/gpu-benchmark.md, "Vertex forms"): the default stays expanded.
 set -euo pipefail
 OUT=${OUT:-out/h100-indexed}
 RES=${RES:-1920x1440}
