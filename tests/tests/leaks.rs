@@ -213,14 +213,17 @@ fn targets(tris: &[Triangle]) -> Targets {
         }
     }
     let pos = |k: [u32; 3]| Vec3::from(k.map(f32::from_bits));
-    let shared_edges = edges
-        .iter()
-        .filter(|(_, t)| t.len() == 2)
-        .map(|((a, b), t)| ((pos(*a) + pos(*b)) * 0.5, [t[0], t[1]]))
-        .collect();
+    // In the order of the keys, not the maps': packets trace eight rays together, and which of
+    // two near-equal hits a packet finds depends on its neighbours, so the order must not change
+    // from run to run.
+    let mut shared: Vec<_> = edges.iter().filter(|(_, t)| t.len() == 2).collect();
+    shared.sort_unstable_by_key(|(e, _)| **e);
+    let shared_edges = shared.iter().map(|((a, b), t)| ((pos(*a) + pos(*b)) * 0.5, [t[0], t[1]])).collect();
     // A vertex is interior when each edge from it is shared by exactly two of its triangles.
-    let vertices = fans
-        .iter()
+    let mut interior: Vec<_> = fans.iter().collect();
+    interior.sort_unstable_by_key(|(v, _)| **v);
+    let vertices = interior
+        .into_iter()
         .filter(|&(&v, fan)| {
             fan.iter().all(|&k| {
                 let vs = tris[k].vertices().map(key);
@@ -479,7 +482,10 @@ fn leaks_from(scene: &SceneFile, tracer: &Tracer<'_>, t: &Targets, eye: Vec3) ->
                     // triangle; counted here, not hidden).
                     if res.get(i) != *hit {
                         let (a, b) = (res.get(i).map_or(f32::INFINITY, |h| h.t), hit.map_or(f32::INFINITY, |h| h.t));
-                        assert!((a - b).abs() <= 1e-5 * a.min(b), "{test:?}: not a near tie: packet {a}, ordered {b}");
+                        // Möller-Trumbore's distance at a grazing vertex hit is off by more than
+                        // the watertight test's (measured: 2.4e-5 of t between the two orders).
+                        let slack = if test == Intersect::Watertight { 1e-5 } else { 1e-4 };
+                        assert!((a - b).abs() <= slack * a.min(b), "{test:?}: not a near tie: packet {a}, ordered {b}");
                         leaks.near_ties += 1;
                     }
                 }
