@@ -30,6 +30,8 @@
 # (its default method) on both scenes and both modes in both rounds; trace-cpu's stays expanded
 # unless indexed is at least 0.98 as fast for auto (its default method) in all four scene x mode
 # rows (memory for no speed). Any "DIFFER" is a bug, whatever the times.
+# ROUNDS=0 skips the GPU timing (run once already: docs/gpu-benchmark.md, "On the H100"), leaving
+# the bytes, the images and the CPU section (about 2 minutes).
 #
 # Env: RES (default 1920x1440), METHODS (default lst,stackless,sst), FRAMES (default 50), ROUNDS
 # (default 2).
