@@ -31,6 +31,32 @@ impl Mode {
     }
 }
 
+/// How a tracer reads the corners of a triangle (`--vertices`), a trade of memory for reads: both
+/// forms give the same bits, so the same images and hit counts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Vertices {
+    /// Three vertices per triangle in leaf order, each padded to 16 bytes with the material in
+    /// the first padding word: 48 bytes per triangle held (CPU) or uploaded (GPU) beside the
+    /// file's indexed form, three 16-byte reads.
+    #[default]
+    Expanded,
+    /// The file's indexed form: per triangle three vertex indices and the material, then every
+    /// vertex once: one read more per triangle, through the index, and no copy of its own (the
+    /// GPU uploads 16 bytes per triangle and per vertex; about half the memory of a closed mesh,
+    /// where a vertex is shared by about six triangles).
+    Indexed,
+}
+
+impl Vertices {
+    /// The name `--vertices` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Vertices::Expanded => "expanded",
+            Vertices::Indexed => "indexed",
+        }
+    }
+}
+
 /// The rays of ambient occlusion (`--ao-samples`, `--ao-length`).
 #[derive(Clone, Copy, Debug)]
 pub struct Ao {

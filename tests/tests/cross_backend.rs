@@ -411,6 +411,8 @@ fn incoherent_modes_equal_the_cpu_bit_for_bit() {
 /// the expanded form's images, distances, normals, triangles and costs bit for bit, on every
 /// traversal and in every mode, with less scene data uploaded; switching back restores the
 /// expanded kernels; rt-pipeline, which reads the driver's structures, refuses it in a sentence.
+/// The CPU tracer reading the same indexed form (`trace-cpu --vertices indexed`) renders what the
+/// GPU does, as the expanded forms match.
 #[test]
 fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
     use tracer_vk::kernels::Vertices;
@@ -423,6 +425,7 @@ fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
         let n: Vec<[u32; 3]> = a.normal.iter().map(|n| n.map(f32::to_bits)).collect();
         (t, n, a.prim.clone(), a.nodes.clone(), a.tris.clone())
     };
+    let cpu_indexed = Tracer::with_vertices(&scene, Vertices::Indexed);
     for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup] {
         let expanded = tracer_vk::render::upload_bytes_with(&scene, method, Vertices::Expanded);
         let indexed = tracer_vk::render::upload_bytes_with(&scene, method, Vertices::Indexed);
@@ -449,6 +452,8 @@ fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
             assert_eq!(a.rgb, b.rgb, "{what}: the indexed form's image differs");
             assert!(aov_bits(a) == aov_bits(&b), "{what}: the indexed form's AOVs differ");
             assert_eq!(a.rays, b.rays, "{what}: rays");
+            let cpu = tracer_cpu::render(&cpu_indexed, s, Method::Ordered).expect("the CPU renders the indexed form");
+            common::assert_matches_cpu(&format!("{what} indexed"), &cpu, &b);
         }
         r.set_vertices(Vertices::Expanded).expect("the expanded form uploads again");
         let again = r.render(&settings[1]).expect("the GPU renders the expanded form again").image;

@@ -435,7 +435,7 @@ fn aimed_rays<'t>(tris: &[Triangle], t: &'t Targets, eye: Vec3) -> Vec<Aimed<'t>
 /// leaks).
 fn leaks_from(scene: &SceneFile, tracer: &Tracer<'_>, t: &Targets, eye: Vec3) -> (usize, usize, TestLeaks, TestLeaks) {
     use render_spec::Intersect;
-    let tris = tracer.triangles();
+    let tris: &[Triangle] = &scene.leaf_triangles();
     let nodes = scene.child_pair.as_deref().expect("the child-pair layout");
     let (mut stack, mut pstack, mut cost) = (Stack::default(), Vec::new(), Cost::default());
     let aimed = aimed_rays(tris, t, eye);
@@ -558,10 +558,10 @@ fn moller_trumbore_leaks_through_the_tracer_where_the_watertight_test_does_not()
     );
     for (name, scene, n_eyes) in &meshes {
         let tracer = Tracer::new(scene);
-        let t = targets(tracer.triangles());
+        let t = targets(&scene.leaf_triangles());
         let open = {
             let mut count: HashMap<([u32; 3], [u32; 3]), usize> = HashMap::new();
-            for tri in tracer.triangles() {
+            for tri in tracer.triangles().iter() {
                 let v = tri.vertices().map(|p| p.map(f32::to_bits));
                 for e in 0..3 {
                     let (a, b) = (v[e], v[(e + 1) % 3]);

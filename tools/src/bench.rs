@@ -4,10 +4,10 @@
 //! chart can hold CPU and GPU rows of a scene side by side (`bench-chart`).
 
 use crate::output::{self, Kind, Output};
-use crate::render_args::{IntersectArg, MAX_LIGHTS, lights_n, parse_count, parse_res, stored_camera};
+use crate::render_args::{IntersectArg, MAX_LIGHTS, VerticesArg, lights_n, parse_count, parse_res, stored_camera};
 use bvh_format::SceneFile;
 use clap::ValueEnum;
-use render_spec::{Ao, CameraSpec, Image, Mode, Settings};
+use render_spec::{Ao, CameraSpec, Image, Mode, Settings, Vertices};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -40,6 +40,31 @@ pub struct MatrixArgs {
     /// measure what the edge-consistent test costs against Möller-Trumbore.
     #[arg(long, value_enum, default_value = "watertight")]
     pub intersect: IntersectArg,
+    /// Vertex forms to time each method with (`render --vertices`), side by side: a form other
+    /// than expanded names its rows METHOD+FORM (lst+indexed), and each prints its bytes held
+    /// (trace-cpu) or uploaded (trace-vk).
+    #[arg(long, value_delimiter = ',', value_enum, default_value = "expanded")]
+    pub vertices: Vec<VerticesArg>,
+}
+
+/// What a bench row's method name adds for the indexed vertex form (`lst+indexed`).
+pub const INDEXED_SUFFIX: &str = "+indexed";
+
+/// The bench's name of the method `name` reading triangles in `form`: the method's own for the
+/// default expanded form, with [`INDEXED_SUFFIX`] for the indexed one.
+pub fn with_form(name: &str, form: Vertices) -> String {
+    match form {
+        Vertices::Expanded => name.to_owned(),
+        Vertices::Indexed => format!("{name}{INDEXED_SUFFIX}"),
+    }
+}
+
+/// A bench method name split into the method and its vertex form ([`with_form`] undone).
+pub fn split_form(name: &str) -> (&str, Vertices) {
+    match name.strip_suffix(INDEXED_SUFFIX) {
+        Some(name) => (name, Vertices::Indexed),
+        None => (name, Vertices::Expanded),
+    }
 }
 
 pub fn parse_frames(s: &str) -> Result<usize, String> {

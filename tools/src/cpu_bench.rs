@@ -23,8 +23,36 @@ pub fn method_of(name: &str) -> Result<Method, String> {
         .ok_or_else(|| format!("{name:?} is not a CPU method (auto, packet, ordered, stackless, bvh8)"))
 }
 
+/// What a tracer made for `method` holds of its scene ([`Tracer::held_bytes`]: the file as read,
+/// the expanded triangles in that form, the wide BVH where the method collapsed it), in all and
+/// per triangle; the counterpart of trace-vk's bytes uploaded.
+pub fn held_line(tracer: &Tracer<'_>, method: Method) -> String {
+    let scene = tracer.scene;
+    let bytes = tracer.held_bytes();
+    let tris = scene.triangles.len();
+    format!(
+        "{} with {} vertices holds {} bytes of scene data, {:.1} per triangle ({tris} triangles, {} vertices{})",
+        method.resolve(scene).name(),
+        tracer.triangles().form().name(),
+        bytes,
+        bytes as f64 / tris.max(1) as f64,
+        scene.vertices.len(),
+        match tracer.bvh8_if_made() {
+            Some(w) => format!("; the wide BVH {:.1} per triangle of it", w.bytes() as f64 / tris.max(1) as f64),
+            None => String::new(),
+        }
+    )
+}
+
+/// Whether `method` on `scene` walks the wide BVH, which the tracer collapses at load.
+pub fn collapses(method: Method, scene: &SceneFile) -> bool {
+    matches!(method.resolve(scene), Method::Bvh8 | Method::Auto)
+}
+
 pub struct CpuBench {
     pub pool: rayon::ThreadPool,
+    /// Print each prepared method's bytes held ([`held_line`]; `trace-cpu bench --vertices`).
+    pub report_held: bool,
 }
 
 impl Bench for CpuBench {
@@ -44,12 +72,22 @@ impl Bench for CpuBench {
             .to_owned()
     }
 
+    /// `method` may end in [`crate::bench::INDEXED_SUFFIX`] for the indexed vertex form.
     fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<(Tracer<'a>, Method), String> {
-        let method = method_of(method)?;
+        let (name, form) = crate::bench::split_form(method);
+        let method = method_of(name)?;
         if method == Method::Packet && method.resolve(scene) != method {
             return Err("this CPU cannot run the packet method: it needs AVX2".to_owned());
         }
-        Ok((Tracer::new(scene), method))
+        let tracer = Tracer::with_vertices(scene, form);
+        // Collapsed here, before the warm-up frames, so that the bytes held include it.
+        if collapses(method, scene) {
+            tracer.bvh8();
+        }
+        if self.report_held {
+            crate::say!("{}", held_line(&tracer, method));
+        }
+        Ok((tracer, method))
     }
 
     fn frame(&self, r: &mut (Tracer<'_>, Method), s: &Settings) -> Result<Timed, String> {

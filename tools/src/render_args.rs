@@ -6,7 +6,7 @@ use crate::output::{self, Kind, Output};
 use bvh_format::{Light, SceneFile};
 use clap::{Args, ValueEnum};
 use glam::{DVec3, Vec3};
-use render_spec::{Accuracy, Ao, CameraSpec, Image, Intersect, Mode, Offset, Settings};
+use render_spec::{Accuracy, Ao, CameraSpec, Image, Intersect, Mode, Offset, Settings, Vertices};
 use std::path::PathBuf;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -39,6 +39,25 @@ impl IntersectArg {
         match self {
             IntersectArg::Watertight => Intersect::Watertight,
             IntersectArg::Mt => Intersect::MollerTrumbore,
+        }
+    }
+}
+
+/// How a tracer reads triangle corners (`--vertices`, `bench --vertices`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum VerticesArg {
+    /// Three vertices per triangle in leaf order, 48 bytes, one contiguous read.
+    Expanded,
+    /// The file's indexed form: vertex indices per triangle and every vertex once, one read more
+    /// per triangle through the index.
+    Indexed,
+}
+
+impl VerticesArg {
+    pub fn vertices(self) -> Vertices {
+        match self {
+            VerticesArg::Expanded => Vertices::Expanded,
+            VerticesArg::Indexed => Vertices::Indexed,
         }
     }
 }
@@ -135,6 +154,15 @@ pub struct RenderArgs {
     /// fuses them, so trace-cpu is always exact.
     #[arg(long, help_heading = "Accuracy")]
     pub exact: bool,
+    /// How the tracer reads triangle corners, a trade of memory for reads with the same images:
+    /// expanded (a copy of 48 bytes per triangle: trace-cpu holds it beside the file, trace-vk
+    /// uploads it) or indexed (the file's own arrays: trace-cpu reads them in place, trace-vk
+    /// uploads 16 bytes per triangle and per vertex; one read more per triangle). trace-cpu's
+    /// bvh8 and auto test the leaf blocks of their wide BVH, a copy of their own in either form.
+    /// Given, the report says the bytes held (trace-cpu) or uploaded (trace-vk) per triangle
+    /// [default: expanded].
+    #[arg(long, value_enum)]
+    pub vertices: Option<VerticesArg>,
     /// Count exact acne: the shadow, secondary, AO and diffuse rays that the triangle they leave
     /// from meets (one more triangle test per such ray), reported on a line of their own.
     #[arg(long, help_heading = "Accuracy")]

@@ -18,15 +18,12 @@ pub const AUTO: &str = "auto";
 pub const EXACT_SUFFIX: &str = "+exact";
 
 /// Marks a method name for the indexed vertex form (`trace-vk bench --vertices indexed`).
-pub const INDEXED_SUFFIX: &str = "+indexed";
+pub use crate::bench::INDEXED_SUFFIX;
 
 /// The bench's name of `method` reading triangles in `form`: the method's own for the default
 /// expanded form, with [`INDEXED_SUFFIX`] for the indexed one.
 pub fn method_name(method: Method, form: Vertices) -> String {
-    match form {
-        Vertices::Expanded => method.name().to_owned(),
-        Vertices::Indexed => format!("{}{INDEXED_SUFFIX}", method.name()),
-    }
+    crate::bench::with_form(method.name(), form)
 }
 
 /// What `method` with triangles in `form` uploads of `scene` (nodes of its layout, triangles,
@@ -199,10 +196,7 @@ impl Bench for VkBench {
                 Picker::new(&self.gpu, scene, path, self.workgroup, exact, self.recalibrate).among(&self.candidates);
             return Ok(VkRenderer::Auto(Box::new(Auto { bench: self, picker, current: None })));
         }
-        let (name, form) = match name.strip_suffix(INDEXED_SUFFIX) {
-            Some(name) => (name, Vertices::Indexed),
-            None => (name, Vertices::Expanded),
-        };
+        let (name, form) = crate::bench::split_form(name);
         Ok(VkRenderer::Fixed(Box::new(self.renderer(scene, method_of(name)?, exact, form)?)))
     }
 

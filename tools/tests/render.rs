@@ -253,8 +253,9 @@ fn accuracy_flags_are_honoured_and_named() {
 }
 
 /// `--self-hits` (exact acne) prints the same line from both tracers where their arithmetic is the
-/// same (`--exact`), with rays stopped by their own triangle under a tiny fixed offset; `trace-vk
-/// --vertices indexed` renders the expanded form's image and says what it uploaded.
+/// same (`--exact`), with rays stopped by their own triangle under a tiny fixed offset; `--vertices
+/// indexed` renders the expanded form's image and says what trace-vk uploaded and trace-cpu holds
+/// (48 bytes per triangle less); the f64 reference refuses it.
 #[test]
 fn self_hits_and_the_vertex_form_are_reported() {
     let dir = scratch("self-hits");
@@ -272,15 +273,32 @@ fn self_hits_and_the_vertex_form_are_reported() {
     assert!(!lines[0].contains(": 0 of"), "a fixed offset of 1e-9 stopped no shadow ray on its surface: {}", lines[0]);
     let e = run(&dir, "trace-cpu", &["render", &room, "--res", "8x8", "-o", "r.png", "--self-hits", "--reference"]);
     assert_one_sentence_error(&e, "--self-hits");
-    let mut images = Vec::new();
-    for v in ["expanded", "indexed"] {
-        let name = format!("{v}.png");
-        let out =
-            assert_ok(&run(&dir, "trace-vk", &["render", &room, "--res", "32x24", "-o", &name, "--vertices", v]), v);
-        assert!(out.contains(&format!("lst with {v} vertices uploads")), "{v}: {out}");
-        images.push(std::fs::read(dir.join(&name)).expect("the image was written"));
+    for (tracer, says) in [("trace-vk", "lst with {} vertices uploads "), ("trace-cpu", "auto with {} vertices holds ")]
+    {
+        let (mut images, mut bytes) = (Vec::new(), Vec::new());
+        for v in ["expanded", "indexed"] {
+            let name = format!("{tracer}-{v}.png");
+            let out =
+                assert_ok(&run(&dir, tracer, &["render", &room, "--res", "32x24", "-o", &name, "--vertices", v]), v);
+            let says = says.replace("{}", v);
+            let line = out.lines().find(|l| l.starts_with(&says)).unwrap_or_else(|| panic!("{tracer} {v}: {out}"));
+            let n: u64 = line[says.len()..].split(' ').next().and_then(|n| n.parse().ok()).expect("a byte count");
+            bytes.push(n);
+            images.push(std::fs::read(dir.join(&name)).expect("the image was written"));
+        }
+        assert_eq!(images[0], images[1], "{tracer}: the indexed form's image differs from the expanded form's");
+        assert!(bytes[1] < bytes[0], "{tracer}: the indexed form holds {} bytes, the expanded {}", bytes[1], bytes[0]);
+        if tracer == "trace-cpu" {
+            let scene = tools::load_scene(Some(std::path::Path::new(&room))).expect("the room loads").file;
+            assert_eq!(bytes[0] - bytes[1], 48 * scene.triangles.len() as u64, "trace-cpu's expanded copy");
+        }
     }
-    assert_eq!(images[0], images[1], "the indexed form's image differs from the expanded form's");
+    let e = run(
+        &dir,
+        "trace-cpu",
+        &["render", &room, "--res", "8x8", "-o", "r.png", "--vertices", "indexed", "--reference"],
+    );
+    assert!(!e.status.success() && String::from_utf8_lossy(&e.stderr).contains("--vertices"), "{e:?}");
 }
 
 /// `trace-cpu render ... | head -1`: the reader goes away, the program ends quietly.

@@ -86,3 +86,37 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
     assert_eq!(md.lines().filter(|l| l.starts_with("| room |")).count(), rows.len());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `--vertices expanded,indexed` times each method in both forms side by side (rows METHOD and
+/// METHOD+indexed, the same rays), and prints each prepared tracer's bytes held, the indexed form's
+/// 48 bytes per triangle fewer.
+#[test]
+fn both_vertex_forms_are_timed_side_by_side() {
+    let dir = std::env::temp_dir().join(format!("trace-cpu-bench-forms-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("cpu.csv");
+    let room = repo().join("scenes/room.toml");
+    let o = Command::new(env!("CARGO_BIN_EXE_trace-cpu"))
+        .args(["bench", room.to_str().unwrap(), "--cameras", "medium", "--res", "24x16", "--modes", "whitted1"])
+        .args(["--methods", "ordered,bvh8", "--vertices", "expanded,indexed", "--frames", "1", "--warmup", "0"])
+        .args(["--threads", "2", "--csv", csv.to_str().unwrap()])
+        .output()
+        .expect("trace-cpu runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = read_csv(&csv).unwrap();
+    let methods: Vec<&str> = rows.iter().map(|r| r.method.as_str()).collect();
+    assert_eq!(methods, ["ordered", "ordered+indexed", "bvh8", "bvh8+indexed"]);
+    assert!(rows[0].rays == rows[1].rays && rows[2].rays == rows[3].rays, "the forms trace different rays");
+    let out = String::from_utf8_lossy(&o.stdout);
+    let held = |method: &str, form: &str| -> u64 {
+        let says = format!("{method} with {form} vertices holds ");
+        let line = out.lines().find(|l| l.starts_with(&says)).unwrap_or_else(|| panic!("no {says:?} in {out}"));
+        line[says.len()..].split(' ').next().and_then(|n| n.parse().ok()).expect("a byte count")
+    };
+    let scene = tools::load_scene(Some(&room)).unwrap().file;
+    let copy = 48 * scene.triangles.len() as u64;
+    assert_eq!(held("ordered", "expanded") - held("ordered", "indexed"), copy);
+    assert_eq!(held("bvh8", "expanded") - held("bvh8", "indexed"), copy);
+    assert!(held("bvh8", "indexed") > held("ordered", "indexed"), "bvh8 holds its wide BVH besides");
+    let _ = std::fs::remove_dir_all(&dir);
+}

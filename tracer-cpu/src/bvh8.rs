@@ -19,6 +19,7 @@
 
 use crate::geometry::{self, Cost, Hit, Ray, TriangleTest, may_hold};
 use crate::traverse::Stack;
+use crate::vertices::TriangleSource;
 use bvh_format::{Node, Triangle};
 
 /// Children of a wide node, and triangles of a leaf block.
@@ -68,10 +69,10 @@ pub struct TriBlock {
 }
 
 impl TriBlock {
-    fn new(tris: &[Triangle], indices: &[u32]) -> Self {
+    fn new(tris: &(impl TriangleSource + ?Sized), indices: &[u32]) -> Self {
         let mut b = Self { p: [[[f32::NAN; WIDTH]; 3]; 3], index: [u32::MAX; WIDTH] };
         for (lane, &i) in indices.iter().enumerate() {
-            let t = &tris[i as usize];
+            let t = tris.triangle(i);
             for a in 0..3 {
                 b.p[0][a][lane] = t.p0[a];
                 b.p[1][a][lane] = t.p1[a];
@@ -122,6 +123,12 @@ impl Bvh8 {
     /// Collapses the child-pair tree `nodes` over the triangles `tris` (leaf order, as
     /// [`bvh_format::SceneFile::leaf_triangles`] gives them).
     pub fn new(nodes: &[Node], tris: &[Triangle]) -> Self {
+        Self::from_source(nodes, tris)
+    }
+
+    /// [`Self::new`] over the triangles of either vertex form: the leaf blocks are this BVH's
+    /// own copy of the vertices, in the layout its SIMD test loads, whatever form they came from.
+    pub fn from_source(nodes: &[Node], tris: &(impl TriangleSource + ?Sized)) -> Self {
         let counts = subtree_counts(nodes);
         let mut out = Self {
             nodes: Vec::with_capacity(nodes.len() / 6 + 1),
@@ -194,7 +201,7 @@ impl Bvh8 {
         out
     }
 
-    fn leaf(&mut self, tris: &[Triangle], indices: &[u32]) -> u32 {
+    fn leaf(&mut self, tris: &(impl TriangleSource + ?Sized), indices: &[u32]) -> u32 {
         self.blocks.push(TriBlock::new(tris, indices));
         LEAF | (self.blocks.len() - 1) as u32
     }
@@ -203,7 +210,7 @@ impl Bvh8 {
     /// boxed by its triangles' vertices.
     fn range_node(
         &mut self,
-        tris: &[Triangle],
+        tris: &(impl TriangleSource + ?Sized),
         start: u32,
         count: u32,
         work: &mut Vec<(Work, Option<(usize, usize)>)>,
@@ -215,7 +222,7 @@ impl Bvh8 {
             (start..start + count).step_by(per as usize).map(|s| (s, per.min(start + count - s))).collect();
         for (slot, &(s, n)) in runs.iter().enumerate() {
             let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-            for t in &tris[s as usize..(s + n) as usize] {
+            for t in (s..s + n).map(|i| tris.triangle(i)) {
                 for v in t.vertices() {
                     for a in 0..3 {
                         lo[a] = lo[a].min(v[a]);

@@ -7,6 +7,7 @@ use crate::geometry::{MollerTrumbore, TriangleTest, Watertight};
 use crate::packet::{self, Entry, LANES, Rays, Results};
 use crate::render::Walk;
 use crate::traverse::Stack;
+use crate::vertices::Triangles;
 use render_spec::Intersect;
 
 /// Traces the valid lanes of `rays` with the triangle test `test` (the frame's); a lane's hit is
@@ -113,9 +114,10 @@ impl<'a> Packets<'a> {
     fn trace<const ANY: bool, T: TriangleTest>(&mut self, rays: &Rays) -> Results {
         let walk = self.single.walk;
         match walk.child_pair() {
-            Some(nodes) if rays.count() > SPARSE => {
-                packet::trace::<ANY, T>(nodes, walk.tracer().triangles(), rays, &mut self.stack)
-            }
+            Some(nodes) if rays.count() > SPARSE => match walk.tracer().triangles() {
+                Triangles::Expanded(tris) => packet::trace::<ANY, T>(nodes, tris, rays, &mut self.stack),
+                Triangles::Indexed(tris) => packet::trace::<ANY, T>(nodes, &tris, rays, &mut self.stack),
+            },
             _ => self.single.trace::<ANY, T>(rays),
         }
     }

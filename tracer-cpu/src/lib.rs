@@ -7,6 +7,8 @@
 //!   its single-ray traversal, 8 boxes or 8 triangles per AVX2 sequence.
 //! - [`packet`]: 8-wide AVX2 packets for coherent primary and shadow rays.
 //! - [`reference`]: the exact f64 reference: brute-force and traversed closest hits, and images.
+//! - [`vertices`]: where the triangle tests read a triangle's corners, the expanded copy or the
+//!   file's indexed arrays (`--vertices`).
 //! - [`lanes`]: the rays of one stage of a 4 x 2 pixel block, traced as a packet or one by one.
 //! - [`shade`]: the shading formulas; [`whitted`]: the stages of ray casting and Whitted ray
 //!   tracing for a block of pixels.
@@ -22,11 +24,13 @@ pub mod reference;
 pub mod render;
 pub mod shade;
 pub mod traverse;
+pub mod vertices;
 pub mod whitted;
 pub mod wide;
 
 pub use geometry::{Cost, Hit, Ray};
 pub use render::{Tracer, Walk, render, render_with_progress};
+pub use render_spec::Vertices;
 
 /// How rays find their closest hit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -74,10 +78,10 @@ impl Method {
     }
 }
 
-/// Bytes of scene data trace-cpu holds while rendering `scene` (for `bvhc info`): the file as read
-/// (both layouts, indexed geometry, normals, materials, input indices) and the triangles expanded
-/// to three vertices each for intersection.
-pub fn held_bytes(scene: &bvh_format::SceneFile) -> u64 {
+/// Bytes of the file as trace-cpu reads it into memory: the indexed geometry, normals, materials,
+/// input indices and every layout stored (the wide layout included, which trace-cpu does not
+/// walk).
+pub fn file_bytes(scene: &bvh_format::SceneFile) -> u64 {
     let nodes = |n: &Option<Vec<bvh_format::Node>>| n.as_ref().map_or(0, |n| std::mem::size_of_val(&n[..]));
     let s = scene;
     (std::mem::size_of_val(&s.vertices[..])
@@ -88,6 +92,17 @@ pub fn held_bytes(scene: &bvh_format::SceneFile) -> u64 {
         + std::mem::size_of_val(&s.input_index[..])
         + nodes(&s.child_pair)
         + nodes(&s.escape)
-        + s.wide.as_ref().map_or(0, |w| std::mem::size_of_val(&w[..]))
-        + s.triangles.len() * std::mem::size_of::<bvh_format::Triangle>()) as u64
+        + s.wide.as_ref().map_or(0, |w| std::mem::size_of_val(&w[..]))) as u64
+}
+
+/// Bytes of scene data trace-cpu holds while rendering `scene` with the vertex form `vertices`
+/// and a method that does not collapse the wide BVH (for `bvhc info`; [`Tracer::held_bytes`]
+/// counts a render's own): the file as read ([`file_bytes`]), and in the expanded form the
+/// triangles expanded to three vertices each for intersection (48 bytes per triangle).
+pub fn held_bytes(scene: &bvh_format::SceneFile, vertices: Vertices) -> u64 {
+    let expanded = match vertices {
+        Vertices::Expanded => scene.triangles.len() * std::mem::size_of::<bvh_format::Triangle>(),
+        Vertices::Indexed => 0,
+    };
+    file_bytes(scene) + expanded as u64
 }

@@ -7,7 +7,8 @@
 //! multiply-adds, so a packet finds bit-identical hits (a test holds it to that).
 
 use crate::geometry::{Cost, Hit, Ray, TriangleTest};
-use bvh_format::{Node, Triangle};
+use crate::vertices::TriangleSource;
+use bvh_format::Node;
 use glam::Vec3;
 
 /// Lanes of a packet.
@@ -102,7 +103,7 @@ impl Results {
 /// triangle test `T` in every lane. Only call when [`available`] is true.
 pub fn trace<const ANY: bool, T: TriangleTest>(
     nodes: &[Node],
-    tris: &[Triangle],
+    tris: &(impl TriangleSource + ?Sized),
     rays: &Rays,
     stack: &mut Vec<Entry>,
 ) -> Results {
@@ -133,6 +134,7 @@ pub struct Entry {
 mod avx2 {
     use super::{Entry, LANES, Rays, Results};
     use crate::geometry::{Cost, TriangleTest};
+    use crate::vertices::TriangleSource;
     use bvh_format::{Node, Triangle};
     use render_spec::Intersect;
     use render_spec::constants::T_SLACK;
@@ -335,7 +337,7 @@ mod avx2 {
     #[target_feature(enable = "avx2")]
     pub fn trace<const ANY: bool, T: TriangleTest>(
         nodes: &[Node],
-        tris: &[Triangle],
+        tris: &(impl TriangleSource + ?Sized),
         rays: &Rays,
         stack: &mut Vec<Entry>,
     ) -> Results {
@@ -378,8 +380,8 @@ mod avx2 {
                     n_tris = count(n_tris, cur_mask);
                     // A constant per instance: the other test is compiled out.
                     let [m, t, w1, w2, sum] = match T::KIND {
-                        Intersect::Watertight => intersect(&tris[i as usize], &pk, zero, best_t),
-                        Intersect::MollerTrumbore => intersect_moller_trumbore(&tris[i as usize], &pk, zero, best_t),
+                        Intersect::Watertight => intersect(&tris.triangle(i), &pk, zero, best_t),
+                        Intersect::MollerTrumbore => intersect_moller_trumbore(&tris.triangle(i), &pk, zero, best_t),
                     };
                     // Hit::beats: nearer, or equally near with a lower index (unsigned compare
                     // through a sign flip).

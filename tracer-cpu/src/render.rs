@@ -8,17 +8,20 @@ use crate::lanes::{Mixed, OneByOne, Packets, TraceLanes};
 use crate::packet::{LANES, Rays};
 use crate::shade;
 use crate::traverse::{self, Stack};
+use crate::vertices::{Indexed, Triangles};
 use crate::whitted::{Seeds, Shading};
 use crate::wide::{F8, Lanes, V3};
 use bvh_format::{Node, SceneFile, Triangle};
 use rayon::prelude::*;
-use render_spec::{Aovs, Frame, Image, Intersect, RayCounts, RenderError, Settings};
+use render_spec::{Aovs, Frame, Image, Intersect, RayCounts, RenderError, Settings, Vertices};
 
 /// The scene prepared for tracing: layouts, and the bounds behind the adaptive bounce stop.
 pub struct Tracer<'a> {
     pub scene: &'a SceneFile,
-    /// The triangles expanded to three vertices each, in leaf order (48 bytes per triangle).
-    pub(crate) tris: Vec<Triangle>,
+    /// The triangles expanded to three vertices each, in leaf order (48 bytes per triangle);
+    /// empty in the indexed form, which reads the file's arrays instead.
+    tris: Vec<Triangle>,
+    vertices: Vertices,
     child_pair: Option<&'a [Node]>,
     escape: Option<&'a [Node]>,
     /// Count the rays their own triangle meets ([`render_spec::SelfHits`], `--self-hits`).
@@ -28,10 +31,22 @@ pub struct Tracer<'a> {
 }
 
 impl<'a> Tracer<'a> {
+    /// The scene with the triangles in the expanded form ([`Vertices::Expanded`]).
     pub fn new(scene: &'a SceneFile) -> Self {
+        Self::with_vertices(scene, Vertices::Expanded)
+    }
+
+    /// The scene with the triangles read in the form `vertices`: the expanded form copies them
+    /// (48 bytes per triangle), the indexed form reads the file's index and vertex arrays in
+    /// place. Both give the same images.
+    pub fn with_vertices(scene: &'a SceneFile, vertices: Vertices) -> Self {
         Self {
             scene,
-            tris: scene.leaf_triangles(),
+            tris: match vertices {
+                Vertices::Expanded => scene.leaf_triangles(),
+                Vertices::Indexed => Vec::new(),
+            },
+            vertices,
             child_pair: scene.child_pair.as_deref(),
             escape: scene.escape.as_deref(),
             self_hits: false,
@@ -50,12 +65,29 @@ impl<'a> Tracer<'a> {
     /// asks); None for a file without that layout.
     pub fn bvh8(&self) -> Option<&Bvh8> {
         let nodes = self.child_pair?;
-        Some(self.wide.get_or_init(|| Bvh8::new(nodes, &self.tris)))
+        Some(self.wide.get_or_init(|| Bvh8::from_source(nodes, &self.triangles())))
     }
 
-    /// The triangles as every path intersects them: three vertices each, in leaf order.
-    pub fn triangles(&self) -> &[Triangle] {
-        &self.tris
+    /// The wide BVH where [`Self::bvh8`] has collapsed it already.
+    pub fn bvh8_if_made(&self) -> Option<&Bvh8> {
+        self.wide.get()
+    }
+
+    /// The triangles as every path intersects them, in leaf order, in the form this tracer
+    /// was made with.
+    pub fn triangles(&self) -> Triangles<'_> {
+        match self.vertices {
+            Vertices::Expanded => Triangles::Expanded(&self.tris),
+            Vertices::Indexed => Triangles::Indexed(Indexed::new(self.scene)),
+        }
+    }
+
+    /// Bytes of scene data this tracer holds: the file as read ([`crate::file_bytes`]), the
+    /// expanded triangles where it made them, and the wide BVH where it was collapsed.
+    pub fn held_bytes(&self) -> u64 {
+        crate::file_bytes(self.scene)
+            + std::mem::size_of_val(&self.tris[..]) as u64
+            + self.wide.get().map_or(0, |w| w.bytes() as u64)
     }
 
     /// The scalar traversal `method` names, bound to the layout it reads: the child-pair layout
@@ -164,11 +196,22 @@ impl<'t> Walk<'t> {
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Hit> {
-        let tris = &self.tracer.tris;
-        match self.layout {
-            Layout::Escape(nodes) => traverse::escape::<ANY, T>(nodes, tris, ray, t_min, t_max, cost),
-            Layout::ChildPair(nodes) => traverse::child_pair::<ANY, T>(nodes, tris, ray, t_min, t_max, stack, cost),
-            Layout::Wide(bvh) => bvh.trace::<ANY, T>(ray, t_min, t_max, stack, cost),
+        // One branch per ray on the form; each form's traversal is compiled on its own.
+        match (self.layout, self.tracer.triangles()) {
+            (Layout::Escape(nodes), Triangles::Expanded(tris)) => {
+                traverse::escape::<ANY, T>(nodes, tris, ray, t_min, t_max, cost)
+            }
+            (Layout::Escape(nodes), Triangles::Indexed(tris)) => {
+                traverse::escape::<ANY, T>(nodes, &tris, ray, t_min, t_max, cost)
+            }
+            (Layout::ChildPair(nodes), Triangles::Expanded(tris)) => {
+                traverse::child_pair::<ANY, T>(nodes, tris, ray, t_min, t_max, stack, cost)
+            }
+            (Layout::ChildPair(nodes), Triangles::Indexed(tris)) => {
+                traverse::child_pair::<ANY, T>(nodes, &tris, ray, t_min, t_max, stack, cost)
+            }
+            // The wide BVH tests its own leaf blocks, whatever the form.
+            (Layout::Wide(bvh), _) => bvh.trace::<ANY, T>(ray, t_min, t_max, stack, cost),
         }
     }
 }

@@ -3,7 +3,8 @@
 //! each compiled for one [`TriangleTest`].
 
 use crate::geometry::{Cost, Hit, Ray, TriangleTest, may_hold, slab};
-use bvh_format::{Node, Triangle};
+use crate::vertices::TriangleSource;
+use bvh_format::Node;
 
 /// A traversal stack of (node, entry distance) pairs: a fixed array that covers every tree our
 /// builder makes (depth at most 64 + log2 n), spilling to the heap for deeper trees from elsewhere.
@@ -47,7 +48,7 @@ impl Stack {
 /// Tests the leaf's triangles; returns true when `ANY` and something was hit.
 #[inline(always)]
 fn leaf<const ANY: bool, T: TriangleTest>(
-    tris: &[Triangle],
+    tris: &(impl TriangleSource + ?Sized),
     node: &Node,
     ray: &Ray,
     t_min: f32,
@@ -56,7 +57,7 @@ fn leaf<const ANY: bool, T: TriangleTest>(
 ) -> bool {
     for i in node.index..node.index + node.count {
         cost.tris += 1;
-        if let Some((t, u, v)) = T::intersect(&tris[i as usize], ray, t_min, best.t)
+        if let Some((t, u, v)) = T::intersect(&tris.triangle(i), ray, t_min, best.t)
             && Hit::beats(t, i, best.t, best.tri)
         {
             *best = Hit { t, tri: i, u, v };
@@ -77,7 +78,7 @@ fn no_hit(t_max: f32) -> Hit {
 /// was found.
 pub fn child_pair<const ANY: bool, T: TriangleTest>(
     nodes: &[Node],
-    tris: &[Triangle],
+    tris: &(impl TriangleSource + ?Sized),
     ray: &Ray,
     t_min: f32,
     t_max: f32,
@@ -135,7 +136,7 @@ pub fn child_pair<const ANY: bool, T: TriangleTest>(
 /// front to back, jumping to the escape index past every inner node whose box is missed.
 pub fn escape<const ANY: bool, T: TriangleTest>(
     nodes: &[Node],
-    tris: &[Triangle],
+    tris: &(impl TriangleSource + ?Sized),
     ray: &Ray,
     t_min: f32,
     t_max: f32,

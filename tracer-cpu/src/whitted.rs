@@ -13,18 +13,19 @@ use crate::lanes::{Stage, TraceLanes};
 use crate::packet::{LANES, Rays, Results};
 use crate::render::Tracer;
 use crate::shade::{self, SurfaceOf};
+use crate::vertices::{TriangleSource, Triangles};
 use crate::wide::{Lanes, Mask, V3};
-use bvh_format::{Light, Material, SceneFile, Triangle};
+use bvh_format::{Light, Material, SceneFile};
 use glam::Vec3;
 use render_spec::{Ao, BounceStop, Intersect, Mode, NO_TRIANGLE, Offset, RayCounts, Settings, sequence};
 
 /// Per-frame constants of the pipeline.
 pub struct Shading<'a> {
     scene: &'a SceneFile,
-    /// The tracer's expanded triangles: the hit triangle's corners and material are read here, in
-    /// the cache lines the traversal has just read, rather than through the file's index and
-    /// vertex arrays (two more scattered reads per hit).
-    triangles: &'a [Triangle],
+    /// The tracer's triangles: the hit triangle's corners and material are read here, in the
+    /// expanded form from the cache lines the traversal has just read, in the indexed form
+    /// through the file's index and vertex arrays (two more scattered reads per hit).
+    triangles: Triangles<'a>,
     mode: Mode,
     /// The length of AO rays in scene units ([`Ao::distance`] of the scene's bounds).
     ao_distance: f32,
@@ -139,7 +140,10 @@ impl<'a> Shading<'a> {
             Intersect::MollerTrumbore => crate::geometry::intersect_moller_trumbore,
         };
         (0..LANES)
-            .filter(|&i| rays.valid[i] && test(&self.triangles[tri[i]], &rays.ray(i), 0.0, rays.t_max[i]).is_some())
+            .filter(|&i| {
+                rays.valid[i]
+                    && test(&self.triangles.triangle(tri[i] as u32), &rays.ray(i), 0.0, rays.t_max[i]).is_some()
+            })
             .count() as u64
     }
 
@@ -182,7 +186,7 @@ impl<'a> Shading<'a> {
                 }
             }
             let m = Materials::<L>::gather(&std::array::from_fn(|i| {
-                &scene.materials[self.triangles[tri[i]].material as usize]
+                &scene.materials[self.triangles.triangle(tri[i] as u32).material as usize]
             }));
             match self.mode {
                 Mode::Cast => {
@@ -279,7 +283,7 @@ impl Shading<'_> {
         // the 4-float gathers.
         let pad = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
         let edges: [[[f32; 4]; 2]; LANES] = tri.map(|k| {
-            let (e1, e2) = shade::edges(&self.triangles[k]);
+            let (e1, e2) = shade::edges(&self.triangles.triangle(k as u32));
             [pad(e1), pad(e2)]
         });
         let normals: [[[f32; 4]; 3]; LANES] =
@@ -381,8 +385,9 @@ impl Shading<'_> {
             return background;
         }
         let (b, bounce_tri) = self.surfaces::<L>(&rays, &hits, found);
-        let kd =
-            V3::from_lanes(|i| Vec3::from(self.scene.materials[self.triangles[bounce_tri[i]].material as usize].kd));
+        let kd = V3::from_lanes(|i| {
+            Vec3::from(self.scene.materials[self.triangles.triangle(bounce_tri[i] as u32).material as usize].kd)
+        });
         let lit = shade::cast_of(kd, b.shading, V3::from_arrays(&rays.dir));
         V3::select(L::mask(found), lit, background)
     }

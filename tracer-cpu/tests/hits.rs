@@ -97,7 +97,7 @@ fn fast_hits<T: TriangleTest>(
             p.set(i, &Ray::new(o, d), f32::INFINITY);
         }
         let nodes = scene.child_pair.as_deref().unwrap();
-        let res = packet::trace::<false, T>(nodes, tracer.triangles(), &p, pstack);
+        let res = packet::trace::<false, T>(nodes, &tracer.triangles(), &p, pstack);
         for (i, a) in ordered.iter().enumerate() {
             assert_eq!(res.get(i), *a, "{name}: packet and ordered disagree on lane {i}");
         }

@@ -10,6 +10,7 @@ use render_spec::sequence::{cosine_direction, incoherent_sample, sample_2d};
 use render_spec::{Accuracy, Ao, CameraSpec, Image, Mode, Settings};
 use tracer_cpu::geometry::{Ray, leave};
 use tracer_cpu::traverse::Stack;
+use tracer_cpu::vertices::TriangleSource;
 use tracer_cpu::{Cost, Method, Tracer, shade};
 
 const METHODS: [Method; 5] = [Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8, Method::Auto];
@@ -93,7 +94,7 @@ fn primary_surface(scene: &bvh_format::SceneFile, s: &Settings, x: u32, y: u32) 
         .expect("the file has the child-pair layout")
         .closest(&ray, 0.0, f32::INFINITY, &mut stack, &mut Cost::default())
         .expect("every primary ray hits the box");
-    let tri = tracer.triangles()[hit.tri as usize];
+    let tri = tracer.triangles().triangle(hit.tri);
     let normals = scene.vertex_normals(hit.tri as usize);
     (shade::surface(&tri, normals, ray.origin, ray.dir, hit.t, hit.u, hit.v), hit.tri)
 }
@@ -134,7 +135,7 @@ fn a_pixel_of_each_mode_is_the_definition_evaluated_by_hand() {
         let kd = Vec3::from(scene.materials[scene.triangles[tri as usize].material as usize].kd);
         let light = match walk.closest(&bounce, 0.0, f32::INFINITY, &mut stack, &mut Cost::default()) {
             Some(h) => {
-                let t = tracer.triangles()[h.tri as usize];
+                let t = tracer.triangles().triangle(h.tri);
                 let b = shade::surface(&t, scene.vertex_normals(h.tri as usize), from, d, h.t, h.u, h.v);
                 shade::cast(&scene.materials[scene.triangles[h.tri as usize].material as usize], &b, d)
             }

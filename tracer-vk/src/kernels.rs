@@ -139,28 +139,9 @@ pub struct Specialisation {
     pub self_hits: bool,
 }
 
-/// How the kernels read the corners of a triangle (`--vertices`), a trade of memory for reads:
-/// both forms give the same bits, so the same images.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum Vertices {
-    /// Three vertices per triangle in leaf order, each padded to 16 bytes with the material in
-    /// the first padding word: 48 bytes per triangle, three 16-byte reads.
-    #[default]
-    Expanded,
-    /// The file's indexed form: per triangle three vertex indices and the material (16 bytes),
-    /// then every vertex once (16 bytes): one read more per triangle, through the index, for
-    /// about half the memory of a closed mesh (a vertex is shared by about six triangles).
-    Indexed,
-}
-
-impl Vertices {
-    pub fn name(self) -> &'static str {
-        match self {
-            Vertices::Expanded => "expanded",
-            Vertices::Indexed => "indexed",
-        }
-    }
-}
+/// How the kernels read the corners of a triangle (`--vertices`): defined with the settings both
+/// tracers share.
+pub use render_spec::Vertices;
 
 /// The most bindings one scene array (nodes or triangles) is spread over.
 pub const MAX_CHUNKS: u32 = 4;

@@ -5,8 +5,8 @@ use std::process::ExitCode;
 use std::time::Instant;
 use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
-use tools::cpu_bench::{CpuBench, thread_pool};
-use tools::render_args::{RenderArgs, parse_count};
+use tools::cpu_bench::{CpuBench, collapses, held_line, thread_pool};
+use tools::render_args::{RenderArgs, VerticesArg, parse_count};
 use tools::say;
 use tracer_cpu::{Method, Tracer};
 
@@ -34,8 +34,8 @@ enum Command {
         /// Render the exact reference instead: f64 arithmetic throughout, every bounce up to the
         /// indirection limit (no adaptive stop), the edge-consistent test and an f64 offset; the
         /// ground truth other images are measured against, a few times slower than a fast render.
-        /// Takes --spp; refuses --method, --intersect, --offset and --cutoff.
-        #[arg(long, conflicts_with_all = ["method", "intersect", "offset", "cutoff"])]
+        /// Takes --spp; refuses --method, --intersect, --offset, --cutoff and --vertices.
+        #[arg(long, conflicts_with_all = ["method", "intersect", "offset", "cutoff", "vertices"])]
         reference: bool,
         /// Worker threads, 1 to 1024 [default: all cores].
         #[arg(long, value_parser = parse_threads, allow_hyphen_values = true)]
@@ -104,9 +104,10 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     let pool = thread_pool(threads)?;
     // The scene prepared for tracing before the clock starts, as the file's reading is: the wide
     // BVH of bvh8 and auto is collapsed at load, and its time printed apart.
-    let mut tracer = Tracer::new(scene);
+    let form = args.vertices.map_or(Default::default(), VerticesArg::vertices);
+    let mut tracer = Tracer::with_vertices(scene, form);
     tracer.count_self_hits(args.self_hits);
-    let collapse = (!reference && matches!(method.resolve(scene), Method::Bvh8 | Method::Auto)).then(|| {
+    let collapse = (!reference && collapses(method, scene)).then(|| {
         let t = Instant::now();
         tracer.bvh8();
         t.elapsed().as_secs_f64()
@@ -150,6 +151,9 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     if args.self_hits {
         lines.push(tools::render_args::self_hits_line(&r));
     }
+    if args.vertices.is_some() {
+        lines.push(held_line(&tracer, method));
+    }
     for line in lines.into_iter().chain(written) {
         say!("{line}");
     }
@@ -157,13 +161,19 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
 }
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
-    let names: Vec<String> = b
-        .methods
-        .iter()
-        .map(|m| m.to_possible_value().expect("every method has a name").get_name().to_owned())
-        .collect();
+    let mut names: Vec<String> = Vec::new();
+    for m in &b.methods {
+        for &v in &b.matrix.vertices {
+            let name = m.to_possible_value().expect("every method has a name").get_name().to_owned();
+            let name = tools::bench::with_form(&name, v.vertices());
+            if !names.contains(&name) {
+                names.push(name);
+            }
+        }
+    }
     let methods: Vec<&str> = names.iter().map(String::as_str).collect();
-    let bench = CpuBench { pool: thread_pool(b.threads)? };
+    let report_held = b.matrix.vertices.iter().any(|&v| v != VerticesArg::Expanded);
+    let bench = CpuBench { pool: thread_pool(b.threads)?, report_held };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 10, warmup: 1 })?;
     Ok(())
 }

@@ -51,7 +51,7 @@ fn main() -> ExitCode {
     let cli = tools::cli::parse::<Cli>();
     tools::cli::run(|| {
         let a = &cli.eval;
-        let cpu = CpuBench { pool: thread_pool(cli.threads)? };
+        let cpu = CpuBench { pool: thread_pool(cli.threads)?, report_held: false };
         let gpu = Gpu::new(cli.device, cli.validate).map_err(|e| e.to_string())?;
         let gpu = VkBench::new(gpu, cli.workgroup, false);
         let reference = F64Reference { pool: thread_pool(cli.threads)? };

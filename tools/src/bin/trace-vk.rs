@@ -5,10 +5,10 @@ use std::process::ExitCode;
 use tools::auto::Picker;
 use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
-use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
+use tools::render_args::{RenderArgs, VerticesArg, parse_count, parse_workgroup};
 use tools::say;
 use tools::vk_bench::{AUTO, VkBench, check_validation};
-use tracer_vk::kernels::{Method, Vertices};
+use tracer_vk::kernels::Method;
 use tracer_vk::render::RT_TRAVERSAL;
 use tracer_vk::render::Renderer;
 use tracer_vk::rt::Support;
@@ -56,31 +56,9 @@ enum Command {
         /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
         #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
         workgroup: (u32, u32),
-        /// How the kernels read triangle corners: expanded (48 bytes per triangle, three reads)
-        /// or indexed (the file's form: 16 bytes per triangle and per vertex, four reads); the
-        /// images are the same. Given, the report says the bytes uploaded [default: expanded].
-        #[arg(long, value_enum)]
-        vertices: Option<VerticesArg>,
         #[command(flatten)]
         device: DeviceArgs,
     },
-}
-
-#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
-enum VerticesArg {
-    /// Three vertices per triangle, 48 bytes.
-    Expanded,
-    /// Vertex indices per triangle and every vertex once, 16 bytes each.
-    Indexed,
-}
-
-impl VerticesArg {
-    fn vertices(self) -> Vertices {
-        match self {
-            VerticesArg::Expanded => Vertices::Expanded,
-            VerticesArg::Indexed => Vertices::Indexed,
-        }
-    }
 }
 
 #[derive(clap::Args)]
@@ -112,10 +90,6 @@ struct BenchArgs {
     /// a large frame cut into small frames' dispatches, rays as coherent as the large frame's.
     #[arg(long, value_parser = parse_tile_pixels)]
     tile_pixels: Option<u64>,
-    /// Vertex forms to time each method with (`render --vertices`), side by side: a form other
-    /// than expanded names its rows METHOD+FORM (lst+indexed), and each prints its bytes uploaded.
-    #[arg(long, value_delimiter = ',', value_enum, default_value = "expanded")]
-    vertices: Vec<VerticesArg>,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -159,8 +133,8 @@ fn main() -> ExitCode {
     tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
-        Command::Render { args, method, recalibrate, candidates, workgroup, vertices, device } => {
-            render(&args, method, Auto { recalibrate, candidates }, workgroup, vertices, &device)
+        Command::Render { args, method, recalibrate, candidates, workgroup, device } => {
+            render(&args, method, Auto { recalibrate, candidates }, workgroup, &device)
         }
     })
 }
@@ -224,9 +198,9 @@ fn render(
     method: MethodArg,
     auto: Auto,
     workgroup: (u32, u32),
-    vertices: Option<VerticesArg>,
     device: &DeviceArgs,
 ) -> Result<(), String> {
+    let vertices = args.vertices;
     let candidates = auto.candidates()?;
     let outputs = args.check()?;
     let chosen = method_of(method);
@@ -332,7 +306,7 @@ fn method_of(m: MethodArg) -> Option<Method> {
 fn bench(b: &BenchArgs) -> Result<(), String> {
     let mut names: Vec<String> = Vec::new();
     for &m in &b.methods {
-        for &v in &b.vertices {
+        for &v in &b.matrix.vertices {
             let name = match method_of(m) {
                 Some(m) => tools::vk_bench::method_name(m, v.vertices()),
                 None => AUTO.to_owned(),
@@ -350,7 +324,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
         candidates: auto.candidates()?,
         in_flight: b.in_flight,
         tile_pixels: b.tile_pixels,
-        report_uploads: b.vertices.iter().any(|&v| v != VerticesArg::Expanded),
+        report_uploads: b.matrix.vertices.iter().any(|&v| v != VerticesArg::Expanded),
         ..VkBench::new(open_for(&b.device, &all)?, b.workgroup, b.exact)
     };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;

@@ -167,7 +167,7 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
             }
             Engine::Packet(tracer) => {
                 let nodes = tracer.scene.child_pair.as_deref().expect("the scene has the child-pair layout");
-                let tris = tracer.triangles();
+                let tris = tracer.triangles().expanded().expect("Tracer::new expands the triangles");
                 blocks(rays, out, w, |p| {
                     let res = if any {
                         packet::trace::<true, Watertight>(nodes, tris, p, pstack)
