@@ -5,14 +5,14 @@
 //! ```text
 //! cargo run --release -p tracer-cpu --example tiles -- SCENE.bvh [THREADS] [WxH] [CAMERA]
 //! ```
-//! (defaults: all threads, 1920x1440, medium; ray casting and Whitted with the scene's lights)
+//! (defaults: all threads, 1920x1440, medium; ray casting and Whitted with the scene's lights;
+//! `--method auto`'s tracing as it picks it for the frame)
 
 #[path = "../benches/rayset/mod.rs"]
 mod rayset;
 
 use render_spec::{CameraSpec, Mode, Settings};
-use tracer_cpu::lanes::{OneByOne, Packets};
-use tracer_cpu::render::{Tiles, render_with};
+use tracer_cpu::render::{Tiles, plan, render_with};
 use tracer_cpu::{Method, Tracer};
 
 /// Bands of two rows traced across the whole width (the packet path's first shape), and square
@@ -54,15 +54,11 @@ fn main() {
             aovs: false,
             accuracy: render_spec::Accuracy::default(),
         };
+        // The renderer's own tracing for `--method auto`, as measured once here.
+        let plan = pool.install(|| plan(&tracer, &settings, Method::Auto)).expect("the scene has a layout");
         let frame = |tiles: Tiles| {
-            let walk = tracer.walk(Method::Auto).expect("the scene has a layout");
-            pool.install(|| match Method::Auto.resolve(&scene) {
-                Method::Packet => {
-                    render_with(&tracer, &settings, Method::Packet, || Packets::new(walk), tiles, &|_| {})
-                }
-                m => render_with(&tracer, &settings, m, || OneByOne::new(walk), tiles, &|_| {}),
-            })
-            .expect("renders");
+            pool.install(|| render_with(&tracer, &settings, plan.method(), || plan.lanes(), tiles, &|_| {}))
+                .expect("renders");
         };
         let mut passes: Vec<Box<dyn FnMut() + '_>> = SHAPES
             .iter()
