@@ -2,11 +2,15 @@
 //!
 //! For each scene, mode and method, one frame is rendered with its ray tracing recorded (every
 //! call the Whitted driver makes: each stage's rays of each 4 x 2 block); then, on each thread
-//! count, rounds interleave (a) a whole `render` as `trace-cpu render` runs it (primary rays,
-//! tracing, shading, the 8-bit image, no AOVs) and (b) the recorded calls replayed through the same
-//! tracing code on the same pool, with nothing else. For ray casting from the "medium" camera
-//! with packets, (c) the ray report's own primary-ray pass (`examples/ray_report.rs`: the same
-//! rays, in rows of 4 x 2 blocks) is timed beside them. Each figure is rays / median time.
+//! count, rounds interleave (a) a whole `render` as `trace-cpu render` runs it (auto's measurement,
+//! primary rays, tracing, shading, the 8-bit image, no AOVs; unlike trace-cpu, the image's
+//! buffers are allocated inside the time), (b) the recorded calls replayed through the renderer's
+//! tracing for the method (`Plan::lanes`, for auto with the pick that pool measured) on the same
+//! pool, with nothing else, and (c) for ray casting from the "medium" camera, the ray report's
+//! primary-ray pass (`examples/ray_report.rs`: the same rays, in chunks of two rows) with the
+//! engine that traces the frame's primary rays (packets, or single rays of the method's
+//! traversal). Each figure is rays / median time. Every method `trace-cpu --method` takes is
+//! accepted (`Method::ALL`).
 //!
 //! ```text
 //! cargo run --release -p tracer-cpu --example render_report -- [options]

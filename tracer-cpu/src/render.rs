@@ -185,11 +185,10 @@ pub struct Tiles {
 
 impl Default for Tiles {
     /// Bands of 2 rows (one row of blocks) across the whole width, the ray report's unit of work:
-    /// on one thread as fast as 8 x 8 tiles (within 2% on the dragon, `examples/tiles.rs`), and
-    /// small enough that the last bands leave no core idle. Bands of 8 rows cost up to twice the
-    /// mean where the dragon fills the frame, and with 180 of them at 1920 x 1440 the last one
-    /// kept 16 workers waiting: scheduled greedily from their one-thread costs they reach 87% of
-    /// perfect load balance on 16 workers, bands of 2 rows 100% (issue 17).
+    /// on one thread within a few percent of 8 x 8 tiles (`examples/tiles.rs`, dragon and bunny),
+    /// and small enough that the last bands leave no core idle. Bands of 8 rows cost about twice
+    /// the mean where the dragon fills the frame: from their one-thread costs, 16 workers would
+    /// reach 89-98% of perfect balance with them, 98-99% with bands of 2 rows (issue 17).
     fn default() -> Self {
         Self { rows: 2, columns: usize::MAX }
     }
@@ -347,6 +346,8 @@ impl<'t> Plan<'t> {
 }
 
 /// A worker's tracing for a [`Plan`] ([`Plan::lanes`]).
+// Made once per worker and kept on its stack: a box would cost an indirection on every call.
+#[allow(clippy::large_enum_variant)]
 pub enum FrameLanes<'t> {
     Packets(Packets<'t>),
     Single(OneByOne<'t>),
