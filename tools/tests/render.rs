@@ -321,7 +321,7 @@ fn the_cpu_timing_line_says_what_it_covers() {
             ["render", room.as_str(), "--res", "32x24", "--mode", "whitted", "--method", method.name(), "-o", "x.png"];
         let out = assert_ok(&run(&dir, "trace-cpu", &args), method.name());
         let line = out.lines().next().unwrap_or("");
-        assert!(line.contains("to page in the 0.0 MB image"), "{line}");
+        assert!(line.contains("to page in the image (2304 bytes)"), "{line}");
         assert!(line.contains("trace and shade into the 8-bit image"), "{line}");
         let auto = method == tracer_cpu::Method::Auto;
         assert_eq!(line.contains("to measure auto's ways of tracing"), auto, "{line}");

@@ -145,7 +145,12 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     let r = image.rays;
     let mut not_counted = Vec::new();
     if !reference {
-        not_counted.push(format!("{} to page in the {:.1} MB image", duration(paged), canvas_bytes as f64 / 1e6));
+        let size = match canvas_bytes {
+            b if b < 10_000 => format!("{b} bytes"),
+            b if b < 10_000_000 => format!("{:.0} kB", b as f64 / 1e3),
+            b => format!("{:.0} MB", b as f64 / 1e6),
+        };
+        not_counted.push(format!("{} to page in the image ({size})", duration(paged)));
     }
     if let Some(c) = collapse {
         not_counted.push(format!("{} to collapse the wide BVH at load", duration(c)));
