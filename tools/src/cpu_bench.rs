@@ -17,10 +17,7 @@ pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool, String> 
 
 /// The names `trace-cpu --method` takes for the traversals a benchmark can time.
 pub fn method_of(name: &str) -> Result<Method, String> {
-    [Method::Auto, Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8]
-        .into_iter()
-        .find(|m| m.name() == name)
-        .ok_or_else(|| format!("{name:?} is not a CPU method (auto, packet, ordered, stackless, bvh8)"))
+    Method::named(name).ok_or_else(|| format!("{name:?} is not a CPU method ({})", Method::names()))
 }
 
 /// What a tracer made for `method` holds of its scene ([`Tracer::held_bytes`]: the file as read,

@@ -223,13 +223,18 @@ fn accuracy_flags_explain_a_bad_value() {
 fn accuracy_flags_are_honoured_and_named() {
     let dir = scratch("accuracy-flags");
     let room = room(&dir);
-    let cases: &[&[&str]] = &[&["--intersect", "mt"], &["--offset", "1e-3"], &["--spp", "4"], &["--cutoff", "0"]];
-    for args in cases {
+    let cases: &[(&[&str], &str)] = &[
+        (&["--intersect", "mt"], "Möller-Trumbore"),
+        (&["--offset", "1e-3"], "fixed offset"),
+        (&["--spp", "4"], "4 samples per pixel"),
+        (&["--cutoff", "0"], "no bounce cutoff"),
+    ];
+    for (args, named) in cases {
         let mut all = vec!["render", room.as_str(), "--res", "8x8", "-o", "x.png"];
         all.extend_from_slice(args);
         for tracer in ["trace-cpu", "trace-vk"] {
             let out = assert_ok(&run(&dir, tracer, &all), tracer);
-            assert!(out.lines().next().unwrap_or("").contains(" ("), "{tracer}: the report names the setting: {out}");
+            assert!(out.lines().next().unwrap_or("").contains(named), "{tracer}: the report names the setting: {out}");
         }
     }
     // The defaults spelled out are the defaults: both tracers render.
@@ -320,6 +325,29 @@ fn a_closed_pipe_ends_the_program_quietly() {
         assert!(o.status.success(), "{tracer}: {:?} {err}", o.status);
         assert!(err.trim().is_empty(), "{tracer}: {err}");
         assert!(dir.join("p.png").exists() && dir.join("h.png").exists(), "every file was written first");
+    }
+}
+
+/// trace-cpu's timing line says what its time covers: auto's measurement and its pick per kind of
+/// ray, and apart from it the image's paging in; every method name is taken.
+#[test]
+fn the_cpu_timing_line_says_what_it_covers() {
+    let dir = scratch("cpu-timing-line");
+    let room = room(&dir);
+    for method in tracer_cpu::Method::ALL {
+        let args =
+            ["render", room.as_str(), "--res", "32x24", "--mode", "whitted", "--method", method.name(), "-o", "x.png"];
+        let out = assert_ok(&run(&dir, "trace-cpu", &args), method.name());
+        let line = out.lines().next().unwrap_or("");
+        assert!(line.contains("to page in the image (2304 bytes)"), "{line}");
+        assert!(line.contains("trace and shade into the 8-bit image"), "{line}");
+        let auto = method == tracer_cpu::Method::Auto;
+        assert_eq!(line.contains("to measure auto's ways of tracing"), auto, "{line}");
+        if auto && tracer_cpu::packet::available() {
+            for stage in ["primary: ", "shadow: ", "secondary: "] {
+                assert!(line.contains(stage), "auto names its pick for {stage}: {line}");
+            }
+        }
     }
 }
 

@@ -2,11 +2,15 @@
 //!
 //! For each scene, mode and method, one frame is rendered with its ray tracing recorded (every
 //! call the Whitted driver makes: each stage's rays of each 4 x 2 block); then, on each thread
-//! count, rounds interleave (a) a whole `render` as `trace-cpu render` runs it (primary rays,
-//! tracing, shading, the 8-bit image, no AOVs) and (b) the recorded calls replayed through the same
-//! tracing code on the same pool, with nothing else. For ray casting from the "medium" camera
-//! with packets, (c) the ray report's own primary-ray pass (`examples/ray_report.rs`: the same
-//! rays, in rows of 4 x 2 blocks) is timed beside them. Each figure is rays / median time.
+//! count, rounds interleave (a) a whole `render` as `trace-cpu render` runs it (auto's measurement,
+//! primary rays, tracing, shading, the 8-bit image, no AOVs; unlike trace-cpu, the image's
+//! buffers are allocated inside the time), (b) the recorded calls replayed through the renderer's
+//! tracing for the method (`Plan::lanes`, for auto with the pick that pool measured) on the same
+//! pool, with nothing else, and (c) for ray casting from the "medium" camera, the ray report's
+//! primary-ray pass (`examples/ray_report.rs`: the same rays, in chunks of two rows) with the
+//! engine that traces the frame's primary rays (packets, or single rays of the method's
+//! traversal). Each figure is rays / median time. Every method `trace-cpu --method` takes is
+//! accepted (`Method::ALL`).
 //!
 //! ```text
 //! cargo run --release -p tracer-cpu --example render_report -- [options]
@@ -16,7 +20,7 @@
 //!   --size WxH          [default: 1920x1440]
 //!   --threads LIST      e.g. 1,16 [default: 1 and all]
 //!   --modes LIST        cast,whitted [default: both]
-//!   --methods LIST      packet,ordered,stackless [default: packet]
+//!   --methods LIST      any of trace-cpu's: auto,packet,ordered,stackless,bvh8 [default: packet]
 //!   --reps N            at least N interleaved rounds, and at least 2 s of them [default: 5]
 //!   --clock wall|cpu    time passes by the wall clock, or by the CPU time of the process's
 //!                       threads (rays per CPU-second; for a machine shared with other work,
@@ -33,9 +37,9 @@ use render_spec::{CameraSpec, Intersect, Mode, Settings};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use tracer_cpu::lanes::{OneByOne, Packets, TraceLanes};
+use tracer_cpu::lanes::{Stage, TraceLanes};
 use tracer_cpu::packet::{Rays, Results};
-use tracer_cpu::render::{Tiles, render_with};
+use tracer_cpu::render::{Tiles, plan, render_with};
 use tracer_cpu::{Method, Tracer, render};
 
 struct Options {
@@ -102,12 +106,7 @@ fn parse_args() -> Result<Options, String> {
             "--methods" => {
                 o.methods = list(value()?)
                     .iter()
-                    .map(|m| match m.as_str() {
-                        "packet" => Ok(Method::Packet),
-                        "ordered" => Ok(Method::Ordered),
-                        "stackless" => Ok(Method::Stackless),
-                        _ => Err(format!("bad method {m:?}")),
-                    })
+                    .map(|m| Method::named(m).ok_or_else(|| format!("bad method {m:?} (one of {})", Method::names())))
                     .collect::<Result<_, _>>()?
             }
             "--reps" => o.reps = value()?.parse().map_err(|_| "--reps takes a number")?,
@@ -135,6 +134,7 @@ fn parse_args() -> Result<Options, String> {
 /// One call of the driver: the rays of one stage of one block.
 #[derive(Clone, Copy)]
 struct Call {
+    stage: Stage,
     any: bool,
     rays: Rays,
     test: Intersect,
@@ -149,12 +149,18 @@ struct Recorder<'s, T> {
 
 impl<T: TraceLanes> TraceLanes for Recorder<'_, T> {
     fn closest(&mut self, rays: &Rays, test: Intersect) -> Results {
-        self.calls.push(Call { any: false, rays: *rays, test });
-        self.inner.closest(rays, test)
+        self.closest_in(Stage::Primary, rays, test)
     }
     fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results {
-        self.calls.push(Call { any: true, rays: *rays, test });
-        self.inner.occluded(rays, test)
+        self.occluded_in(Stage::Shadow, rays, test)
+    }
+    fn closest_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
+        self.calls.push(Call { stage, any: false, rays: *rays, test });
+        self.inner.closest_in(stage, rays, test)
+    }
+    fn occluded_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
+        self.calls.push(Call { stage, any: true, rays: *rays, test });
+        self.inner.occluded_in(stage, rays, test)
     }
 }
 
@@ -164,40 +170,15 @@ impl<T> Drop for Recorder<'_, T> {
     }
 }
 
-/// The renderer's own way of tracing for `method` (what `render` picks).
-fn lanes_for<'a>(tracer: &'a Tracer<'a>, method: Method) -> Either<Packets<'a>, OneByOne<'a>> {
-    let walk = tracer.walk(method).expect("the scene has the layout the method reads");
-    match method {
-        Method::Packet => Either::A(Packets::new(walk)),
-        _ => Either::B(OneByOne::new(walk)),
-    }
-}
-
-enum Either<A, B> {
-    A(A),
-    B(B),
-}
-
-impl<A: TraceLanes, B: TraceLanes> TraceLanes for Either<A, B> {
-    fn closest(&mut self, rays: &Rays, test: Intersect) -> Results {
-        match self {
-            Either::A(a) => a.closest(rays, test),
-            Either::B(b) => b.closest(rays, test),
-        }
-    }
-    fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results {
-        match self {
-            Either::A(a) => a.occluded(rays, test),
-            Either::B(b) => b.occluded(rays, test),
-        }
-    }
-}
-
 /// Replays recorded calls on the current pool, in order, in chunks of about a band's worth.
 fn replay<T: TraceLanes>(lanes: impl Fn() -> T + Sync + Send, calls: &[Call]) {
-    calls.par_chunks(1024).for_each_init(lanes, |lanes, chunk| {
+    calls.par_chunks(256).for_each_init(lanes, |lanes, chunk| {
         for c in chunk {
-            let r = if c.any { lanes.occluded(&c.rays, c.test) } else { lanes.closest(&c.rays, c.test) };
+            let r = if c.any {
+                lanes.occluded_in(c.stage, &c.rays, c.test)
+            } else {
+                lanes.closest_in(c.stage, &c.rays, c.test)
+            };
             std::hint::black_box(r);
         }
     });
@@ -206,12 +187,20 @@ fn replay<T: TraceLanes>(lanes: impl Fn() -> T + Sync + Send, calls: &[Call]) {
 struct Row {
     scene: String,
     mode: Mode,
-    method: Method,
+    /// The method as the frame ran it (auto with its choice per kind of ray).
+    method: String,
     threads: usize,
     rays: u64,
     render: f64,
     alone: f64,
     ray_report: Option<f64>,
+}
+
+impl Row {
+    /// The method without auto's choice, which may differ between thread counts.
+    fn method_name(&self) -> &str {
+        self.method.split(" (").next().unwrap_or(&self.method)
+    }
 }
 
 fn main() {
@@ -252,43 +241,41 @@ fn main() {
                 let sink = Mutex::new(Vec::new());
                 let image = one
                     .install(|| {
+                        let plan = plan(&tracer, &settings, method)?;
                         render_with(
                             &tracer,
                             &settings,
-                            method,
-                            || Recorder { inner: lanes_for(&tracer, method), calls: Vec::new(), sink: &sink },
+                            plan.method(),
+                            || Recorder { inner: plan.lanes(), calls: Vec::new(), sink: &sink },
                             Tiles::default(),
                             &|_| {},
                         )
                     })
                     .unwrap_or_else(|e| fail(&e.to_string()));
                 let calls = sink.into_inner().expect("no recorder panicked");
-                let rays = image.rays.primary + image.rays.shadow + image.rays.secondary;
-                let recorded: u64 = calls.iter().map(|c| c.rays.valid.iter().filter(|&&v| v).count() as u64).sum();
+                let rays = image.rays.total();
+                let recorded: u64 = calls.iter().map(|c| c.rays.count() as u64).sum();
                 assert_eq!(recorded, rays, "the recorded calls hold every ray of the image");
-                let primary_set =
-                    (mode == Mode::Cast && method == Method::Packet && opts.camera == "medium").then(|| {
-                        rayset::generate(&scene, w, h)
-                            .unwrap_or_else(|e| fail(&e))
-                            .into_iter()
-                            .next()
-                            .expect("three sets")
-                    });
+                let primary_set = (mode == Mode::Cast && opts.camera == "medium").then(|| {
+                    rayset::generate(&scene, w, h).unwrap_or_else(|e| fail(&e)).into_iter().next().expect("five sets")
+                });
                 for (threads, pool) in &pools {
+                    // Auto's choice as this pool measures it, for the replay and the ray report's pass.
+                    let plan =
+                        pool.install(|| plan(&tracer, &settings, method)).unwrap_or_else(|e| fail(&e.to_string()));
+                    let engine = match plan.method() {
+                        Method::Packet => rayset::Engine::Packet(&tracer),
+                        Method::Auto if plan.packet_stages()[Stage::Primary.index()] => rayset::Engine::Packet(&tracer),
+                        m => rayset::Engine::Scalar(tracer.walk(m).expect("planned"), Intersect::Watertight),
+                    };
                     let mut out = vec![rayset::NO_RAY; (w * h) as usize];
                     let mut a = || {
                         pool.install(|| render(&tracer, &settings, method)).expect("renders");
                     };
-                    let mut b = || {
-                        let walk = tracer.walk(method).expect("the scene has the layout the method reads");
-                        pool.install(|| match method {
-                            Method::Packet => replay(|| Packets::new(walk), &calls),
-                            _ => replay(|| OneByOne::new(walk), &calls),
-                        })
-                    };
+                    let mut b = || pool.install(|| replay(|| plan.lanes(), &calls));
                     let mut c = || {
                         if let Some(set) = &primary_set {
-                            pool.install(|| rayset::trace(rayset::Engine::Packet(&tracer), set, &mut out));
+                            pool.install(|| rayset::trace(engine, set, &mut out));
                         }
                     };
                     a();
@@ -299,7 +286,7 @@ fn main() {
                     let row = Row {
                         scene: name.clone(),
                         mode,
-                        method,
+                        method: plan.describe(),
                         threads: *threads,
                         rays,
                         render: rays as f64 / t[0] / 1e6,
@@ -307,7 +294,8 @@ fn main() {
                         ray_report: primary_set.as_ref().map(|s| s.count as f64 / t[2] / 1e6),
                     };
                     eprintln!(
-                        "{name} {mode:?} {method:?} {threads} threads: render {:.2}, traced alone {:.2}, ray report {} Mrays/s",
+                        "{name} {mode:?} {} {threads} threads: render {:.2}, traced alone {:.2}, ray report {} Mrays/s",
+                        row.method,
                         row.render,
                         row.alone,
                         row.ray_report.map_or("-".into(), |r| format!("{r:.2}"))
@@ -355,11 +343,11 @@ fn markdown(opts: &Options, rows: &[Row], load_before: &str, seconds: f64) -> St
     for r in rows {
         let single = rows
             .iter()
-            .find(|o| o.threads == 1 && o.scene == r.scene && o.mode == r.mode && o.method == r.method)
+            .find(|o| o.threads == 1 && o.scene == r.scene && o.mode == r.mode && o.method_name() == r.method_name())
             .map_or("-".into(), |o| format!("{:.1}x", r.render / o.render));
         let _ = writeln!(
             s,
-            "| {} | {:?} | {:?} | {} | {} | {:.2} | {:.2} | {:.0}% | {} | {} | {single} |",
+            "| {} | {:?} | {} | {} | {} | {:.2} | {:.2} | {:.0}% | {} | {} | {single} |",
             r.scene,
             r.mode,
             r.method,

@@ -31,8 +31,8 @@ pub trait TraceLanes {
     }
 }
 
-/// The kinds of ray the Whitted driver traces: coherent (primary rays, the shadow rays of a block
-/// towards one light) or incoherent (mirror and glass bounces, AO and diffuse rays).
+/// The kinds of ray the Whitted driver traces: the coherent primary rays and shadow rays of a
+/// block towards one light, and the incoherent mirror and glass bounces, AO and diffuse rays.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Stage {
     Primary,
@@ -43,10 +43,23 @@ pub enum Stage {
 }
 
 impl Stage {
-    /// Whether the rays of a block in this stage start (nearly) together and run (nearly) the same
-    /// way, which is where packets can pay.
-    pub fn coherent(self) -> bool {
-        matches!(self, Stage::Primary | Stage::Shadow)
+    /// Every stage, in the order of [`Stage::index`].
+    pub const ALL: [Stage; 5] = [Stage::Primary, Stage::Shadow, Stage::Secondary, Stage::Ao, Stage::Diffuse];
+
+    /// This stage's place in [`Stage::ALL`] (for tables indexed by stage).
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The stage's name in messages (`trace-cpu render`'s timing line).
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Primary => "primary",
+            Stage::Shadow => "shadow",
+            Stage::Secondary => "secondary",
+            Stage::Ao => "AO",
+            Stage::Diffuse => "diffuse",
+        }
     }
 }
 
@@ -139,19 +152,31 @@ impl TraceLanes for Packets<'_> {
     }
 }
 
-/// `--method auto`: every ray on the wide BVH one at a time ([`crate::bvh8`]), except the coherent
-/// stages ([`Stage::coherent`]), which go as AVX2 packets over the child-pair tree where
-/// `coherent_packets` (decided per frame by [`crate::render`]'s short measurement).
+/// `--method auto`: every ray on the wide BVH one at a time ([`crate::bvh8`]), except in the
+/// stages where auto's measurement ([`crate::render::plan`]) found AVX2 packets over the
+/// child-pair tree faster. A packet stage's calls with few live lanes still go one by one on the
+/// wide BVH, which then costs less than a mostly empty packet.
 pub struct Mixed<'a> {
     single: OneByOne<'a>,
     packets: Option<Packets<'a>>,
+    /// Per stage ([`Stage::index`]): whether its rays go as packets.
+    packet_stages: [bool; Stage::ALL.len()],
 }
 
 impl<'a> Mixed<'a> {
-    /// Singles on `wide` (a bvh8 walk); packets on `pairs` (a child-pair walk) for the coherent
-    /// stages, or none.
-    pub fn new(wide: Walk<'a>, pairs: Option<Walk<'a>>) -> Self {
-        Self { single: OneByOne::new(wide), packets: pairs.map(Packets::new) }
+    /// Singles on `wide` (a bvh8 walk); packets on `pairs` (a child-pair walk) for the stages
+    /// marked in `packet_stages`, none without `pairs`.
+    pub fn new(wide: Walk<'a>, pairs: Option<Walk<'a>>, packet_stages: [bool; Stage::ALL.len()]) -> Self {
+        Self { single: OneByOne::new(wide), packets: pairs.map(Packets::new), packet_stages }
+    }
+
+    /// The packets for `stage`'s `rays`, where this stage takes them and enough lanes are live.
+    #[inline]
+    fn packets_for(&mut self, stage: Stage, rays: &Rays) -> Option<&mut Packets<'a>> {
+        match &mut self.packets {
+            Some(p) if self.packet_stages[stage.index()] && rays.count() > SPARSE => Some(p),
+            _ => None,
+        }
     }
 }
 
@@ -163,15 +188,15 @@ impl TraceLanes for Mixed<'_> {
         self.single.occluded(rays, test)
     }
     fn closest_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
-        match &mut self.packets {
-            Some(p) if stage.coherent() => p.closest(rays, test),
-            _ => self.single.closest(rays, test),
+        match self.packets_for(stage, rays) {
+            Some(p) => p.closest(rays, test),
+            None => self.single.closest(rays, test),
         }
     }
     fn occluded_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
-        match &mut self.packets {
-            Some(p) if stage.coherent() => p.occluded(rays, test),
-            _ => self.single.occluded(rays, test),
+        match self.packets_for(stage, rays) {
+            Some(p) => p.occluded(rays, test),
+            None => self.single.occluded(rays, test),
         }
     }
 }

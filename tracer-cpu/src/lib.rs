@@ -45,16 +45,29 @@ pub enum Method {
     Bvh8,
     /// 8-wide SIMD packets (AVX2) for primary and shadow rays, ordered traversal for the rest.
     Packet,
-    /// Picked per kind of ray (`lanes::Mixed`): incoherent rays (mirror and glass bounces, AO
-    /// and diffuse rays) one at a time on the wide BVH ([`Method::Bvh8`]), which the ray report
-    /// measures ahead of packets on them on every scene; the coherent primary and shadow rays as
-    /// packets ([`Method::Packet`]) where a short measurement at the start of the frame finds
-    /// packets faster on a sample of its primary rays, else on the wide BVH too.
-    /// [`Method::Stackless`] for a file that holds only the escape-pointer layout.
+    /// Picked per kind of ray (`lanes::Mixed`): the rays of each stage (primary, shadow,
+    /// secondary, AO, diffuse) one at a time on the wide BVH ([`Method::Bvh8`]) or as packets
+    /// ([`Method::Packet`]), whichever a short measurement of the frame's own rays at its start
+    /// ([`render::plan`]) finds faster. [`Method::Stackless`] for a file that holds only the
+    /// escape-pointer layout.
     Auto,
 }
 
 impl Method {
+    /// Every method, in the order `trace-cpu --help` lists them: the one list of CPU method names
+    /// (the CLI, `trace-cpu bench`, the examples and the tests take it from here).
+    pub const ALL: [Method; 5] = [Method::Auto, Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8];
+
+    /// The method `trace-cpu --method` calls `name`.
+    pub fn named(name: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// The names of [`Method::ALL`], comma-separated, for messages.
+    pub fn names() -> String {
+        Method::ALL.map(Method::name).join(", ")
+    }
+
     /// The method actually used on `scene`: packets fall back to ordered traversal without AVX2,
     /// and `Auto` takes the stackless walk when the file has no child-pair layout.
     pub fn resolve(self, scene: &bvh_format::SceneFile) -> Method {
@@ -105,4 +118,19 @@ pub fn held_bytes(scene: &bvh_format::SceneFile, vertices: Vertices) -> u64 {
         Vertices::Indexed => 0,
     };
     file_bytes(scene) + expanded as u64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Method;
+
+    #[test]
+    fn every_method_is_found_by_its_name() {
+        for m in Method::ALL {
+            assert_eq!(Method::named(m.name()), Some(m));
+            assert!(Method::names().contains(m.name()));
+        }
+        assert_eq!(Method::named("Packet"), None);
+        assert_eq!(Method::names().split(", ").count(), Method::ALL.len());
+    }
 }

@@ -4,8 +4,8 @@
 use crate::Method;
 use crate::bvh8::Bvh8;
 use crate::geometry::{Cost, Hit, MollerTrumbore, Ray, TriangleTest, Watertight};
-use crate::lanes::{Mixed, OneByOne, Packets, TraceLanes};
-use crate::packet::{LANES, Rays};
+use crate::lanes::{Mixed, OneByOne, Packets, Stage, TraceLanes};
+use crate::packet::{LANES, Rays, Results};
 use crate::shade;
 use crate::traverse::{self, Stack};
 use crate::vertices::{Indexed, Triangles};
@@ -227,11 +227,13 @@ pub struct Tiles {
 }
 
 impl Default for Tiles {
-    /// 8 x 8: as fast as any shape measured on the dragon and the bunny (tiles of 2 x the width,
-    /// 4 x 8 to 16 x 16 and 8 x 32 lie within 5% of each other; `examples/tiles.rs`), and enough
-    /// bands (180 at 1920 x 1440) to keep 16 workers busy to the end.
+    /// Bands of 2 rows (one row of blocks) across the whole width, the ray report's unit of work:
+    /// on one thread within a few percent of 8 x 8 tiles (`examples/tiles.rs`, dragon and bunny),
+    /// and small enough that the last bands leave no core idle. Bands of 8 rows cost about twice
+    /// the mean where the dragon fills the frame: from their one-thread costs, 16 workers would
+    /// reach 89-98% of perfect balance with them, 98-99% with bands of 2 rows (issue 17).
     fn default() -> Self {
-        Self { rows: 8, columns: 8 }
+        Self { rows: 2, columns: usize::MAX }
     }
 }
 
@@ -253,68 +255,370 @@ pub fn render(tracer: &Tracer<'_>, settings: &Settings, method: Method) -> Resul
 }
 
 /// [`render`], calling `progress` with the number of rows finished each time a band of rows is
-/// done (from any worker thread).
+/// done (from any worker thread): [`plan`], then [`render_into`] a fresh [`Canvas`].
 pub fn render_with_progress(
     tracer: &Tracer<'_>,
     settings: &Settings,
     method: Method,
     progress: &(dyn Fn(u32) + Sync),
 ) -> Result<Image, RenderError> {
-    let tiles = Tiles::default();
-    let walk = tracer.walk(method)?;
-    match method.resolve(tracer.scene) {
-        Method::Packet => render_with(tracer, settings, Method::Packet, || Packets::new(walk), tiles, progress),
-        Method::Auto => {
-            let pairs = if packets_pay(tracer, settings, walk)? { Some(tracer.walk(Method::Ordered)?) } else { None };
-            render_with(tracer, settings, Method::Auto, || Mixed::new(walk, pairs), tiles, progress)
+    let plan = plan(tracer, settings, method)?;
+    render_into(tracer, settings, &plan, Canvas::new(settings), progress)
+}
+
+/// The buffers a frame is written into: the 8-bit image and, when the settings ask for them, the
+/// AOVs. Made before the frame, so that a caller can page them in before its clock starts
+/// ([`Canvas::page_in`]), as the ray report's output is before its passes.
+pub struct Canvas {
+    width: u32,
+    height: u32,
+    rgb: Vec<[u8; 3]>,
+    aov: Option<Aovs>,
+}
+
+impl Canvas {
+    /// Zeroed buffers for a frame of `settings` (the pages are mapped when first written).
+    pub fn new(settings: &Settings) -> Self {
+        let n = settings.width as usize * settings.height as usize;
+        Canvas {
+            width: settings.width,
+            height: settings.height,
+            rgb: vec![[0; 3]; n],
+            aov: settings.aovs.then(|| Aovs {
+                t: vec![0.0; n],
+                normal: vec![[0.0; 3]; n],
+                prim: vec![0; n],
+                nodes: vec![0; n],
+                tris: vec![0; n],
+            }),
         }
-        m => render_with(tracer, settings, m, || OneByOne::new(walk), tiles, progress),
+    }
+
+    /// Bytes of the buffers.
+    pub fn bytes(&self) -> usize {
+        let aov = self.aov.as_ref().map_or(0, |a| {
+            std::mem::size_of_val(&a.t[..])
+                + std::mem::size_of_val(&a.normal[..])
+                + std::mem::size_of_val(&a.prim[..])
+                + std::mem::size_of_val(&a.nodes[..])
+                + std::mem::size_of_val(&a.tris[..])
+        });
+        std::mem::size_of_val(&self.rgb[..]) + aov
+    }
+
+    /// Writes every page of the buffers on the current thread pool, so that the frame does not
+    /// take the page faults of fresh memory (a few microseconds each in a VM: 2000 of them for a
+    /// 1920 x 1440 image, 12 000 at 4096 x 4096).
+    pub fn page_in(&mut self) {
+        fn touch<T: Copy + Default + Send>(v: &mut [T]) {
+            const PAGE: usize = 4096;
+            let step = (PAGE / std::mem::size_of::<T>().max(1)).max(1);
+            v.par_chunks_mut(step * 64).for_each(|chunk| {
+                for x in chunk.iter_mut().step_by(step) {
+                    // Through black_box: a store of zero into memory known to be zeroed could
+                    // otherwise be dropped.
+                    *std::hint::black_box(x) = T::default();
+                }
+            });
+        }
+        touch(&mut self.rgb);
+        if let Some(a) = &mut self.aov {
+            touch(&mut a.t);
+            touch(&mut a.normal);
+            touch(&mut a.prim);
+            touch(&mut a.nodes);
+            touch(&mut a.tris);
+        }
+    }
+
+    /// Whether these buffers are a frame of `settings`.
+    fn fits(&self, settings: &Settings) -> bool {
+        (self.width, self.height, self.aov.is_some()) == (settings.width, settings.height, settings.aovs)
     }
 }
 
-/// `--method auto`'s measurement: whether AVX2 packets over the child-pair tree trace this frame's
-/// primary rays faster than the wide BVH one ray at a time (`wide`), timed on up to 256 of its
-/// 4 x 2 pixel blocks spread evenly over the image (the fastest of 3 alternating rounds; about a
-/// millisecond). Its answer goes for the shadow rays too, the other coherent kind. Images do not
-/// depend on it: every method finds the same hits.
-pub fn packets_pay(tracer: &Tracer<'_>, settings: &Settings, wide: Walk<'_>) -> Result<bool, RenderError> {
-    if !crate::packet::available() || tracer.child_pair.is_none() {
-        return Ok(false);
+/// How a frame's rays are traced, fixed before its first pixel: the method as resolved for the
+/// scene and, for [`Method::Auto`], the stages its measurement sends as packets.
+#[derive(Clone, Copy)]
+pub struct Plan<'t> {
+    method: Method,
+    walk: Walk<'t>,
+    /// Auto's child-pair walk for its packet stages, where packets run at all.
+    pairs: Option<Walk<'t>>,
+    packet_stages: [bool; Stage::ALL.len()],
+    measured: Option<Measurement>,
+}
+
+impl<'t> Plan<'t> {
+    /// The method the frame runs ([`Method::resolve`]d for the scene).
+    pub fn method(&self) -> Method {
+        self.method
     }
+
+    /// Per stage ([`Stage::index`]): whether auto sends its rays as packets.
+    pub fn packet_stages(&self) -> [bool; Stage::ALL.len()] {
+        self.packet_stages
+    }
+
+    /// Auto's measurement, where it took one.
+    pub fn measured(&self) -> Option<&Measurement> {
+        self.measured.as_ref()
+    }
+
+    /// The tracing of one worker, as the renderer makes it for this plan.
+    pub fn lanes(&self) -> FrameLanes<'t> {
+        match self.method {
+            Method::Packet => FrameLanes::Packets(Packets::new(self.walk)),
+            Method::Auto => FrameLanes::Mixed(Mixed::new(self.walk, self.pairs, self.packet_stages)),
+            _ => FrameLanes::Single(OneByOne::new(self.walk)),
+        }
+    }
+
+    /// The method in words, with auto's pick per measured kind of ray ("Auto (primary: packets,
+    /// shadow: packets, secondary: bvh8)").
+    pub fn describe(&self) -> String {
+        let name = format!("{:?}", self.method);
+        let Some(m) = &self.measured else { return name };
+        let picks: Vec<String> = Stage::ALL
+            .into_iter()
+            .filter(|s| m.rays[s.index()] > 0)
+            .map(|s| format!("{}: {}", s.name(), if self.packet_stages[s.index()] { "packets" } else { "bvh8" }))
+            .collect();
+        format!("{name} ({})", picks.join(", "))
+    }
+}
+
+/// A worker's tracing for a [`Plan`] ([`Plan::lanes`]).
+// Made once per worker and kept on its stack: a box would cost an indirection on every call.
+#[allow(clippy::large_enum_variant)]
+pub enum FrameLanes<'t> {
+    Packets(Packets<'t>),
+    Single(OneByOne<'t>),
+    Mixed(Mixed<'t>),
+}
+
+impl TraceLanes for FrameLanes<'_> {
+    fn closest(&mut self, rays: &Rays, test: Intersect) -> Results {
+        match self {
+            FrameLanes::Packets(l) => l.closest(rays, test),
+            FrameLanes::Single(l) => l.closest(rays, test),
+            FrameLanes::Mixed(l) => l.closest(rays, test),
+        }
+    }
+    fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results {
+        match self {
+            FrameLanes::Packets(l) => l.occluded(rays, test),
+            FrameLanes::Single(l) => l.occluded(rays, test),
+            FrameLanes::Mixed(l) => l.occluded(rays, test),
+        }
+    }
+    fn closest_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
+        match self {
+            FrameLanes::Packets(l) => l.closest_in(stage, rays, test),
+            FrameLanes::Single(l) => l.closest_in(stage, rays, test),
+            FrameLanes::Mixed(l) => l.closest_in(stage, rays, test),
+        }
+    }
+    fn occluded_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
+        match self {
+            FrameLanes::Packets(l) => l.occluded_in(stage, rays, test),
+            FrameLanes::Single(l) => l.occluded_in(stage, rays, test),
+            FrameLanes::Mixed(l) => l.occluded_in(stage, rays, test),
+        }
+    }
+}
+
+/// What `--method auto`'s measurement found, per stage ([`Stage::index`]): the sampled rays, and
+/// the seconds they took one by one on the wide BVH and as packets (summed over the workers,
+/// each the fastest of its rounds).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Measurement {
+    pub rays: [u64; Stage::ALL.len()],
+    pub single: [f64; Stage::ALL.len()],
+    pub packets: [f64; Stage::ALL.len()],
+}
+
+impl Measurement {
+    /// Packets for the stages where they took less time than single rays; single rays where
+    /// nothing was sampled.
+    pub fn packet_stages(&self) -> [bool; Stage::ALL.len()] {
+        std::array::from_fn(|i| self.rays[i] > 0 && self.packets[i] < self.single[i])
+    }
+
+    fn add(mut self, o: Self) -> Self {
+        for i in 0..Stage::ALL.len() {
+            self.rays[i] += o.rays[i];
+            self.single[i] += o.single[i];
+            self.packets[i] += o.packets[i];
+        }
+        self
+    }
+}
+
+/// How auto's measurement times one way of tracing one stage's sampled rays. The renderer's is
+/// [`WallClock`]; tests hand in a table of costs to see that the measurement decides.
+pub trait StageTimer: Sync {
+    /// Runs `trace` (the `rays` sampled rays of `stage`, as packets or one by one on the wide
+    /// BVH) and returns the seconds it took.
+    fn time(&self, stage: Stage, packets: bool, rays: u64, trace: &mut dyn FnMut()) -> f64;
+}
+
+/// [`StageTimer`] by the wall clock.
+pub struct WallClock;
+
+impl StageTimer for WallClock {
+    fn time(&self, _: Stage, _: bool, _: u64, trace: &mut dyn FnMut()) -> f64 {
+        let t = std::time::Instant::now();
+        trace();
+        t.elapsed().as_secs_f64()
+    }
+}
+
+/// Fixes how the frame's rays are traced: the method resolved for the scene (refused here when
+/// the file lacks its layout), and for [`Method::Auto`] a short measurement on the current thread
+/// pool ([`plan_with`] by the wall clock).
+pub fn plan<'t>(tracer: &'t Tracer<'t>, settings: &Settings, method: Method) -> Result<Plan<'t>, RenderError> {
+    plan_with(tracer, settings, method, &WallClock)
+}
+
+/// [`plan`] with `timer` timing auto's measurement: the frame's own rays at up to 256 of its
+/// 4 x 2 pixel blocks spread evenly over the image are shaded once as the renderer shades them,
+/// every call of each stage (primary, shadow, secondary, AO or diffuse rays) recorded; then the
+/// workers time each stage's calls one by one on the wide BVH and as packets over the child-pair
+/// tree, alternately, the fastest of 3 rounds each, and each stage goes the way that took less
+/// time summed over the workers (about a millisecond of work, spread over the pool). Images do
+/// not depend on it: every way finds the same hits.
+pub fn plan_with<'t>(
+    tracer: &'t Tracer<'t>,
+    settings: &Settings,
+    method: Method,
+    timer: &dyn StageTimer,
+) -> Result<Plan<'t>, RenderError> {
+    let resolved = method.resolve(tracer.scene);
+    let walk = tracer.walk(resolved)?;
+    let mut plan = Plan { method: resolved, walk, pairs: None, packet_stages: [false; 5], measured: None };
+    if resolved == Method::Auto && crate::packet::available() && tracer.child_pair.is_some() {
+        let pairs = tracer.walk(Method::Ordered)?;
+        let m = measure(tracer, settings, walk, pairs, timer)?;
+        plan.pairs = Some(pairs);
+        plan.packet_stages = m.packet_stages();
+        plan.measured = Some(m);
+    }
+    Ok(plan)
+}
+
+/// Auto's measurement ([`plan_with`]).
+fn measure(
+    tracer: &Tracer<'_>,
+    settings: &Settings,
+    wide: Walk<'_>,
+    pairs: Walk<'_>,
+    timer: &dyn StageTimer,
+) -> Result<Measurement, RenderError> {
     let frame = settings.frame()?;
-    let (w, h) = (settings.width, settings.height);
-    const GRID: u32 = 16;
-    let mut blocks = Vec::with_capacity((GRID * GRID) as usize);
+    let sh = Shading::new(tracer, settings).with_self_hits(false);
+    let sample = render_spec::accuracy::sample_positions(settings.accuracy.spp).next().unwrap_or((0.5, 0.5));
+    let (w, h) = (settings.width as usize, settings.height as usize);
+    const GRID: usize = 16;
+    let mut blocks = Vec::with_capacity(GRID * GRID);
     for gy in 0..GRID.min(h.div_ceil(2)) {
         for gx in 0..GRID.min(w.div_ceil(4)) {
-            let (bx, by) = ((gx * w / GRID) & !3, (gy * h / GRID) & !1);
-            let mut rays = Rays::default();
-            for i in 0..LANES as u32 {
-                let (x, y) = (bx + i % 4, by + i / 4);
-                if x < w && y < h {
-                    rays.set(i as usize, &Ray::new(frame.eye, frame.direction(x, y)), f32::INFINITY);
-                }
-            }
-            blocks.push(rays);
+            blocks.push(((gx * w / GRID) & !3, (gy * h / GRID) & !1));
         }
     }
     let test = settings.accuracy.intersect;
-    let mut single = OneByOne::new(wide);
-    let mut packets = Packets::new(tracer.walk(Method::Ordered)?);
-    let (mut t_single, mut t_packets) = (f64::INFINITY, f64::INFINITY);
-    for _ in 0..3 {
-        let t = std::time::Instant::now();
-        for b in &blocks {
-            std::hint::black_box(single.closest(b, test));
-        }
-        t_single = t_single.min(t.elapsed().as_secs_f64());
-        let t = std::time::Instant::now();
-        for b in &blocks {
-            std::hint::black_box(packets.closest(b, test));
-        }
-        t_packets = t_packets.min(t.elapsed().as_secs_f64());
+    // Chunks of the sample for the workers: each times both ways on the same rays.
+    let chunk = blocks.len().div_ceil(16).max(1);
+    Ok(blocks
+        .par_chunks(chunk)
+        .map(|blocks| {
+            let mut record = Recorder { inner: OneByOne::new(wide), calls: Vec::new() };
+            for &(x0, y0) in blocks {
+                let (rays, seeds, ..) = primary_block::<F8>(&frame, w, h, x0, y0, sample);
+                sh.block::<F8, _>(&rays, &seeds, &mut record);
+            }
+            let mut single = Mixed::new(wide, None, [false; 5]);
+            let mut packets = Mixed::new(wide, Some(pairs), [true; 5]);
+            let mut m = Measurement::default();
+            for stage in Stage::ALL {
+                let calls: Vec<&Call> = record.calls.iter().filter(|c| c.stage == stage).collect();
+                let rays: u64 = calls.iter().map(|c| c.rays.count() as u64).sum();
+                if rays == 0 {
+                    continue;
+                }
+                let run = |lanes: &mut Mixed<'_>| {
+                    for c in &calls {
+                        std::hint::black_box(if c.any {
+                            lanes.occluded_in(stage, &c.rays, test)
+                        } else {
+                            lanes.closest_in(stage, &c.rays, test)
+                        });
+                    }
+                };
+                let (mut t_single, mut t_packets) = (f64::INFINITY, f64::INFINITY);
+                for _ in 0..3 {
+                    t_single = t_single.min(timer.time(stage, false, rays, &mut || run(&mut single)));
+                    t_packets = t_packets.min(timer.time(stage, true, rays, &mut || run(&mut packets)));
+                }
+                let i = stage.index();
+                (m.rays[i], m.single[i], m.packets[i]) = (rays, t_single, t_packets);
+            }
+            m
+        })
+        .reduce(Measurement::default, Measurement::add))
+}
+
+/// One call of the Whitted driver, as auto's measurement records it.
+struct Call {
+    stage: Stage,
+    any: bool,
+    rays: Rays,
+}
+
+/// Traces through `inner` and keeps every call.
+struct Recorder<T> {
+    inner: T,
+    calls: Vec<Call>,
+}
+
+impl<T: TraceLanes> TraceLanes for Recorder<T> {
+    fn closest(&mut self, rays: &Rays, test: Intersect) -> Results {
+        self.closest_in(Stage::Primary, rays, test)
     }
-    Ok(t_packets < t_single)
+    fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results {
+        self.occluded_in(Stage::Shadow, rays, test)
+    }
+    fn closest_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
+        self.calls.push(Call { stage, any: false, rays: *rays });
+        self.inner.closest_in(stage, rays, test)
+    }
+    fn occluded_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
+        self.calls.push(Call { stage, any: true, rays: *rays });
+        self.inner.occluded_in(stage, rays, test)
+    }
+}
+
+/// Renders a frame of `settings` the way `plan` (from [`plan`]) says into `canvas` (one made
+/// for other settings is replaced by a fresh one).
+pub fn render_into(
+    tracer: &Tracer<'_>,
+    settings: &Settings,
+    plan: &Plan<'_>,
+    canvas: Canvas,
+    progress: &(dyn Fn(u32) + Sync),
+) -> Result<Image, RenderError> {
+    let tiles = Tiles::default();
+    let avx = crate::packet::available();
+    let (walk, method) = (plan.walk, plan.method);
+    // Each way of tracing compiled into the loop of its own (what [`Plan::lanes`] makes).
+    match method {
+        Method::Packet => render_in(tracer, settings, method, || Packets::new(walk), tiles, progress, avx, canvas),
+        Method::Auto => {
+            let (pairs, stages) = (plan.pairs, plan.packet_stages);
+            render_in(tracer, settings, method, || Mixed::new(walk, pairs, stages), tiles, progress, avx, canvas)
+        }
+        _ => render_in(tracer, settings, method, || OneByOne::new(walk), tiles, progress, avx, canvas),
+    }
 }
 
 /// One band of rows and the part of every output it covers.
@@ -351,9 +655,9 @@ fn bands<'a>(w: usize, rows: usize, rgb: &'a mut [[u8; 3]], aov: Option<&'a mut 
     rgb.chunks_mut(n).zip(aovs).enumerate().map(|(i, (rgb, aov))| Band { y0: i * rows, rgb, aov }).collect()
 }
 
-/// [`render_with_progress`] with the rays of every stage traced by a [`TraceLanes`] made once per
-/// worker by `lanes` (benchmarks wrap the renderer's own to see what it traces), in `tiles`.
-/// `method` is the one `lanes` traces with: the layout it reads must be in the file.
+/// A frame with the rays of every stage traced by a [`TraceLanes`] made once per worker by
+/// `lanes` (benchmarks wrap the renderer's own to see what it traces), in `tiles`. `method` is
+/// the one `lanes` traces with: the layout it reads must be in the file.
 pub fn render_with<T: TraceLanes>(
     tracer: &Tracer<'_>,
     settings: &Settings,
@@ -362,10 +666,13 @@ pub fn render_with<T: TraceLanes>(
     tiles: Tiles,
     progress: &(dyn Fn(u32) + Sync),
 ) -> Result<Image, RenderError> {
-    render_in(tracer, settings, method, lanes, tiles, progress, crate::packet::available())
+    let avx = crate::packet::available();
+    render_in(tracer, settings, method, lanes, tiles, progress, avx, Canvas::new(settings))
 }
 
-/// [`render_with`], with AVX lanes for the shading or (`avx` false, or no AVX2) plain arrays.
+/// [`render_with`] into `canvas`, with AVX lanes for the shading or (`avx` false, or no AVX2)
+/// plain arrays.
+#[allow(clippy::too_many_arguments)]
 fn render_in<T: TraceLanes>(
     tracer: &Tracer<'_>,
     settings: &Settings,
@@ -374,6 +681,7 @@ fn render_in<T: TraceLanes>(
     tiles: Tiles,
     progress: &(dyn Fn(u32) + Sync),
     avx: bool,
+    canvas: Canvas,
 ) -> Result<Image, RenderError> {
     let tiles = tiles.blocks();
     let frame = settings.frame()?;
@@ -381,14 +689,7 @@ fn render_in<T: TraceLanes>(
     let (w, h) = (settings.width as usize, settings.height as usize);
     let sh = Shading::new(tracer, settings).with_self_hits(tracer.self_hits);
     let samples: Vec<(f32, f32)> = render_spec::accuracy::sample_positions(settings.accuracy.spp).collect();
-    let mut rgb = vec![[0u8; 3]; w * h];
-    let mut aov = settings.aovs.then(|| Aovs {
-        t: vec![0.0; w * h],
-        normal: vec![[0.0; 3]; w * h],
-        prim: vec![0; w * h],
-        nodes: vec![0; w * h],
-        tris: vec![0; w * h],
-    });
+    let Canvas { mut rgb, mut aov, .. } = if canvas.fits(settings) { canvas } else { Canvas::new(settings) };
     let rays = bands(w, tiles.rows, &mut rgb, aov.as_mut())
         .into_par_iter()
         .map_init(&lanes, |lanes, mut band| {
@@ -397,6 +698,7 @@ fn render_in<T: TraceLanes>(
             rays
         })
         .reduce(RayCounts::default, |a, b| a + b);
+    debug_assert_eq!(rgb.len(), w * h);
     Ok(Image { width: settings.width, height: settings.height, rgb, aov, rays })
 }
 
@@ -469,6 +771,33 @@ fn directions<L: Lanes>(frame: &Frame, x: L, y: L, (sx, sy): (f32, f32)) -> V3<L
     .normalize()
 }
 
+/// The primary rays at the sub-pixel point `sample` of the 4 x 2 block whose top-left pixel is
+/// (`x0`, `y0`) in an image `w` pixels wide, whose rows end at `h` (lanes past either edge are not
+/// valid), with the block's seeds and its lanes' pixel coordinates.
+#[inline(always)]
+fn primary_block<L: Lanes>(
+    frame: &Frame,
+    w: usize,
+    h: usize,
+    x0: usize,
+    y0: usize,
+    sample: (f32, f32),
+) -> (Rays, Seeds, L, L) {
+    let lane_xy = |i: usize| (x0 + i % 4, y0 + i / 4);
+    let mut primary = Rays::default();
+    for i in 0..LANES {
+        let (x, y) = lane_xy(i);
+        primary.valid[i] = x < w && y < h;
+    }
+    primary.origin = V3::<L>::splat(frame.eye).to_arrays();
+    let (x, y) = (L::from_fn(|i| lane_xy(i).0 as f32), L::from_fn(|i| lane_xy(i).1 as f32));
+    primary.t_max = [f32::INFINITY; LANES];
+    primary.dir = directions(frame, x, y, sample).to_arrays();
+    // Row-major pixel indices in the image (at most 2^28 pixels: no overflow).
+    let seeds = Seeds { pixel: std::array::from_fn(|i| (lane_xy(i).1 * w + lane_xy(i).0) as u32), sample: 0 };
+    (primary, seeds, x, y)
+}
+
 /// Traces and shades the 4 x 2 block whose top-left pixel is (`bx`, `dy`) in the band at every
 /// sample position, writing its pixels: the colour is the sum of the samples' linear colours in
 /// their order times the f32 reciprocal of their number (a GPU multiplies exactly, where its
@@ -488,18 +817,7 @@ fn block<L: Lanes, T: TraceLanes>(
     dy: usize,
 ) -> RayCounts {
     let lane_xy = |i: usize| (bx + i % 4, dy + i / 4);
-    let mut primary = Rays::default();
-    for i in 0..LANES {
-        let (x, y) = lane_xy(i);
-        primary.valid[i] = x < w && y < rows;
-    }
-    primary.origin = V3::<L>::splat(frame.eye).to_arrays();
-    let (x, y) = (L::from_fn(|i| lane_xy(i).0 as f32), L::from_fn(|i| (band.y0 + lane_xy(i).1) as f32));
-    primary.t_max = [f32::INFINITY; LANES];
-    primary.dir = directions(frame, x, y, samples[0]).to_arrays();
-    // Row-major pixel indices in the image (at most 2^28 pixels: no overflow).
-    let mut seeds =
-        Seeds { pixel: std::array::from_fn(|i| ((band.y0 + lane_xy(i).1) * w + lane_xy(i).0) as u32), sample: 0 };
+    let (mut primary, mut seeds, x, y) = primary_block::<L>(frame, w, band.y0 + rows, bx, band.y0 + dy, samples[0]);
     let mut out = sh.block::<L, T>(&primary, &seeds, lanes);
     let mut colour = V3::<L>::from_arrays(&out.colour);
     for (k, &sample) in samples.iter().enumerate().skip(1) {
@@ -593,16 +911,40 @@ mod tests {
                 let tiles = Tiles { rows: 6, columns: 12 };
                 let walk = tracer.walk(method).unwrap();
                 let image = |avx| match method.resolve(&scene) {
-                    Method::Packet => {
-                        render_in(&tracer, &settings, Method::Packet, || Packets::new(walk), tiles, &|_| {}, avx)
-                    }
-                    m => render_in(&tracer, &settings, m, || OneByOne::new(walk), tiles, &|_| {}, avx),
+                    Method::Packet => render_in(
+                        &tracer,
+                        &settings,
+                        Method::Packet,
+                        || Packets::new(walk),
+                        tiles,
+                        &|_| {},
+                        avx,
+                        Canvas::new(&settings),
+                    ),
+                    m => render_in(
+                        &tracer,
+                        &settings,
+                        m,
+                        || OneByOne::new(walk),
+                        tiles,
+                        &|_| {},
+                        avx,
+                        Canvas::new(&settings),
+                    ),
                 };
                 let (a, b) = (image(true).unwrap(), image(false).unwrap());
                 assert_eq!(a.rgb, b.rgb, "{mode:?} {method:?}");
                 for tiles in [Tiles { rows: 2, columns: usize::MAX }, Tiles { rows: usize::MAX, columns: 1 }] {
-                    let other =
-                        render_in(&tracer, &settings, Method::Packet, || Packets::new(walk), tiles, &|_| {}, true);
+                    let other = render_in(
+                        &tracer,
+                        &settings,
+                        Method::Packet,
+                        || Packets::new(walk),
+                        tiles,
+                        &|_| {},
+                        true,
+                        Canvas::new(&settings),
+                    );
                     assert_eq!(a.rgb, other.unwrap().rgb, "{mode:?} {method:?}: {tiles:?}");
                 }
                 assert_eq!(a.rgb, render(&tracer, &settings, method).unwrap().rgb, "{mode:?} {method:?}: other tiles");
@@ -680,8 +1022,18 @@ mod tests {
                             Tiles::default(),
                             &|_| {},
                             avx,
+                            Canvas::new(&settings),
                         ),
-                        m => render_in(&tracer, &settings, m, || OneByOne::new(walk), Tiles::default(), &|_| {}, avx),
+                        m => render_in(
+                            &tracer,
+                            &settings,
+                            m,
+                            || OneByOne::new(walk),
+                            Tiles::default(),
+                            &|_| {},
+                            avx,
+                            Canvas::new(&settings),
+                        ),
                     }
                     .unwrap();
                     assert_eq!(image.rgb, want, "{spp} spp, {method:?}, avx {avx}");

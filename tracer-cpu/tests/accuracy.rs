@@ -9,8 +9,6 @@ use glam::Vec3;
 use render_spec::{Accuracy, CameraSpec, Image, Mode, NO_TRIANGLE, Offset, Settings};
 use tracer_cpu::{Method, Tracer};
 
-const METHODS: [Method; 5] = [Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8, Method::Auto];
-
 /// A smooth sphere of radius 100 at the origin, one light beside the camera, no mirrors or glass:
 /// convex, so no shadow ray of a point that faces the light can be blocked, except by the surface
 /// it leaves (acne). The primary hit points, 300 units from the eye, are off the surface by up to
@@ -68,7 +66,7 @@ fn a_fixed_offset_too_small_for_the_scene_gives_acne_where_the_scale_aware_one_d
     let scene = sphere_scene();
     let tracer = Tracer::new(&scene);
     println!("offset | method | acne pixels | lit pixels");
-    for method in METHODS {
+    for method in Method::ALL {
         let mut counts = Vec::new();
         for offset in [Offset::ScaleAware, Offset::Fixed(1e-6), Offset::Fixed(1e-2)] {
             let s = whitted(&scene, 160, 120, Accuracy { offset, ..Default::default() });
@@ -132,7 +130,7 @@ fn the_bounce_cutoff_trades_secondary_rays_for_at_most_one_step() {
         let s = whitted(&scene, 80, 60, Accuracy { cutoff, ..Default::default() });
         tracer_cpu::render(&tracer, &s, method).unwrap()
     };
-    for method in METHODS {
+    for method in Method::ALL {
         let default = at(Accuracy::default().cutoff, method);
         let every = at(0.0, method);
         let coarse = at(0.1, method);

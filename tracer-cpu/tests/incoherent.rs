@@ -13,8 +13,6 @@ use tracer_cpu::traverse::Stack;
 use tracer_cpu::vertices::TriangleSource;
 use tracer_cpu::{Cost, Method, Tracer, shade};
 
-const METHODS: [Method; 5] = [Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8, Method::Auto];
-
 /// A closed box, 4 x 3 x 5, seen from inside, with a smaller box standing in it (compiled once:
 /// the tests run in parallel and would share its temporary file).
 fn box_scene() -> &'static bvh_format::SceneFile {
@@ -47,7 +45,7 @@ fn settings(scene: &bvh_format::SceneFile, mode: Mode, spp: u32) -> Settings {
 fn render_all(scene: &bvh_format::SceneFile, s: &Settings) -> Image {
     let tracer = Tracer::new(scene);
     let first = tracer_cpu::render(&tracer, s, Method::Ordered).expect("the CPU renders");
-    for method in METHODS {
+    for method in Method::ALL {
         let other = tracer_cpu::render(&tracer, s, method).expect("the CPU renders");
         assert_eq!(other.rgb, first.rgb, "{:?} {method:?}", s.mode);
         assert_eq!(other.rays, first.rays, "{:?} {method:?}", s.mode);

@@ -6,6 +6,8 @@ mod common;
 use bvh_format::{Light, SceneFile};
 use glam::Vec3;
 use render_spec::{CameraSpec, Image, Mode, NO_TRIANGLE, Settings};
+use tracer_cpu::lanes::Stage;
+use tracer_cpu::render::{Canvas, StageTimer, plan, plan_with, render_into};
 use tracer_cpu::traverse::Stack;
 use tracer_cpu::{Cost, Method, Ray, Tracer};
 
@@ -45,7 +47,7 @@ fn every_method_renders_the_same_image() {
         let tracer = Tracer::new(scene);
         for mode in [Mode::Cast, Mode::Whitted] {
             let base = render(&tracer, &settings(scene, camera, mode, Method::Ordered, 97, 61)).unwrap();
-            for method in [Method::Stackless, Method::Packet, Method::Bvh8, Method::Auto] {
+            for method in Method::ALL {
                 let img = render(&tracer, &settings(scene, camera, mode, method, 97, 61)).unwrap();
                 same_image(&base, &img, &format!("{name} {camera} {mode:?} {method:?}"));
             }
@@ -234,7 +236,7 @@ fn a_walk_on_a_missing_layout_is_refused() {
 fn progress_reports_every_row_once_and_the_image_is_unchanged() {
     let room = common::compile(&common::scenes_dir().join("room.toml"));
     let tracer = Tracer::new(&room);
-    // 203 rows: bands of 8 and a last band of 3.
+    // 203 rows: bands of 2 and a last band of 1.
     let s = settings(&room, "medium", Mode::Whitted, Method::Auto, 65, 203);
     let rows = std::sync::atomic::AtomicU64::new(0);
     let calls = std::sync::atomic::AtomicU64::new(0);
@@ -250,4 +252,109 @@ fn progress_reports_every_row_once_and_the_image_is_unchanged() {
     assert_eq!(rows.into_inner(), 203);
     assert!(calls.into_inner() > 1, "progress comes band by band, not once at the end");
     same_image(&img, &render(&tracer, &s).unwrap(), "with and without progress");
+}
+
+/// A [`StageTimer`] that reads the cost from a table (seconds per ray, one by one and as packets,
+/// per stage) instead of a clock, and notes which stages it was asked about.
+struct Table {
+    per_ray: [(f64, f64); 5],
+    asked: std::sync::Mutex<std::collections::BTreeSet<usize>>,
+}
+
+impl Table {
+    fn new(per_ray: [(f64, f64); 5]) -> Self {
+        Self { per_ray, asked: Default::default() }
+    }
+}
+
+impl StageTimer for Table {
+    fn time(&self, stage: Stage, packets: bool, rays: u64, trace: &mut dyn FnMut()) -> f64 {
+        trace();
+        self.asked.lock().unwrap().insert(stage.index());
+        let (single, packet) = self.per_ray[stage.index()];
+        rays as f64 * if packets { packet } else { single }
+    }
+}
+
+/// `--method auto` picks each stage's way by its measurement: a cost table handed in as the
+/// timer decides every stage the frame has rays of (primary, shadow and secondary in the room's
+/// Whitted frame; AO and diffuse rays in their modes), either way round, and the images are those
+/// of the fixed methods whatever it picks.
+#[test]
+fn auto_picks_each_kind_of_ray_by_its_measurement() {
+    let room = common::compile(&common::scenes_dir().join("room.toml"));
+    let tracer = Tracer::new(&room);
+    let (p, s) = (1e-9, 2e-9);
+    // Packets cheaper for primary and secondary rays, single rays for shadow, AO and diffuse ...
+    let a = [(s, p), (p, s), (s, p), (p, s), (p, s)];
+    // ... and the other way round.
+    let b = a.map(|(x, y)| (y, x));
+    for (mode, stages) in [
+        (Mode::Cast, vec![Stage::Primary]),
+        (Mode::Whitted, vec![Stage::Primary, Stage::Shadow, Stage::Secondary]),
+        (Mode::Ao(Default::default()), vec![Stage::Primary, Stage::Ao]),
+        (Mode::Diffuse, vec![Stage::Primary, Stage::Diffuse]),
+    ] {
+        let (s, _) = settings(&room, "medium", mode, Method::Auto, 64, 48);
+        let base = tracer_cpu::render(&tracer, &s, Method::Ordered).unwrap();
+        for table in [a, b] {
+            let timer = Table::new(table);
+            let plan = plan_with(&tracer, &s, Method::Auto, &timer).unwrap();
+            let want: Vec<usize> = stages.iter().map(|s| s.index()).collect();
+            if !tracer_cpu::packet::available() {
+                assert!(plan.measured().is_none() && plan.packet_stages() == [false; 5], "no AVX2: no packets");
+                continue;
+            }
+            assert_eq!(timer.asked.into_inner().unwrap().into_iter().collect::<Vec<_>>(), want, "{mode:?}");
+            let m = plan.measured().expect("auto measures where packets run");
+            // Every sampled block is whole at 64 x 48: 16 x 16 blocks of 8 primary rays.
+            assert_eq!(m.rays[Stage::Primary.index()], 256 * 8, "{mode:?}");
+            for stage in Stage::ALL {
+                let i = stage.index();
+                let packets = stages.contains(&stage) && table[i].1 < table[i].0;
+                assert_eq!(plan.packet_stages()[i], packets, "{mode:?} {stage:?}: {m:?}");
+                assert_eq!(m.rays[i] > 0, stages.contains(&stage), "{mode:?} {stage:?}: {m:?}");
+            }
+            let image = render_into(&tracer, &s, &plan, Canvas::new(&s), &|_| {}).unwrap();
+            same_image(&base, &image, &format!("{mode:?} auto {}", plan.describe()));
+        }
+    }
+}
+
+/// The measured plan picks what its measurement says, and names it.
+#[test]
+fn auto_by_the_clock_follows_its_measurement() {
+    let room = common::compile(&common::scenes_dir().join("room.toml"));
+    let tracer = Tracer::new(&room);
+    let (s, _) = settings(&room, "medium", Mode::Whitted, Method::Auto, 96, 64);
+    let plan = plan(&tracer, &s, Method::Auto).unwrap();
+    match plan.measured() {
+        Some(m) => {
+            assert_eq!(plan.packet_stages(), m.packet_stages());
+            for stage in [Stage::Primary, Stage::Shadow, Stage::Secondary] {
+                let i = stage.index();
+                assert!(m.rays[i] > 0 && m.single[i] > 0.0 && m.packets[i] > 0.0, "{stage:?}: {m:?}");
+                assert_eq!(m.packet_stages()[i], m.packets[i] < m.single[i]);
+                assert!(plan.describe().contains(stage.name()), "{}", plan.describe());
+            }
+        }
+        None => assert!(!tracer_cpu::packet::available()),
+    }
+}
+
+/// A canvas paged in before the frame, or one made for other settings, changes nothing.
+#[test]
+fn the_canvas_does_not_change_the_image() {
+    let room = common::compile(&common::scenes_dir().join("room.toml"));
+    let tracer = Tracer::new(&room);
+    let (s, method) = settings(&room, "medium", Mode::Whitted, Method::Packet, 45, 31);
+    let want = tracer_cpu::render(&tracer, &s, method).unwrap();
+    let plan = plan(&tracer, &s, method).unwrap();
+    let mut paged = Canvas::new(&s);
+    paged.page_in();
+    assert_eq!(paged.bytes(), 45 * 31 * (3 + 4 + 12 + 4 + 4 + 4));
+    same_image(&want, &render_into(&tracer, &s, &plan, paged, &|_| {}).unwrap(), "paged in");
+    let (other, _) = settings(&room, "medium", Mode::Whitted, Method::Packet, 31, 45);
+    let other = Canvas::new(&Settings { aovs: false, ..other });
+    same_image(&want, &render_into(&tracer, &s, &plan, other, &|_| {}).unwrap(), "a canvas of another size");
 }

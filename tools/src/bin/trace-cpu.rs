@@ -23,10 +23,10 @@ enum Command {
     Render {
         #[command(flatten)]
         args: Box<RenderArgs>,
-        /// Traversal: auto picks per kind of ray (incoherent rays one at a time on the wide BVH;
-        /// primary and shadow rays as packets where a short measurement at the start finds them
-        /// faster, else on the wide BVH too; the stackless walk for a file compiled with only the
-        /// escape-pointer layout); packet: SIMD packets where the CPU has AVX2 (else ordered);
+        /// Traversal: auto picks per kind of ray (primary, shadow, secondary, AO, diffuse) between
+        /// packets and the wide BVH one ray at a time, whichever a short measurement of the
+        /// frame's own rays at the start finds faster (the stackless walk for a file compiled
+        /// with only the escape-pointer layout); packet: SIMD packets where the CPU has AVX2 (else ordered);
         /// ordered child-pair traversal; the stackless escape-pointer walk; bvh8: the wide BVH
         /// collapsed at load from the child-pair layout, one ray at a time.
         #[arg(long, value_enum, default_value = "auto")]
@@ -59,24 +59,26 @@ struct BenchArgs {
     threads: Option<usize>,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-enum MethodArg {
-    Auto,
-    Packet,
-    Ordered,
-    Stackless,
-    Bvh8,
-}
+/// A CPU method as clap takes it: the names of [`Method::ALL`].
+#[derive(Clone, Copy)]
+struct MethodArg(Method);
 
-impl MethodArg {
-    fn method(self) -> Method {
-        match self {
-            MethodArg::Auto => Method::Auto,
-            MethodArg::Packet => Method::Packet,
-            MethodArg::Ordered => Method::Ordered,
-            MethodArg::Stackless => Method::Stackless,
-            MethodArg::Bvh8 => Method::Bvh8,
-        }
+impl ValueEnum for MethodArg {
+    fn value_variants<'a>() -> &'a [Self] {
+        const ALL: [MethodArg; Method::ALL.len()] = {
+            let mut all = [MethodArg(Method::Auto); Method::ALL.len()];
+            let mut i = 0;
+            while i < all.len() {
+                all[i] = MethodArg(Method::ALL[i]);
+                i += 1;
+            }
+            all
+        };
+        &ALL
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.0.name()))
     }
 }
 
@@ -100,7 +102,7 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     let loaded = tools::load_scene(args.scene.as_deref())?;
     let scene = &loaded.file;
     let settings = args.settings(scene)?;
-    let method = method.method();
+    let method = method.0;
     let pool = thread_pool(threads)?;
     // The scene prepared for tracing before the clock starts, as the file's reading is: the wide
     // BVH of bvh8 and auto is collapsed at load, and its time printed apart.
@@ -112,16 +114,26 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
         tracer.bvh8();
         t.elapsed().as_secs_f64()
     });
+    // The image's buffers paged in before the clock starts, as the ray report's output is: the
+    // first writes to fresh memory cost a page fault each (a few microseconds in a VM).
+    let paged = Instant::now();
+    let mut canvas = tracer_cpu::render::Canvas::new(&settings);
+    if !reference {
+        pool.install(|| canvas.page_in());
+    }
+    let (paged, canvas_bytes) = (paged.elapsed().as_secs_f64(), canvas.bytes());
     let bar = Progress::new(settings.height as u64, "{bar:40} {pos}/{len} rows ({elapsed}, {eta} left)", false);
     let t0 = Instant::now();
     let progress = |rows: u32| bar.inc(rows as u64);
-    let (image, linear) = pool
+    let (image, linear, plan) = pool
         .install(|| {
             if reference {
                 tracer_cpu::reference::render_with_progress(scene, &settings, &progress)
-                    .map(|r| (r.image, Some(r.linear)))
+                    .map(|r| (r.image, Some(r.linear), "the f64 reference".to_owned()))
             } else {
-                tracer_cpu::render_with_progress(&tracer, &settings, method, &progress).map(|i| (i, None))
+                let plan = tracer_cpu::render::plan(&tracer, &settings, method)?;
+                tracer_cpu::render::render_into(&tracer, &settings, &plan, canvas, &progress)
+                    .map(|i| (i, None, plan.describe()))
             }
         })
         .map_err(|e| e.to_string())?;
@@ -132,18 +144,31 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     let written = outputs.write(&image, linear.as_deref(), args.heatmap_max, scene)?;
     let mut lines = Vec::new();
     let r = image.rays;
+    let mut not_counted = Vec::new();
+    if !reference {
+        let size = match canvas_bytes {
+            b if b < 10_000 => format!("{b} bytes"),
+            b if b < 10_000_000 => format!("{:.0} kB", b as f64 / 1e3),
+            b => format!("{:.0} MB", b as f64 / 1e6),
+        };
+        not_counted.push(format!("{} to page in the image ({size})", duration(paged)));
+    }
+    if let Some(c) = collapse {
+        not_counted.push(format!("{} to collapse the wide BVH at load", duration(c)));
+    }
     lines.push(format!(
-        "{}x{} {}{} with {} on {} threads: {} to trace and shade into the 8-bit image{}{}{}, rays: {} ({}) -> {}",
+        "{}x{} {}{} with {} on {} threads: {} to {}trace and shade into the 8-bit image{}{}{}, rays: {} ({}) -> {}",
         image.width,
         image.height,
         settings.mode.name(),
         tools::render_args::accuracy_note(&settings.accuracy, scene),
-        if reference { "the f64 reference".to_owned() } else { format!("{:?}", method.resolve(scene)) },
+        plan,
         pool.current_num_threads(),
         duration(seconds),
+        if method == Method::Auto && !reference { "measure auto's ways of tracing, " } else { "" },
         if settings.aovs { " and the AOVs" } else { "" },
         loaded.timing_note(),
-        collapse.map_or(String::new(), |c| format!(" (not counting {} to collapse the wide BVH at load)", duration(c))),
+        if not_counted.is_empty() { String::new() } else { format!(" (not counting {})", not_counted.join(", nor ")) },
         tools::render_args::rays_note(&r),
         rays_per_second(r.total(), seconds),
         outputs.image.path.display()
@@ -164,8 +189,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
     let mut names: Vec<String> = Vec::new();
     for m in &b.methods {
         for &v in &b.matrix.vertices {
-            let name = m.to_possible_value().expect("every method has a name").get_name().to_owned();
-            let name = tools::bench::with_form(&name, v.vertices());
+            let name = tools::bench::with_form(m.0.name(), v.vertices());
             if !names.contains(&name) {
                 names.push(name);
             }
