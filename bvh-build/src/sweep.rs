@@ -3,6 +3,7 @@
 //! and the binned builder's choice for nodes no larger than its bin count.
 
 use crate::build::{Aabb, AreaScale, Costs, NodeBounds, PrimRef, Split, Splitter, bounds_of};
+use bytemuck::Zeroable;
 use std::cell::RefCell;
 
 pub struct SweepSah {
@@ -41,6 +42,13 @@ thread_local! {
 pub fn sweep_split(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
     if nb.centroids.extent().max_element() <= 0.0 {
         return None;
+    }
+    // Most nodes swept are the binned builder's smallest (up to 16 primitives by default, half a
+    // million of them in a million-triangle tree): on the stack they skip the scratch buffers.
+    match prims.len() {
+        n if n <= 16 => return sweep_small::<16>(costs, prims, nb, may_leaf),
+        n if n <= 64 => return sweep_small::<64>(costs, prims, nb, may_leaf),
+        _ => {}
     }
     SCRATCH.with(|s| match s.try_borrow_mut() {
         Ok(mut s) => sweep_with(costs, prims, nb, may_leaf, &mut s),
@@ -91,6 +99,60 @@ fn sweep_with(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: b
         *dst = s.copy[k.at as usize];
     }
     Some(Split { mid, left: bounds_of(&prims[..mid]), right: bounds_of(&prims[mid..]), in_spare: false })
+}
+
+/// [`sweep_with`] for at most `N` primitives, with every buffer on the stack and the boxes loaded
+/// once: the same keys, the same sums in the same order, hence the same split.
+fn sweep_small<const N: usize>(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
+    let n = prims.len();
+    debug_assert!(n <= N);
+    let scale = AreaScale::of(&nb.aabb);
+    let mut boxes = [Aabb::EMPTY; N];
+    let mut sorted = [[Key { key: 0, at: 0 }; N]; 3];
+    for (i, p) in prims.iter().enumerate() {
+        let b = p.aabb();
+        boxes[i] = b;
+        let c = p.centroid();
+        for (axis, keys) in sorted.iter_mut().enumerate() {
+            keys[i] = Key { key: (ordered_bits(c[axis]) as u64) << 32 | p.id as u64, at: i as u32 };
+        }
+    }
+    let mut best: Option<(f32, usize, usize)> = None;
+    let mut right_area = [0f32; N];
+    for (axis, keys) in sorted.iter_mut().enumerate() {
+        let order = &mut keys[..n];
+        order.sort_unstable_by_key(|k| k.key);
+        let mut acc = Aabb::EMPTY;
+        for i in (1..n).rev() {
+            acc.grow(&boxes[order[i].at as usize]);
+            right_area[i] = scale.half_area(&acc) * (n - i) as f32;
+        }
+        let mut left = Aabb::EMPTY;
+        for i in 1..n {
+            left.grow(&boxes[order[i - 1].at as usize]);
+            let weighted = scale.half_area(&left) * i as f32 + right_area[i];
+            if best.is_none_or(|(b, _, _)| weighted < b) {
+                best = Some((weighted, axis, i));
+            }
+        }
+    }
+    let (weighted, axis, mid) = best?;
+    let cost = costs.split_cost(scale.half_area(&nb.aabb) as f64, weighted as f64);
+    if may_leaf && cost >= costs.leaf_cost(n) {
+        return None;
+    }
+    let mut copy = [PrimRef::zeroed(); N];
+    copy[..n].copy_from_slice(prims);
+    let empty = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
+    let (mut left, mut right) = (empty, empty);
+    for (i, (dst, k)) in prims.iter_mut().zip(&sorted[axis][..n]).enumerate() {
+        let p = &copy[k.at as usize];
+        *dst = *p;
+        let side = if i < mid { &mut left } else { &mut right };
+        side.aabb.grow(&boxes[k.at as usize]);
+        side.centroids.grow_point(p.centroid());
+    }
+    Some(Split { mid, left, right, in_spare: false })
 }
 
 impl Splitter for SweepSah {
