@@ -46,6 +46,9 @@ pub fn sweep_split(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_le
     // Most nodes swept are the binned builder's smallest (up to 16 primitives by default, half a
     // million of them in a million-triangle tree): on the stack they skip the scratch buffers.
     match prims.len() {
+        2 => return sweep_pair(costs, prims, nb, may_leaf),
+        n if n <= 4 => return sweep_small::<4>(costs, prims, nb, may_leaf),
+        n if n <= 8 => return sweep_small::<8>(costs, prims, nb, may_leaf),
         n if n <= 16 => return sweep_small::<16>(costs, prims, nb, may_leaf),
         n if n <= 64 => return sweep_small::<64>(costs, prims, nb, may_leaf),
         _ => {}
@@ -101,35 +104,114 @@ fn sweep_with(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: b
     Some(Split { mid, left: bounds_of(&prims[..mid]), right: bounds_of(&prims[mid..]), in_spare: false })
 }
 
+/// The comparators of Batcher's odd-even merge sort of `n` keys (a power of two), in order: `M` of
+/// them, checked at compile time.
+const fn batcher<const M: usize>(n: usize) -> [(u8, u8); M] {
+    let mut out = [(0u8, 0u8); M];
+    let mut m = 0;
+    let mut p = 1;
+    while p < n {
+        let mut k = p;
+        while k > 0 {
+            let mut j = k % p;
+            while j + k < n {
+                let mut i = 0;
+                while i < k && i < n - j - k {
+                    if (i + j) / (2 * p) == (i + j + k) / (2 * p) {
+                        out[m] = ((i + j) as u8, (i + j + k) as u8);
+                        m += 1;
+                    }
+                    i += 1;
+                }
+                j += 2 * k;
+            }
+            k /= 2;
+        }
+        p *= 2;
+    }
+    assert!(m == M, "the comparator count of the network");
+    out
+}
+
+const NET4: [(u8, u8); 5] = batcher(4);
+const NET8: [(u8, u8); 19] = batcher(8);
+const NET16: [(u8, u8); 63] = batcher(16);
+
+/// Sorts `keys` (padded with `u64::MAX` to the network's size) without a branch: a handful of
+/// random keys costs an insertion sort a mispredicted branch per key.
+#[inline(always)]
+fn network_sort<const N: usize>(keys: &mut [u64; N], net: &[(u8, u8)]) {
+    for &(a, b) in net {
+        let (x, y) = (keys[a as usize], keys[b as usize]);
+        keys[a as usize] = x.min(y);
+        keys[b as usize] = x.max(y);
+    }
+}
+
+/// [`sweep_with`] for two primitives (two in five nodes swept in a binned tree): every axis offers
+/// the one split, at the same cost (a sum of the two areas in either order), so the first axis
+/// wins and sets the order.
+fn sweep_pair(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
+    let scale = AreaScale::of(&nb.aabb);
+    let (a, b) = (prims[0].aabb(), prims[1].aabb());
+    let weighted = scale.half_area(&a) + scale.half_area(&b);
+    let cost = costs.split_cost(scale.half_area(&nb.aabb) as f64, weighted as f64);
+    if may_leaf && cost >= costs.leaf_cost(2) {
+        return None;
+    }
+    let key = |p: &PrimRef| (ordered_bits(p.centroid().x) as u64) << 32 | p.id as u64;
+    if key(&prims[1]) < key(&prims[0]) {
+        prims.swap(0, 1);
+    }
+    let one = |p: &PrimRef| NodeBounds { aabb: p.aabb(), centroids: Aabb { min: p.centroid(), max: p.centroid() } };
+    Some(Split { mid: 1, left: one(&prims[0]), right: one(&prims[1]), in_spare: false })
+}
+
 /// [`sweep_with`] for at most `N` primitives, with every buffer on the stack and the boxes loaded
-/// once: the same keys, the same sums in the same order, hence the same split.
+/// once. Each axis sorts keys of the centroid's ordered bits (high half) and the primitive's place
+/// (low half), then puts runs of equal centroids in input-id order: the order of `sweep_with`'s
+/// keys, hence the same sums in the same order and the same split.
 fn sweep_small<const N: usize>(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
     let n = prims.len();
-    debug_assert!(n <= N);
+    debug_assert!(n <= N && N <= 64);
     let scale = AreaScale::of(&nb.aabb);
     let mut boxes = [Aabb::EMPTY; N];
-    let mut sorted = [[Key { key: 0, at: 0 }; N]; 3];
+    let mut sorted = [[u64::MAX; N]; 3];
     for (i, p) in prims.iter().enumerate() {
         let b = p.aabb();
         boxes[i] = b;
-        let c = p.centroid();
+        let c = (b.min + b.max) * 0.5;
         for (axis, keys) in sorted.iter_mut().enumerate() {
-            keys[i] = Key { key: (ordered_bits(c[axis]) as u64) << 32 | p.id as u64, at: i as u32 };
+            keys[i] = (ordered_bits(c[axis]) as u64) << 32 | i as u64;
         }
     }
+    let at = |key: u64| (key & 0xffff_ffff) as usize;
     let mut best: Option<(f32, usize, usize)> = None;
     let mut right_area = [0f32; N];
     for (axis, keys) in sorted.iter_mut().enumerate() {
-        let order = &mut keys[..n];
-        order.sort_unstable_by_key(|k| k.key);
+        match N {
+            4 => network_sort(keys, &NET4),
+            8 => network_sort(keys, &NET8),
+            16 => network_sort(keys, &NET16),
+            _ => keys[..n].sort_unstable(),
+        }
+        // Equal centroids in input-id order (rare: a short insertion sort of each run).
+        for i in 1..n {
+            let mut j = i;
+            while j > 0 && keys[j] >> 32 == keys[j - 1] >> 32 && prims[at(keys[j])].id < prims[at(keys[j - 1])].id {
+                keys.swap(j, j - 1);
+                j -= 1;
+            }
+        }
+        let order = &keys[..n];
         let mut acc = Aabb::EMPTY;
         for i in (1..n).rev() {
-            acc.grow(&boxes[order[i].at as usize]);
+            acc.grow(&boxes[at(order[i])]);
             right_area[i] = scale.half_area(&acc) * (n - i) as f32;
         }
         let mut left = Aabb::EMPTY;
         for i in 1..n {
-            left.grow(&boxes[order[i - 1].at as usize]);
+            left.grow(&boxes[at(order[i - 1])]);
             let weighted = scale.half_area(&left) * i as f32 + right_area[i];
             if best.is_none_or(|(b, _, _)| weighted < b) {
                 best = Some((weighted, axis, i));
@@ -145,12 +227,12 @@ fn sweep_small<const N: usize>(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBo
     copy[..n].copy_from_slice(prims);
     let empty = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
     let (mut left, mut right) = (empty, empty);
-    for (i, (dst, k)) in prims.iter_mut().zip(&sorted[axis][..n]).enumerate() {
-        let p = &copy[k.at as usize];
-        *dst = *p;
+    for (i, (dst, &key)) in prims.iter_mut().zip(&sorted[axis][..n]).enumerate() {
+        let b = &boxes[at(key)];
+        *dst = copy[at(key)];
         let side = if i < mid { &mut left } else { &mut right };
-        side.aabb.grow(&boxes[k.at as usize]);
-        side.centroids.grow_point(p.centroid());
+        side.aabb.grow(b);
+        side.centroids.grow_point((b.min + b.max) * 0.5);
     }
     Some(Split { mid, left, right, in_spare: false })
 }
