@@ -242,3 +242,67 @@ impl Splitter for SweepSah {
         sweep_split(&self.costs, prims, nb, may_leaf)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::build::bounds_of;
+
+    fn sorts_every_zero_one_input<const N: usize>(net: &[(u8, u8)]) {
+        // A comparator network that sorts every input of zeros and ones sorts every input.
+        for bits in 0..1u32 << N {
+            let mut keys = [0u64; N];
+            for (i, k) in keys.iter_mut().enumerate() {
+                *k = (bits >> i & 1) as u64;
+            }
+            network_sort(&mut keys, net);
+            assert!(keys.windows(2).all(|w| w[0] <= w[1]), "{N} keys, input {bits:b}: {keys:?}");
+        }
+    }
+
+    #[test]
+    fn the_merge_networks_sort() {
+        sorts_every_zero_one_input::<4>(&NET4);
+        sorts_every_zero_one_input::<8>(&NET8);
+        sorts_every_zero_one_input::<16>(&NET16);
+    }
+
+    #[test]
+    fn small_nodes_split_as_the_general_sweep() {
+        // Coordinates on a coarse grid, so that many centroids tie on some axis and the id order
+        // decides; ids shuffled so that it differs from the order in the slice.
+        let mut rng = ::tests::Rng(99);
+        let costs = Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 8, depth_limit: 64 };
+        for case in 0..4000 {
+            let n = 2 + case % 63;
+            let mut prims: Vec<PrimRef> = (0..n)
+                .map(|i| {
+                    let mut v = || (rng.unit() * 4.0).floor();
+                    let min = [v(), v(), v()];
+                    let max = [min[0] + v(), min[1] + v(), min[2] + v()];
+                    let d = [max[0] - min[0], max[1] - min[1], max[2] - min[2]];
+                    let id = ((i * 7919 + case) % 1000) as u32 + 1000 * i as u32;
+                    PrimRef { min, id, max, area: d[0] * d[1] + d[1] * d[2] + d[2] * d[0] }
+                })
+                .collect();
+            let nb = bounds_of(&prims);
+            let may_leaf = case % 2 == 0;
+            let mut general = prims.clone();
+            let expected = (nb.centroids.extent().max_element() > 0.0)
+                .then(|| sweep_with(&costs, &mut general, &nb, may_leaf, &mut Scratch::default()))
+                .flatten();
+            let got = sweep_split(&costs, &mut prims, &nb, may_leaf);
+            match (expected, got) {
+                (None, None) => {}
+                (Some(e), Some(g)) => {
+                    assert_eq!(e.mid, g.mid, "case {case}");
+                    assert_eq!((e.left.aabb, e.right.aabb), (g.left.aabb, g.right.aabb), "case {case}");
+                    assert_eq!((e.left.centroids, e.right.centroids), (g.left.centroids, g.right.centroids));
+                    let ids = |p: &[PrimRef]| p.iter().map(|p| p.id).collect::<Vec<_>>();
+                    assert_eq!(ids(&general), ids(&prims), "case {case}: the same order");
+                }
+                (e, g) => panic!("case {case}: general {:?}, small {:?}", e.map(|s| s.mid), g.map(|s| s.mid)),
+            }
+        }
+    }
+}
