@@ -24,26 +24,36 @@ use std::cell::RefCell;
 /// not a share of the threads, so that the chunks are the same on every machine.
 const CHUNK: usize = 8192;
 
-#[derive(Clone, Copy)]
-struct Bin {
-    bounds: Aabb,
-    count: u32,
+/// Bins of one node, boxes and counts apart (a bin's box is 32 bytes, two to a cache line): `3 K`
+/// bins (K per axis), then the large bin, then (from [`TWO_SETS`] primitives) a second set of
+/// `3 K` ([`BinnedSah::bin_into`]).
+#[derive(Default)]
+struct Bins {
+    bounds: Vec<Aabb>,
+    counts: Vec<u32>,
 }
 
-const EMPTY_BIN: Bin = Bin { bounds: Aabb::EMPTY, count: 0 };
+impl Bins {
+    /// Empty bins, `len` of them.
+    fn new(len: usize) -> Bins {
+        Bins { bounds: vec![Aabb::EMPTY; len], counts: vec![0; len] }
+    }
 
-impl Bin {
-    #[inline(always)]
-    fn add(&mut self, other: &Bin) {
-        self.bounds.grow(&other.bounds);
-        self.count += other.count;
+    /// Makes room for `len` bins and empties the first `clear` of them.
+    fn reset(&mut self, len: usize, clear: usize) {
+        if self.bounds.len() < len {
+            self.bounds.resize(len, Aabb::EMPTY);
+            self.counts.resize(len, 0);
+        }
+        self.bounds[..clear].fill(Aabb::EMPTY);
+        self.counts[..clear].fill(0);
     }
 }
 
 thread_local! {
     /// Reused bin storage: a fresh allocation per node would cost more than the binning of the
     /// millions of small nodes near the leaves.
-    static SCRATCH: RefCell<Vec<Bin>> = const { RefCell::new(Vec::new()) };
+    static SCRATCH: RefCell<Bins> = RefCell::new(Bins::default());
 }
 
 pub struct BinnedSah {
@@ -56,7 +66,8 @@ pub struct BinnedSah {
 struct Grid {
     lo: Vec3A,
     scale: Vec3A,
-    last: usize,
+    /// The last bin's index, as a float.
+    last: f32,
     /// Box half area from which a triangle joins the large-triangle candidate.
     big: f32,
 }
@@ -71,22 +82,26 @@ impl Grid {
         // Axes without extent get scale 0: everything in bin 0, so they offer no plane.
         let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(bins as f32) / ext, Vec3A::ZERO);
         let big = (nb.aabb.half_area() * 0.25) as f32;
-        Some(Grid { lo: nb.centroids.min, scale, last: bins - 1, big })
+        Some(Grid { lo: nb.centroids.min, scale, last: (bins - 1) as f32, big })
     }
 
-    /// The bin of centroid `c` on each axis.
+    /// The bin of centroid `c` on each axis. Clamped while still a float (`max` takes NaN, from
+    /// an infinite scale times 0, to 0), the conversion is one truncation per lane without the
+    /// range checks of a saturating `as usize`, which cost more than the rest of the binning.
     #[inline(always)]
     fn bins_of(&self, c: Vec3A) -> [usize; 3] {
-        let f = ((c - self.lo) * self.scale).to_array();
-        // `as` saturates: NaN and negatives land in bin 0.
-        [(f[0] as usize).min(self.last), (f[1] as usize).min(self.last), (f[2] as usize).min(self.last)]
+        let f = ((c - self.lo) * self.scale).max(Vec3A::ZERO).min(Vec3A::splat(self.last));
+        let i = f.as_ivec3();
+        [i.x as usize, i.y as usize, i.z as usize]
     }
 
-    /// The bin of centroid `c` on one axis: the same arithmetic as [`Grid::bins_of`]'s lane, so
-    /// that the partition sends every primitive where its bin was counted.
+    /// Whether centroid `c` lies in a bin before `plane` on `axis`: the same arithmetic as
+    /// [`Grid::bins_of`]'s lane, so that the partition sends every primitive where its bin was
+    /// counted. For the clamped `f`, `trunc(f) < plane` exactly when `f < plane`, and the upper
+    /// clamp never matters as `plane` is at most the last bin.
     #[inline(always)]
-    fn bin_on(&self, c: Vec3A, axis: usize) -> usize {
-        (((c[axis] - self.lo[axis]) * self.scale[axis]) as usize).min(self.last)
+    fn left_of(&self, c: Vec3A, axis: usize, plane: f32) -> bool {
+        ((c[axis] - self.lo[axis]) * self.scale[axis]).max(0.0) < plane
     }
 }
 
@@ -103,18 +118,16 @@ impl Choice {
     #[inline(always)]
     fn goes_left(&self, grid: &Grid, p: &PrimRef, c: Vec3A) -> bool {
         match *self {
-            Choice::Plane { axis, plane, .. } => grid.bin_on(c, axis) < plane,
+            Choice::Plane { axis, plane, .. } => grid.left_of(c, axis, plane as f32),
             Choice::Large { .. } => p.area >= grid.big,
         }
     }
 
-    /// How many primitives of the chunk binned into `bins` go left.
-    fn left_count(&self, bins: &[Bin], k: usize) -> usize {
+    /// How many primitives of the chunk whose bin counts are `counts` go left.
+    fn left_count(&self, counts: &[u32], k: usize) -> usize {
         match *self {
-            Choice::Plane { axis, plane, .. } => {
-                bins[axis * k..axis * k + plane].iter().map(|b| b.count as usize).sum()
-            }
-            Choice::Large { .. } => bins[3 * k].count as usize,
+            Choice::Plane { axis, plane, .. } => counts[axis * k..axis * k + plane].iter().map(|&c| c as usize).sum(),
+            Choice::Large { .. } => counts[3 * k] as usize,
         }
     }
 
@@ -125,20 +138,20 @@ impl Choice {
     }
 }
 
-/// Adds one primitive to a set of `3 K` bins and, if it is large, to the large bin.
+/// Adds one primitive to a set of `3 K` bins (`bounds`, `counts`) and, if it is large, to the
+/// large bin.
 #[inline(always)]
-fn bin_one(axes: &mut [Bin], large: &mut Bin, k: usize, grid: &Grid, p: &PrimRef) {
+fn bin_one(bounds: &mut [Aabb], counts: &mut [u32], large: (&mut Aabb, &mut u32), k: usize, grid: &Grid, p: &PrimRef) {
     let pb = p.aabb();
     let b = grid.bins_of((pb.min + pb.max) * 0.5);
     for (axis, i) in b.into_iter().enumerate() {
-        let bin = &mut axes[axis * k + i];
-        bin.bounds.grow(&pb);
-        bin.count += 1;
+        bounds[axis * k + i].grow(&pb);
+        counts[axis * k + i] += 1;
     }
     // Large triangles are rare, hence a branch.
     if p.area >= grid.big {
-        large.bounds.grow(&pb);
-        large.count += 1;
+        large.0.grow(&pb);
+        *large.1 += 1;
     }
 }
 
@@ -177,28 +190,34 @@ impl BinnedSah {
     /// for the previous one's update of that bin to come back from memory; two sets halve those
     /// chains. The sets are summed into the first at the end (min, max and counts are exact in
     /// any order, so the bins do not depend on this).
-    fn bin_into(&self, prims: &[PrimRef], grid: &Grid, k: usize, bins: &mut [Bin]) {
-        let (first, second) = bins.split_at_mut(3 * k + 1);
-        let (axes, large) = first.split_at_mut(3 * k);
-        let large = &mut large[0];
+    fn bin_into(&self, prims: &[PrimRef], grid: &Grid, k: usize, bins: &mut Bins) {
+        let (first_b, second_b) = bins.bounds.split_at_mut(3 * k + 1);
+        let (first_c, second_c) = bins.counts.split_at_mut(3 * k + 1);
+        let (axes_b, large_b) = first_b.split_at_mut(3 * k);
+        let (axes_c, large_c) = first_c.split_at_mut(3 * k);
+        let (large_b, large_c) = (&mut large_b[0], &mut large_c[0]);
         if prims.len() < TWO_SETS {
             for p in prims {
-                bin_one(axes, large, k, grid, p);
+                bin_one(axes_b, axes_c, (large_b, large_c), k, grid, p);
             }
             return;
         }
-        let other = &mut second[..3 * k];
-        other.fill(EMPTY_BIN);
+        let (other_b, other_c) = (&mut second_b[..3 * k], &mut second_c[..3 * k]);
+        other_b.fill(Aabb::EMPTY);
+        other_c.fill(0);
         let mut pairs = prims.chunks_exact(2);
         for pair in &mut pairs {
-            bin_one(axes, large, k, grid, &pair[0]);
-            bin_one(other, large, k, grid, &pair[1]);
+            bin_one(axes_b, axes_c, (large_b, large_c), k, grid, &pair[0]);
+            bin_one(other_b, other_c, (large_b, large_c), k, grid, &pair[1]);
         }
         for p in pairs.remainder() {
-            bin_one(axes, large, k, grid, p);
+            bin_one(axes_b, axes_c, (large_b, large_c), k, grid, p);
         }
-        for (a, b) in axes.iter_mut().zip(other.iter()) {
-            a.add(b);
+        for (a, b) in axes_b.iter_mut().zip(other_b.iter()) {
+            a.grow(b);
+        }
+        for (a, b) in axes_c.iter_mut().zip(other_c.iter()) {
+            *a += b;
         }
     }
 
@@ -207,7 +226,7 @@ impl BinnedSah {
     /// needed only when some but not all are.
     fn choose(
         &self,
-        bins: &[Bin],
+        bins: &Bins,
         k: usize,
         n: usize,
         nb: &NodeBounds,
@@ -228,19 +247,19 @@ impl BinnedSah {
             &mut right_area_vec
         };
         for axis in 0..3 {
-            let ab = &bins[axis * k..axis * k + k];
+            let (ab, ac) = (&bins.bounds[axis * k..axis * k + k], &bins.counts[axis * k..axis * k + k]);
             let mut acc = Aabb::EMPTY;
             let mut right_n = 0u32;
             for i in (1..k).rev() {
-                acc.grow(&ab[i].bounds);
-                right_n += ab[i].count;
+                acc.grow(&ab[i]);
+                right_n += ac[i];
                 right_area[i] = scale.half_area(&acc) * right_n as f32;
             }
             let mut left = Aabb::EMPTY;
             let mut left_n = 0usize;
             for plane in 1..k {
-                left.grow(&ab[plane - 1].bounds);
-                left_n += ab[plane - 1].count as usize;
+                left.grow(&ab[plane - 1]);
+                left_n += ac[plane - 1] as usize;
                 if left_n == 0 || left_n == n {
                     continue;
                 }
@@ -252,24 +271,23 @@ impl BinnedSah {
         }
         let beats_leaf = |cost: f64| !(may_leaf && cost >= self.costs.leaf_cost(n));
 
-        let large = bins[3 * k];
-        let large_n = large.count as usize;
+        let large = bins.bounds[3 * k];
+        let large_n = bins.counts[3 * k] as usize;
         if large_n > 0 && large_n < n {
             let rest = rest();
-            let weighted =
-                scale.half_area(&large.bounds) * large_n as f32 + scale.half_area(&rest) * (n - large_n) as f32;
+            let weighted = scale.half_area(&large) * large_n as f32 + scale.half_area(&rest) * (n - large_n) as f32;
             if best.is_none_or(|(b, _, _)| weighted < b)
                 && beats_leaf(self.costs.split_cost(parent_area, weighted as f64))
             {
-                return Some(Choice::Large { left: large.bounds, right: rest });
+                return Some(Choice::Large { left: large, right: rest });
             }
         }
         let (weighted, axis, plane) = best?;
         if !beats_leaf(self.costs.split_cost(parent_area, weighted as f64)) {
             return None;
         }
-        let ab = &bins[axis * k..axis * k + k];
-        let side = |bins: &[Bin]| bins.iter().fold(Aabb::EMPTY, |a, b| a.union(&b.bounds));
+        let ab = &bins.bounds[axis * k..axis * k + k];
+        let side = |bins: &[Aabb]| bins.iter().fold(Aabb::EMPTY, |a, b| a.union(b));
         Some(Choice::Plane { axis, plane, left: side(&ab[..plane]), right: side(&ab[plane..]) })
     }
 
@@ -279,11 +297,11 @@ impl BinnedSah {
         nb: &NodeBounds,
         may_leaf: bool,
         k: usize,
-        bins: &mut [Bin],
+        bins: &mut Bins,
     ) -> Option<Split> {
         let grid = Grid::new(nb, k)?;
         // The second set is cleared by bin_into when used.
-        bins[..3 * k + 1].fill(EMPTY_BIN);
+        bins.reset(bin_len(k), 3 * k + 1);
         self.bin_into(prims, &grid, k, bins);
         let choice = self.choose(bins, k, prims.len(), nb, may_leaf, || small_bounds(prims, grid.big))?;
         let (mut left, mut right) = choice.children();
@@ -393,17 +411,14 @@ impl Splitter for BinnedSah {
             // A nested use (rayon may steal work while this thread waits) gets its own buffer.
             let mut own;
             let mut guard = s.try_borrow_mut();
-            let bins: &mut Vec<Bin> = match guard.as_deref_mut() {
+            let bins: &mut Bins = match guard.as_deref_mut() {
                 Ok(b) => b,
                 Err(_) => {
-                    own = Vec::new();
+                    own = Bins::default();
                     &mut own
                 }
             };
-            if bins.len() < bin_len(k) {
-                bins.resize(bin_len(k), EMPTY_BIN);
-            }
-            self.split_with(prims, nb, may_leaf, k, &mut bins[..bin_len(k)])
+            self.split_with(prims, nb, may_leaf, k, bins)
         })
     }
 
@@ -419,25 +434,27 @@ impl Splitter for BinnedSah {
         }
         let k = self.bins_for(prims.len());
         let grid = Grid::new(nb, k)?;
-        let chunks: Vec<Vec<Bin>> = prims
+        let chunks: Vec<Bins> = prims
             .par_chunks(CHUNK)
             .map(|chunk| {
-                let mut bins = vec![EMPTY_BIN; bin_len(k)];
+                let mut bins = Bins::new(bin_len(k));
                 self.bin_into(chunk, &grid, k, &mut bins);
-                bins.truncate(3 * k + 1);
                 bins
             })
             .collect();
-        let mut bins = vec![EMPTY_BIN; 3 * k + 1];
+        let mut bins = Bins::new(3 * k + 1);
         for chunk in &chunks {
-            for (b, c) in bins.iter_mut().zip(chunk) {
-                b.add(c);
+            for (b, c) in bins.bounds.iter_mut().zip(&chunk.bounds) {
+                b.grow(c);
+            }
+            for (b, c) in bins.counts.iter_mut().zip(&chunk.counts) {
+                *b += c;
             }
         }
         let rest =
             || prims.par_chunks(CHUNK).map(|c| small_bounds(c, grid.big)).reduce(|| Aabb::EMPTY, |a, b| a.union(&b));
         let choice = self.choose(&bins, k, prims.len(), nb, may_leaf, rest)?;
-        let left_counts: Vec<usize> = chunks.iter().map(|c| choice.left_count(c, k)).collect();
+        let left_counts: Vec<usize> = chunks.iter().map(|c| choice.left_count(&c.counts, k)).collect();
         let (mut left, mut right) = choice.children();
         (left.centroids, right.centroids) = scatter(prims, spare, &left_counts, |p, c| choice.goes_left(&grid, p, c));
         let mid = left_counts.iter().sum();

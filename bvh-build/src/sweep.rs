@@ -3,6 +3,7 @@
 //! and the binned builder's choice for nodes no larger than its bin count.
 
 use crate::build::{Aabb, AreaScale, Costs, NodeBounds, PrimRef, Split, Splitter, bounds_of};
+use bytemuck::Zeroable;
 use std::cell::RefCell;
 
 pub struct SweepSah {
@@ -41,6 +42,16 @@ thread_local! {
 pub fn sweep_split(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
     if nb.centroids.extent().max_element() <= 0.0 {
         return None;
+    }
+    // Most nodes swept are the binned builder's smallest (up to 16 primitives by default, half a
+    // million of them in a million-triangle tree): on the stack they skip the scratch buffers.
+    match prims.len() {
+        2 => return sweep_pair(costs, prims, nb, may_leaf),
+        n if n <= 4 => return sweep_small::<4>(costs, prims, nb, may_leaf),
+        n if n <= 8 => return sweep_small::<8>(costs, prims, nb, may_leaf),
+        n if n <= 16 => return sweep_small::<16>(costs, prims, nb, may_leaf),
+        n if n <= 64 => return sweep_small::<64>(costs, prims, nb, may_leaf),
+        _ => {}
     }
     SCRATCH.with(|s| match s.try_borrow_mut() {
         Ok(mut s) => sweep_with(costs, prims, nb, may_leaf, &mut s),
@@ -93,8 +104,205 @@ fn sweep_with(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: b
     Some(Split { mid, left: bounds_of(&prims[..mid]), right: bounds_of(&prims[mid..]), in_spare: false })
 }
 
+/// The comparators of Batcher's odd-even merge sort of `n` keys (a power of two), in order: `M` of
+/// them, checked at compile time.
+const fn batcher<const M: usize>(n: usize) -> [(u8, u8); M] {
+    let mut out = [(0u8, 0u8); M];
+    let mut m = 0;
+    let mut p = 1;
+    while p < n {
+        let mut k = p;
+        while k > 0 {
+            let mut j = k % p;
+            while j + k < n {
+                let mut i = 0;
+                while i < k && i < n - j - k {
+                    if (i + j) / (2 * p) == (i + j + k) / (2 * p) {
+                        out[m] = ((i + j) as u8, (i + j + k) as u8);
+                        m += 1;
+                    }
+                    i += 1;
+                }
+                j += 2 * k;
+            }
+            k /= 2;
+        }
+        p *= 2;
+    }
+    assert!(m == M, "the comparator count of the network");
+    out
+}
+
+const NET4: [(u8, u8); 5] = batcher(4);
+const NET8: [(u8, u8); 19] = batcher(8);
+const NET16: [(u8, u8); 63] = batcher(16);
+
+/// Sorts `keys` (padded with `u64::MAX` to the network's size) without a branch: a handful of
+/// random keys costs an insertion sort a mispredicted branch per key.
+#[inline(always)]
+fn network_sort<const N: usize>(keys: &mut [u64; N], net: &[(u8, u8)]) {
+    for &(a, b) in net {
+        let (x, y) = (keys[a as usize], keys[b as usize]);
+        keys[a as usize] = x.min(y);
+        keys[b as usize] = x.max(y);
+    }
+}
+
+/// [`sweep_with`] for two primitives (two in five nodes swept in a binned tree): every axis offers
+/// the one split, at the same cost (a sum of the two areas in either order), so the first axis
+/// wins and sets the order.
+fn sweep_pair(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
+    let scale = AreaScale::of(&nb.aabb);
+    let (a, b) = (prims[0].aabb(), prims[1].aabb());
+    let weighted = scale.half_area(&a) + scale.half_area(&b);
+    let cost = costs.split_cost(scale.half_area(&nb.aabb) as f64, weighted as f64);
+    if may_leaf && cost >= costs.leaf_cost(2) {
+        return None;
+    }
+    let key = |p: &PrimRef| (ordered_bits(p.centroid().x) as u64) << 32 | p.id as u64;
+    if key(&prims[1]) < key(&prims[0]) {
+        prims.swap(0, 1);
+    }
+    let one = |p: &PrimRef| NodeBounds { aabb: p.aabb(), centroids: Aabb { min: p.centroid(), max: p.centroid() } };
+    Some(Split { mid: 1, left: one(&prims[0]), right: one(&prims[1]), in_spare: false })
+}
+
+/// [`sweep_with`] for at most `N` primitives, with every buffer on the stack and the boxes loaded
+/// once. Each axis sorts keys of the centroid's ordered bits (high half) and the primitive's place
+/// (low half), then puts runs of equal centroids in input-id order: the order of `sweep_with`'s
+/// keys, hence the same sums in the same order and the same split.
+fn sweep_small<const N: usize>(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
+    let n = prims.len();
+    debug_assert!(n <= N && N <= 64);
+    let scale = AreaScale::of(&nb.aabb);
+    let mut boxes = [Aabb::EMPTY; N];
+    let mut sorted = [[u64::MAX; N]; 3];
+    for (i, p) in prims.iter().enumerate() {
+        let b = p.aabb();
+        boxes[i] = b;
+        let c = (b.min + b.max) * 0.5;
+        for (axis, keys) in sorted.iter_mut().enumerate() {
+            keys[i] = (ordered_bits(c[axis]) as u64) << 32 | i as u64;
+        }
+    }
+    let at = |key: u64| (key & 0xffff_ffff) as usize;
+    let mut best: Option<(f32, usize, usize)> = None;
+    let mut right_area = [0f32; N];
+    for (axis, keys) in sorted.iter_mut().enumerate() {
+        match N {
+            4 => network_sort(keys, &NET4),
+            8 => network_sort(keys, &NET8),
+            16 => network_sort(keys, &NET16),
+            _ => keys[..n].sort_unstable(),
+        }
+        // Equal centroids in input-id order (rare: a short insertion sort of each run).
+        for i in 1..n {
+            let mut j = i;
+            while j > 0 && keys[j] >> 32 == keys[j - 1] >> 32 && prims[at(keys[j])].id < prims[at(keys[j - 1])].id {
+                keys.swap(j, j - 1);
+                j -= 1;
+            }
+        }
+        let order = &keys[..n];
+        let mut acc = Aabb::EMPTY;
+        for i in (1..n).rev() {
+            acc.grow(&boxes[at(order[i])]);
+            right_area[i] = scale.half_area(&acc) * (n - i) as f32;
+        }
+        let mut left = Aabb::EMPTY;
+        for i in 1..n {
+            left.grow(&boxes[at(order[i - 1])]);
+            let weighted = scale.half_area(&left) * i as f32 + right_area[i];
+            if best.is_none_or(|(b, _, _)| weighted < b) {
+                best = Some((weighted, axis, i));
+            }
+        }
+    }
+    let (weighted, axis, mid) = best?;
+    let cost = costs.split_cost(scale.half_area(&nb.aabb) as f64, weighted as f64);
+    if may_leaf && cost >= costs.leaf_cost(n) {
+        return None;
+    }
+    let mut copy = [PrimRef::zeroed(); N];
+    copy[..n].copy_from_slice(prims);
+    let empty = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
+    let (mut left, mut right) = (empty, empty);
+    for (i, (dst, &key)) in prims.iter_mut().zip(&sorted[axis][..n]).enumerate() {
+        let b = &boxes[at(key)];
+        *dst = copy[at(key)];
+        let side = if i < mid { &mut left } else { &mut right };
+        side.aabb.grow(b);
+        side.centroids.grow_point((b.min + b.max) * 0.5);
+    }
+    Some(Split { mid, left, right, in_spare: false })
+}
+
 impl Splitter for SweepSah {
     fn split(&self, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
         sweep_split(&self.costs, prims, nb, may_leaf)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::build::bounds_of;
+
+    fn sorts_every_zero_one_input<const N: usize>(net: &[(u8, u8)]) {
+        // A comparator network that sorts every input of zeros and ones sorts every input.
+        for bits in 0..1u32 << N {
+            let mut keys = [0u64; N];
+            for (i, k) in keys.iter_mut().enumerate() {
+                *k = (bits >> i & 1) as u64;
+            }
+            network_sort(&mut keys, net);
+            assert!(keys.windows(2).all(|w| w[0] <= w[1]), "{N} keys, input {bits:b}: {keys:?}");
+        }
+    }
+
+    #[test]
+    fn the_merge_networks_sort() {
+        sorts_every_zero_one_input::<4>(&NET4);
+        sorts_every_zero_one_input::<8>(&NET8);
+        sorts_every_zero_one_input::<16>(&NET16);
+    }
+
+    #[test]
+    fn small_nodes_split_as_the_general_sweep() {
+        // Coordinates on a coarse grid, so that many centroids tie on some axis and the id order
+        // decides; ids shuffled so that it differs from the order in the slice.
+        let mut rng = ::tests::Rng(99);
+        let costs = Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 8, depth_limit: 64 };
+        for case in 0..4000 {
+            let n = 2 + case % 63;
+            let mut prims: Vec<PrimRef> = (0..n)
+                .map(|i| {
+                    let mut v = || (rng.unit() * 4.0).floor();
+                    let min = [v(), v(), v()];
+                    let max = [min[0] + v(), min[1] + v(), min[2] + v()];
+                    let d = [max[0] - min[0], max[1] - min[1], max[2] - min[2]];
+                    let id = ((i * 7919 + case) % 1000) as u32 + 1000 * i as u32;
+                    PrimRef { min, id, max, area: d[0] * d[1] + d[1] * d[2] + d[2] * d[0] }
+                })
+                .collect();
+            let nb = bounds_of(&prims);
+            let may_leaf = case % 2 == 0;
+            let mut general = prims.clone();
+            let expected = (nb.centroids.extent().max_element() > 0.0)
+                .then(|| sweep_with(&costs, &mut general, &nb, may_leaf, &mut Scratch::default()))
+                .flatten();
+            let got = sweep_split(&costs, &mut prims, &nb, may_leaf);
+            match (expected, got) {
+                (None, None) => {}
+                (Some(e), Some(g)) => {
+                    assert_eq!(e.mid, g.mid, "case {case}");
+                    assert_eq!((e.left.aabb, e.right.aabb), (g.left.aabb, g.right.aabb), "case {case}");
+                    assert_eq!((e.left.centroids, e.right.centroids), (g.left.centroids, g.right.centroids));
+                    let ids = |p: &[PrimRef]| p.iter().map(|p| p.id).collect::<Vec<_>>();
+                    assert_eq!(ids(&general), ids(&prims), "case {case}: the same order");
+                }
+                (e, g) => panic!("case {case}: general {:?}, small {:?}", e.map(|s| s.mid), g.map(|s| s.mid)),
+            }
+        }
     }
 }

@@ -1,22 +1,28 @@
 #!/usr/bin/env bash
 # Issue 11 item 3's builder figures on the H100 machine's 16-core host (docs/build-benchmark.md):
-# build time of a million triangles on all threads and on 2, against the `bvh` crate and obvhs;
-# 16 bins against the full sweep on the benchmark scenes and on the others; where the time of
-# `bvhc compile` goes; and the whole `bvhc compile` (import, build, write, fsync) of million,
-# dragon and bunny, timed from outside.
+# 16 bins against the `bvh` crate on 2 threads and on all threads (bunny, dragon, million), this
+# build side by side with the build before it when its binary is carried; every builder on all
+# threads; 16 and 64 bins against the full sweep on the scenes beyond the benchmark; where the
+# time of `bvhc compile` goes; and the whole `bvhc compile` of million, dragon and bunny, timed
+# from outside.
 #
 # Run from the repository root on the device machine. The host has no Rust toolchain: build the
-# release binaries here and carry .bin/ (ignored; about 20 MiB in all):
+# release binaries here and carry .bin/ (ignored; about 25 MiB in all):
 #   cargo build --release -p bvh-build --features compare --example build_report --example compile_profile
 #   cargo build --release -p tools --bin bvhc
 #   mkdir -p .bin && cp target/release/examples/build_report target/release/examples/compile_profile \
 #     target/release/bvhc .bin/ && strip .bin/*
+# Optionally the build to compare with (before.md, two-before.md), from a worktree of main before
+# the change: `cargo build --release -p bvh-build --features compare --example build_report` there,
+# and its binary copied to .bin/build_report_before.
 # The scenes are tracked files under scenes/ (million.toml places dragon.glb and two bunny.glb,
 # 17 MiB), so the working tree carries them; nothing is generated on the host.
-# Device tool: command `bash tools/scripts/h100-build.sh`, carry [".bin"]. Writes build.md
-# (build_report's tables), others.md, profile.txt, phases.txt, compile.txt, host.txt and log.txt into $OUT
-# (default ./out/h100-build). Expected run time: about 3 minutes (the full sweep of million and
-# forest, a few seconds per build, is most of it).
+# Device tool: command `bash tools/scripts/h100-build.sh`, carry [".bin"]. Writes into $OUT
+# (default ./out/h100-build): two.md (2 threads: 16 bins and bvh), two-before.md (the same with
+# the earlier build), build.md (all threads, every builder), before.md (all threads, 16 bins and
+# bvh with the earlier build), others.md, profile.txt, phases.txt, compile.txt, host.txt, log.txt.
+# Expected run time: about 4 minutes with RUNS=7 (the full sweep of million and forest, a second
+# or two per build, is a third of it); RUNS=5 for a shorter run.
 set -euo pipefail
 OUT=${OUT:-out/h100-build}
 RUNS=${RUNS:-7}
@@ -31,30 +37,44 @@ export BVH_SCENES_DIR=$PWD/scenes
   echo "date: $(date -u '+%Y-%m-%d %H:%M UTC'); git: $(git rev-parse --short HEAD 2>/dev/null || echo '?')"
 } | tee "$OUT/host.txt"
 exec > >(tee "$OUT/log.txt") 2>&1
+START=$(date +%s)
+log() { echo "[$(($(date +%s) - START)) s] $*"; }
 
-echo "== build time, all $(nproc) threads: bunny, dragon, million (16 bins, sweep, bvh, obvhs) =="
+# 16 bins and bvh on bunny, dragon, million; each report prints its table and the targets.
+pair() { # threads binary out-name
+  mkdir -p "$OUT/$3"
+  RAYON_NUM_THREADS=$1 ".bin/$2" --runs "$RUNS" --scenes bunny,dragon,million --builders binned16,bvh \
+    --out "$OUT/$3" 2>/dev/null | grep -E '^\||^- '
+  cp "$OUT/$3/build-benchmark.md" "$OUT/$3.md"
+}
+log "== 2 threads: 16 bins against bvh (this build) =="
+pair 2 build_report two
+if [ -x .bin/build_report_before ]; then
+  log "== 2 threads: 16 bins against bvh (the earlier build) =="
+  pair 2 build_report_before two-before
+  log "== all $(nproc) threads: 16 bins against bvh (the earlier build) =="
+  pair "$(nproc)" build_report_before before
+fi
+
+log "== all $(nproc) threads, every builder: bunny, dragon, million =="
 mkdir -p "$OUT/all"
 .bin/build_report --runs "$RUNS" --scenes bunny,dragon,million \
-  --builders binned4,binned8,binned16,binned32,binned64,sweep,bvh,obvhs --out "$OUT/all" 2>/dev/null
+  --builders binned4,binned8,binned16,binned32,binned64,sweep,bvh,obvhs --out "$OUT/all" 2>/dev/null | grep -E '^\||^- '
 cp "$OUT/all/build-benchmark.md" "$OUT/build.md"
 
-echo "== build time, 2 threads (16 bins against bvh) =="
-mkdir -p "$OUT/two"
-RAYON_NUM_THREADS=2 .bin/build_report --runs "$RUNS" --scenes bunny,dragon,million \
-  --builders binned16,bvh --out "$OUT/two" 2>/dev/null
-
-echo "== 16 bins against the sweep on the scenes beyond the benchmark (all threads) =="
+log "== 16 and 64 bins against the sweep on the scenes beyond the benchmark (all threads) =="
 mkdir -p "$OUT/others"
 .bin/build_report --runs 3 --builders binned16,binned64,sweep \
-  --scenes scenes/toycar.glb,scenes/car.toml,scenes/forest.toml,scenes/room.toml --out "$OUT/others" 2>/dev/null
+  --scenes scenes/toycar.glb,scenes/car.toml,scenes/forest.toml,scenes/room.toml --out "$OUT/others" 2>/dev/null |
+  grep -E '^\||^- '
 cp "$OUT/others/build-benchmark.md" "$OUT/others.md"
 
-echo "== where the time of bvhc compile goes (medians of $RUNS) =="
+log "== where the time of bvhc compile goes (medians of $RUNS) =="
 for s in million.toml dragon.toml bunny.toml; do
   .bin/compile_profile "scenes/$s" --runs "$RUNS"
 done | tee "$OUT/profile.txt"
 
-echo "== bvhc compile million.toml, its own phases on all $(nproc) threads (medians of $RUNS) =="
+log "== bvhc compile million.toml, its own phases on all $(nproc) threads (medians of $RUNS) =="
 # bvhc's second output line: "  import I s, build B s (binned 16 bins), write W s".
 for _ in $(seq "$RUNS"); do
   .bin/bvhc compile scenes/million.toml -o "$OUT/scene.bvh" | sed -n 's/.*import \([0-9.]*\) s, build \([0-9.]*\) s.*write \([0-9.]*\) s.*/\1 \2 \3/p'
@@ -64,7 +84,7 @@ for k in 1 2 3; do
   echo "bvhc phase $name: median $(cut -d' ' -f"$k" "$OUT/phases.raw" | sort -n | sed -n "$(((RUNS + 1) / 2))p") s (all: $(cut -d' ' -f"$k" "$OUT/phases.raw" | sort -n | tr '\n' ' '))"
 done | tee "$OUT/phases.txt"
 
-echo "== bvhc compile, whole command timed from outside (medians of $RUNS; 16 threads, then 2) =="
+log "== bvhc compile, whole command timed from outside (medians of $RUNS; all threads, then 2) =="
 for threads in "$(nproc)" 2; do
   for s in million.toml dragon.toml bunny.toml; do
     times=()
@@ -80,3 +100,4 @@ for threads in "$(nproc)" 2; do
   RAYON_NUM_THREADS=$threads .bin/bvhc compile scenes/million.toml -o "$OUT/scene.bvh"
 done | tee "$OUT/compile.txt"
 rm -f "$OUT/scene.bvh"
+log "done"
