@@ -7,6 +7,7 @@ use bvh_format::SceneFile;
 use glam::Vec3;
 use rayon::prelude::*;
 use render_spec::Intersect;
+use tracer_cpu::bvh8::Simd;
 use tracer_cpu::geometry::{MollerTrumbore, TriangleTest, Watertight};
 use tracer_cpu::reference::{self, RefHit};
 use tracer_cpu::traverse::Stack;
@@ -70,6 +71,7 @@ fn fast_hits<T: TriangleTest>(
     pstack: &mut Vec<packet::Entry>,
 ) -> Vec<Option<Hit>> {
     let mut ordered = Vec::with_capacity(chunk.len());
+    let simds = Simd::available();
     for &(o, d) in chunk {
         let ray = Ray::new(o, d);
         let mut c = Cost::default();
@@ -79,15 +81,21 @@ fn fast_hits<T: TriangleTest>(
         let w = tracer.walk(Method::Bvh8).unwrap().closest_with(T::KIND, &ray, 0.0, f32::INFINITY, stack, &mut c);
         assert_eq!(a, w, "{name}: ordered and bvh8 disagree on origin {o:?} dir {d:?}");
         let bvh8 = tracer.bvh8().unwrap();
-        let p = bvh8.trace_portable::<false, T>(&ray, 0.0, f32::INFINITY, stack, &mut c);
-        assert_eq!(a, p, "{name}: ordered and portable bvh8 disagree on origin {o:?} dir {d:?}");
+        // Every instruction set this CPU has (portable, AVX2, AVX-512), each forced.
+        for &simd in &simds {
+            let p = bvh8.trace_on::<false, T>(simd, &ray, 0.0, f32::INFINITY, stack, &mut c);
+            assert_eq!(a, p, "{name}: ordered and {simd:?} bvh8 disagree on origin {o:?} dir {d:?}");
+        }
         // Any hit, up to the closest hit's distance and just short of it (where nothing is).
         for t_max in a.map_or(vec![f32::INFINITY, 1.0], |h| vec![h.t, f32::INFINITY, h.t * (1.0 - 1e-3)]) {
             let walk = tracer.walk(Method::Ordered).unwrap();
             let want = walk.occluded_with(T::KIND, &ray, t_max, stack, &mut c);
             let got = tracer.walk(Method::Bvh8).unwrap().occluded_with(T::KIND, &ray, t_max, stack, &mut c);
-            let portable = bvh8.trace_portable::<true, T>(&ray, 0.0, t_max, stack, &mut c).is_some();
-            assert_eq!((got, portable), (want, want), "{name}: any hit to {t_max} on origin {o:?} dir {d:?}");
+            assert_eq!(got, want, "{name}: bvh8 any hit to {t_max} on origin {o:?} dir {d:?}");
+            for &simd in &simds {
+                let got = bvh8.trace_on::<true, T>(simd, &ray, 0.0, t_max, stack, &mut c).is_some();
+                assert_eq!(got, want, "{name}: {simd:?} bvh8 any hit to {t_max} on origin {o:?} dir {d:?}");
+            }
         }
         ordered.push(a);
     }
@@ -139,18 +147,17 @@ fn check_scene(name: &str, scene: &SceneFile, n: usize, seed: u64) {
             total.edges += c.edges;
             total.unexplained.extend(c.unexplained.iter().cloned());
         }
+        let paths: Vec<String> = Simd::available().iter().map(|s| format!("bvh8 {}", s.name())).collect();
         println!(
-            "{name}: {} rays, {} agree with the f64 reference, {} exact ties, {} within {EDGE} of an edge, {} unexplained{}",
+            "{name}: {} rays, {} agree with the f64 reference, {} exact ties, {} within {EDGE} of an edge, {} unexplained \
+             (ordered, stackless, {} and AVX2 packets{} identical)",
             total.rays,
             total.agree,
             total.ties,
             total.edges,
             total.unexplained.len(),
-            if packet::available() {
-                " (ordered, stackless, bvh8 and AVX2 packets identical)"
-            } else {
-                " (no AVX2 here; ordered, stackless and bvh8 identical)"
-            }
+            paths.join(", "),
+            if packet::available() { "" } else { " (absent: no AVX2 here)" }
         );
         let examples: Vec<&String> = total.unexplained.iter().filter(|s| !s.is_empty()).collect();
         assert!(total.unexplained.is_empty(), "{name}: unexplained disagreements, e.g. {examples:#?}");
@@ -202,6 +209,18 @@ fn rays_through_shared_vertices_break_ties_the_same_way_on_every_path() {
                 tracer.walk(Method::Ordered).unwrap().closest_with(test, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
             let w = tracer.walk(Method::Bvh8).unwrap().closest_with(test, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
             assert_eq!(a, w, "ray {i}, {test:?}: bvh8");
+            let bvh8 = tracer.bvh8().unwrap();
+            for simd in Simd::available() {
+                let w = match test {
+                    Intersect::Watertight => {
+                        bvh8.trace_on::<false, Watertight>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut c)
+                    }
+                    Intersect::MollerTrumbore => {
+                        bvh8.trace_on::<false, MollerTrumbore>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut c)
+                    }
+                };
+                assert_eq!(a, w, "ray {i}, {test:?}: bvh8 {simd:?}");
+            }
         }
         rays += 1;
         if a.is_none() {
