@@ -2,6 +2,8 @@
 //! nodes of up to 8 children whose boxes lie component by component (structure of arrays), so one
 //! AVX2 sequence tests a ray against all 8; leaves of up to 8 triangles, also structure of arrays,
 //! so one sequence tests the ray against all of a leaf's triangles with the frame's triangle test.
+//! Three paths ([`Simd`]): AVX2 (the default where the CPU has it), AVX-512 (on request) and a
+//! portable one; `crate::packet8` traces coherent packets of 8 rays through the same tree.
 //!
 //! The collapse (after Embree's BVH8 builder and Wald et al., "Getting Rid of Packets", 2008):
 //! a wide node starts from the two children of a binary node and repeatedly opens the child with
@@ -116,6 +118,7 @@ pub enum Simd {
     Avx2,
     /// AVX-512 (F, VL, DQ): the near and far planes of all 8 children in one 16-lane register,
     /// mask registers and compress instructions for the children hit; the leaf test is AVX2's.
+    /// Only on request ([`Simd::detect`] says why).
     Avx512,
 }
 
@@ -154,12 +157,15 @@ impl Simd {
         Simd::ALL.into_iter().filter(|s| s.supported()).collect()
     }
 
-    /// The fastest path this CPU runs, capped by the environment variable `TRACER_CPU_SIMD`
-    /// (`portable`, `avx2` or `avx512`) where it is set, so that a machine can run (and time) a
-    /// narrower path than it has; a name it does not know is ignored.
+    /// The path [`Bvh8::trace`] takes: AVX2 where the CPU has it, else the portable one; the
+    /// environment variable `TRACER_CPU_SIMD` (`portable`, `avx2` or `avx512`) asks for another,
+    /// taken where the CPU runs it (else the widest below it that it runs; a name it does not
+    /// know is ignored). AVX-512 is not the default: on the 2-core AMD EPYC (Zen 4) VM it traces
+    /// about 10% fewer rays per second than AVX2 (docs/cpu-benchmark.md; the ray report times
+    /// both side by side on every machine, so a CPU where it wins shows it).
     pub fn detect() -> Simd {
-        let cap = std::env::var("TRACER_CPU_SIMD").ok().and_then(|v| Simd::parse(&v));
-        Simd::best_up_to(cap.unwrap_or(Simd::Avx512))
+        let asked = std::env::var("TRACER_CPU_SIMD").ok().and_then(|v| Simd::parse(&v));
+        Simd::best_up_to(asked.unwrap_or(Simd::Avx2))
     }
 
     /// The path `name` names (case and surrounding blanks ignored).
@@ -590,7 +596,7 @@ pub(crate) mod avx2 {
     /// (hit mask, t, w1, w2, sum) (`u = w1 * (1 / sum)`, computed for the closest hit only).
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn watertight(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+    pub(super) fn watertight(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
         let (o, d) = (&r.o, &r.d);
         // Written out, not in closures: a closure does not inherit AVX2 (see crate::wide).
         let (a0, a1, a2) = (sub3(&b.p[0], o), sub3(&b.p[1], o), sub3(&b.p[2], o));
@@ -637,7 +643,7 @@ pub(crate) mod avx2 {
     /// operation; returns (hit mask, t, u, v, 1).
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn moller_trumbore(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+    pub(super) fn moller_trumbore(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
         let (o, d) = (&r.o, &r.d);
         let v0 = [load(&b.p[0][0]), load(&b.p[0][1]), load(&b.p[0][2])];
         let e1 = [
@@ -679,43 +685,40 @@ pub(crate) mod avx2 {
         [m, t, u, v, one]
     }
 
-    /// Tests the block's triangles against the ray, updating `best`; true where one beat it.
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) fn leaf<const ANY: bool, T: TriangleTest>(
-        block: &TriBlock,
-        r: &Lanes,
-        t_min: __m256,
-        best: &mut Found,
-        cost: &mut Cost,
-    ) -> bool {
-        // SAFETY: a load of 8 ints.
-        let index = unsafe { _mm256_loadu_si256(block.index.as_ptr().cast()) };
-        let empty = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(index, _mm256_set1_epi32(-1))));
-        cost.tris += WIDTH as u32 - empty.count_ones();
-        let [m, t, w1, w2, sum] = match T::KIND {
-            Intersect::Watertight => watertight(block, r, t_min, _mm256_set1_ps(best.t)),
-            Intersect::MollerTrumbore => moller_trumbore(block, r, t_min, _mm256_set1_ps(best.t)),
-        };
-        let mut hit = _mm256_movemask_ps(m) as u32;
-        if hit == 0 {
-            return false;
-        }
-        let (t, w1, w2, sum) = (store(t), store(w1), store(w2), store(sum));
-        let mut found = false;
-        while hit != 0 {
-            let i = hit.trailing_zeros() as usize;
-            hit &= hit - 1;
-            if Hit::beats(t[i], block.index[i], best.t, best.tri) {
-                *best = Found { t: t[i], tri: block.index[i], w1: w1[i], w2: w2[i], sum: sum[i] };
-                found = true;
-                if ANY {
-                    break;
+    /// Tests the block's triangles against the ray, updating `best`; true where one beat it. A
+    /// macro, so that both traversals have it inline (a `#[target_feature]` function cannot be
+    /// `#[inline(always)]`, and LLVM kept it out of line, at a cost of 10%).
+    macro_rules! leaf {
+        ($any:expr, $t:ty, $block:expr, $r:expr, $t_min:expr, $best:expr, $cost:expr) => {{
+            let (block, best, cost): (&TriBlock, &mut Found, &mut Cost) = ($block, $best, $cost);
+            // SAFETY: a load of 8 ints.
+            let index = unsafe { _mm256_loadu_si256(block.index.as_ptr().cast()) };
+            let empty = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(index, _mm256_set1_epi32(-1))));
+            cost.tris += WIDTH as u32 - empty.count_ones();
+            let [m, t, w1, w2, sum] = match <$t as TriangleTest>::KIND {
+                Intersect::Watertight => watertight(block, $r, $t_min, _mm256_set1_ps(best.t)),
+                Intersect::MollerTrumbore => moller_trumbore(block, $r, $t_min, _mm256_set1_ps(best.t)),
+            };
+            let mut hit = _mm256_movemask_ps(m) as u32;
+            let mut found = false;
+            if hit != 0 {
+                let (t, w1, w2, sum) = (store(t), store(w1), store(w2), store(sum));
+                while hit != 0 {
+                    let i = hit.trailing_zeros() as usize;
+                    hit &= hit - 1;
+                    if Hit::beats(t[i], block.index[i], best.t, best.tri) {
+                        *best = Found { t: t[i], tri: block.index[i], w1: w1[i], w2: w2[i], sum: sum[i] };
+                        found = true;
+                        if $any {
+                            break;
+                        }
+                    }
                 }
             }
-        }
-        found
+            found
+        }};
     }
+    pub(super) use leaf;
 
     /// Asks for the cache lines of the node or leaf block `r`.
     #[inline(always)]
@@ -833,7 +836,7 @@ pub(crate) mod avx2 {
                 }
             } else {
                 let block = &bvh.blocks[(cur & !LEAF) as usize];
-                if leaf::<ANY, T>(block, &r, t_min_v, &mut best, cost) {
+                if leaf!(ANY, T, block, &r, t_min_v, &mut best, cost) {
                     found = true;
                     if ANY {
                         return Some(best);
@@ -856,10 +859,11 @@ pub(crate) mod avx2 {
 
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
-    use super::avx2::{Lanes, leaf, prefetch};
-    use super::{Bvh8, Found, LEAF, WIDTH};
-    use crate::geometry::{Cost, Ray, TriangleTest, may_hold};
+    use super::avx2::{Lanes, leaf, moller_trumbore, prefetch, store, watertight};
+    use super::{Bvh8, Found, LEAF, TriBlock, WIDTH};
+    use crate::geometry::{Cost, Hit, Ray, TriangleTest, may_hold};
     use crate::traverse::Stack;
+    use render_spec::Intersect;
     use render_spec::constants::T_SLACK;
     use std::arch::x86_64::*;
 
@@ -942,13 +946,14 @@ mod avx512 {
                     }
                     // SAFETY: a load of 8 ints.
                     let child = unsafe { _mm256_loadu_si256(node.child.as_ptr().cast()) };
-                    let (mut dists, mut kids) = ([0f32; WIDTH], [0u32; WIDTH]);
                     let n = mask.count_ones() as usize;
-                    // SAFETY: compress stores write at most 8 lanes into arrays of 8.
+                    // The register form: compress to memory is microcoded on some CPUs (AMD Zen 4).
+                    let dists = super::avx2::store(_mm256_maskz_compress_ps(mask as u8, near));
+                    let mut kids = [0u32; WIDTH];
+                    // SAFETY: a store of 8 ints.
                     unsafe {
-                        _mm256_mask_compressstoreu_ps(dists.as_mut_ptr().cast(), mask as u8, near);
-                        _mm256_mask_compressstoreu_epi32(kids.as_mut_ptr().cast(), mask as u8, child);
-                    }
+                        _mm256_storeu_si256(kids.as_mut_ptr().cast(), _mm256_maskz_compress_epi32(mask as u8, child))
+                    };
                     if ANY {
                         // Any hit ends the ray: no order needed.
                         for k in 1..n {
@@ -983,7 +988,7 @@ mod avx512 {
                 }
             } else {
                 let block = &bvh.blocks[(cur & !LEAF) as usize];
-                if leaf::<ANY, T>(block, &r, t_min_v, &mut best, cost) {
+                if leaf!(ANY, T, block, &r, t_min_v, &mut best, cost) {
                     found = true;
                     if ANY {
                         return Some(best);
@@ -1232,7 +1237,7 @@ mod tests {
     }
 
     #[test]
-    fn the_environment_caps_the_path() {
+    fn paths_are_named_and_capped_by_what_the_cpu_runs() {
         assert_eq!(Simd::parse(" AVX2 "), Some(Simd::Avx2));
         assert_eq!(Simd::parse("avx512"), Some(Simd::Avx512));
         assert_eq!(Simd::parse("sse"), None);

@@ -12,6 +12,7 @@ use rayon::prelude::*;
 use render_spec::{CameraSpec, Intersect, sequence};
 use std::path::Path;
 use std::time::Instant;
+use tracer_cpu::bvh8::Simd;
 use tracer_cpu::geometry::{Cost, Ray, Watertight, offset_origin};
 use tracer_cpu::packet::{self, LANES, Rays};
 use tracer_cpu::traverse::Stack;
@@ -134,6 +135,8 @@ pub enum Engine<'a> {
     Scalar(Walk<'a>, Intersect),
     /// Ours, 8-wide AVX2 packets of 4 x 2 pixel blocks.
     Packet(&'a Tracer<'a>),
+    /// Ours, the wide BVH one ray at a time on a chosen instruction set (the edge-consistent test).
+    Bvh8(&'a Tracer<'a>, Simd),
     /// Embree, `rtcIntersect1` / `rtcOccluded1`.
     #[cfg(feature = "embree")]
     Embree1(&'a tracer_cpu::embree::Scene),
@@ -162,6 +165,20 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
                         if walk.occluded_with(test, ray, *t_max, stack, &mut cost) { 0.0 } else { f32::INFINITY }
                     } else {
                         walk.closest_with(test, ray, 0.0, *t_max, stack, &mut cost).map_or(f32::INFINITY, |h| h.t)
+                    };
+                }
+            }
+            Engine::Bvh8(tracer, simd) => {
+                let bvh = tracer.bvh8().expect("the scene has the child-pair layout");
+                let mut cost = Cost::default();
+                for (r, o) in rays.iter().zip(out.iter_mut()) {
+                    let Some((ray, t_max)) = r else { continue };
+                    *o = if any {
+                        let hit = bvh.trace_on::<true, Watertight>(simd, ray, 0.0, *t_max, stack, &mut cost);
+                        if hit.is_some() { 0.0 } else { f32::INFINITY }
+                    } else {
+                        bvh.trace_on::<false, Watertight>(simd, ray, 0.0, *t_max, stack, &mut cost)
+                            .map_or(f32::INFINITY, |h| h.t)
                     };
                 }
             }
