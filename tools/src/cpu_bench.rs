@@ -17,10 +17,10 @@ pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool, String> 
 
 /// The names `trace-cpu --method` takes for the traversals a benchmark can time.
 pub fn method_of(name: &str) -> Result<Method, String> {
-    [Method::Auto, Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8]
+    [Method::Auto, Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8, Method::Bvh8Packet]
         .into_iter()
         .find(|m| m.name() == name)
-        .ok_or_else(|| format!("{name:?} is not a CPU method (auto, packet, ordered, stackless, bvh8)"))
+        .ok_or_else(|| format!("{name:?} is not a CPU method (auto, packet, ordered, stackless, bvh8, bvh8-packet)"))
 }
 
 pub struct CpuBench {

@@ -27,7 +27,7 @@ use bvh_format::{Node, Triangle};
 pub const WIDTH: usize = 8;
 
 /// A child reference: a wide node's index, or with this bit a leaf block's index.
-const LEAF: u32 = 1 << 31;
+pub(crate) const LEAF: u32 = 1 << 31;
 
 /// A wide node: the boxes of up to 8 children, component by component.
 #[repr(C, align(64))]
@@ -85,7 +85,7 @@ impl TriBlock {
     }
 
     /// The triangle in `lane`, as the scalar tests take it.
-    fn triangle(&self, lane: usize) -> Triangle {
+    pub(crate) fn triangle(&self, lane: usize) -> Triangle {
         let v = |k: usize| [self.p[k][0][lane], self.p[k][1][lane], self.p[k][2][lane]];
         Triangle::from_vertices(v(0), v(1), v(2))
     }
@@ -99,10 +99,10 @@ impl TriBlock {
 /// The wide BVH of a scene: nodes in depth-first order (a node's first child right after it),
 /// leaf blocks in the same order.
 pub struct Bvh8 {
-    nodes: Vec<WideNode>,
-    blocks: Vec<TriBlock>,
+    pub(crate) nodes: Vec<WideNode>,
+    pub(crate) blocks: Vec<TriBlock>,
     /// The root's reference (a leaf for a scene of at most 8 triangles).
-    root: u32,
+    pub(crate) root: u32,
     /// The instruction set the traversal runs with here ([`Simd::detect`]).
     simd: Simd,
 }

@@ -5,7 +5,8 @@
 //! - [`traverse`]: scalar ordered child-pair traversal and stackless escape-pointer traversal.
 //! - [`bvh8`]: the wide BVH (8 children per node, collapsed at load from the child-pair tree) and
 //!   its single-ray traversal, 8 boxes or 8 triangles per AVX2 sequence.
-//! - [`packet`]: 8-wide AVX2 packets for coherent primary and shadow rays.
+//! - [`packet`]: 8-wide AVX2 packets for coherent primary and shadow rays over the child-pair tree;
+//!   [`packet8`]: the same packets over the wide BVH.
 //! - [`reference`]: the exact f64 reference: brute-force and traversed closest hits, and images.
 //! - [`lanes`]: the rays of one stage of a 4 x 2 pixel block, traced as a packet or one by one.
 //! - [`shade`]: the shading formulas; [`whitted`]: the stages of ray casting and Whitted ray
@@ -18,6 +19,7 @@ pub mod embree;
 pub mod geometry;
 pub mod lanes;
 pub mod packet;
+pub mod packet8;
 pub mod reference;
 pub mod render;
 pub mod shade;
@@ -41,6 +43,10 @@ pub enum Method {
     Bvh8,
     /// 8-wide SIMD packets (AVX2) for primary and shadow rays, ordered traversal for the rest.
     Packet,
+    /// 8-wide SIMD packets (AVX2) over the wide BVH ([`packet8`]) for every stage of a block,
+    /// lanes left alone finishing on the wide BVH one at a time ([`Method::Bvh8`], which it is
+    /// without AVX2).
+    Bvh8Packet,
     /// Picked per kind of ray (`lanes::Mixed`): incoherent rays (mirror and glass bounces, AO
     /// and diffuse rays) one at a time on the wide BVH ([`Method::Bvh8`]), which the ray report
     /// measures ahead of packets on them on every scene; the coherent primary and shadow rays as
@@ -58,6 +64,8 @@ impl Method {
             Method::Auto if scene.child_pair.is_none() && scene.escape.is_some() => Method::Stackless,
             Method::Packet if packet::available() => Method::Packet,
             Method::Packet => Method::Ordered,
+            Method::Bvh8Packet if packet8::available() => Method::Bvh8Packet,
+            Method::Bvh8Packet => Method::Bvh8,
             m => m,
         }
     }
@@ -69,6 +77,7 @@ impl Method {
             Method::Stackless => "stackless",
             Method::Bvh8 => "bvh8",
             Method::Packet => "packet",
+            Method::Bvh8Packet => "bvh8-packet",
             Method::Auto => "auto",
         }
     }

@@ -71,7 +71,9 @@ impl<'a> Tracer<'a> {
         let layout = match resolved {
             Method::Stackless => Layout::Escape(self.escape.ok_or_else(|| missing("escape-pointer"))?),
             // Auto's rays one at a time: the wide BVH.
-            Method::Bvh8 | Method::Auto => Layout::Wide(self.bvh8().ok_or_else(|| missing("child-pair"))?),
+            Method::Bvh8 | Method::Bvh8Packet | Method::Auto => {
+                Layout::Wide(self.bvh8().ok_or_else(|| missing("child-pair"))?)
+            }
             Method::Ordered | Method::Packet => {
                 Layout::ChildPair(self.child_pair.ok_or_else(|| missing("child-pair"))?)
             }
@@ -221,6 +223,10 @@ pub fn render_with_progress(
     let walk = tracer.walk(method)?;
     match method.resolve(tracer.scene) {
         Method::Packet => render_with(tracer, settings, Method::Packet, || Packets::new(walk), tiles, progress),
+        Method::Bvh8Packet => {
+            let bvh = tracer.bvh8().expect("the walk is on the wide BVH");
+            render_with(tracer, settings, Method::Bvh8Packet, || crate::packet8::Lanes::new(bvh), tiles, progress)
+        }
         Method::Auto => {
             let pairs = if packets_pay(tracer, settings, walk)? { Some(tracer.walk(Method::Ordered)?) } else { None };
             render_with(tracer, settings, Method::Auto, || Mixed::new(walk, pairs), tiles, progress)

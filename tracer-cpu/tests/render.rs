@@ -45,7 +45,7 @@ fn every_method_renders_the_same_image() {
         let tracer = Tracer::new(scene);
         for mode in [Mode::Cast, Mode::Whitted] {
             let base = render(&tracer, &settings(scene, camera, mode, Method::Ordered, 97, 61)).unwrap();
-            for method in [Method::Stackless, Method::Packet, Method::Bvh8, Method::Auto] {
+            for method in [Method::Stackless, Method::Packet, Method::Bvh8, Method::Bvh8Packet, Method::Auto] {
                 let img = render(&tracer, &settings(scene, camera, mode, method, 97, 61)).unwrap();
                 same_image(&base, &img, &format!("{name} {camera} {mode:?} {method:?}"));
             }

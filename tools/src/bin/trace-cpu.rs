@@ -66,6 +66,7 @@ enum MethodArg {
     Ordered,
     Stackless,
     Bvh8,
+    Bvh8Packet,
 }
 
 impl MethodArg {
@@ -76,6 +77,7 @@ impl MethodArg {
             MethodArg::Ordered => Method::Ordered,
             MethodArg::Stackless => Method::Stackless,
             MethodArg::Bvh8 => Method::Bvh8,
+            MethodArg::Bvh8Packet => Method::Bvh8Packet,
         }
     }
 }
@@ -106,11 +108,12 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     // BVH of bvh8 and auto is collapsed at load, and its time printed apart.
     let mut tracer = Tracer::new(scene);
     tracer.count_self_hits(args.self_hits);
-    let collapse = (!reference && matches!(method.resolve(scene), Method::Bvh8 | Method::Auto)).then(|| {
-        let t = Instant::now();
-        tracer.bvh8();
-        t.elapsed().as_secs_f64()
-    });
+    let collapse = (!reference && matches!(method.resolve(scene), Method::Bvh8 | Method::Bvh8Packet | Method::Auto))
+        .then(|| {
+            let t = Instant::now();
+            tracer.bvh8();
+            t.elapsed().as_secs_f64()
+        });
     let bar = Progress::new(settings.height as u64, "{bar:40} {pos}/{len} rows ({elapsed}, {eta} left)", false);
     let t0 = Instant::now();
     let progress = |rows: u32| bar.inc(rows as u64);

@@ -15,6 +15,7 @@ use std::time::Instant;
 use tracer_cpu::bvh8::Simd;
 use tracer_cpu::geometry::{Cost, Ray, Watertight, offset_origin};
 use tracer_cpu::packet::{self, LANES, Rays};
+use tracer_cpu::packet8;
 use tracer_cpu::traverse::Stack;
 use tracer_cpu::{Method, Tracer, Walk, shade};
 
@@ -137,6 +138,8 @@ pub enum Engine<'a> {
     Packet(&'a Tracer<'a>),
     /// Ours, the wide BVH one ray at a time on a chosen instruction set (the edge-consistent test).
     Bvh8(&'a Tracer<'a>, Simd),
+    /// Ours, 8-wide AVX2 packets of 4 x 2 pixel blocks over the wide BVH (`packet8`).
+    WidePacket(&'a Tracer<'a>),
     /// Embree, `rtcIntersect1` / `rtcOccluded1`.
     #[cfg(feature = "embree")]
     Embree1(&'a tracer_cpu::embree::Scene),
@@ -181,6 +184,21 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
                             .map_or(f32::INFINITY, |h| h.t)
                     };
                 }
+            }
+            Engine::WidePacket(tracer) => {
+                let bvh = tracer.bvh8().expect("the scene has the child-pair layout");
+                blocks(rays, out, w, |p| {
+                    let res = if any {
+                        packet8::trace::<true, Watertight>(bvh, p, pstack, stack)
+                    } else {
+                        packet8::trace::<false, Watertight>(bvh, p, pstack, stack)
+                    };
+                    std::array::from_fn(|i| match res.get(i) {
+                        Some(_) if any => 0.0,
+                        Some(h) => h.t,
+                        None => f32::INFINITY,
+                    })
+                });
             }
             Engine::Packet(tracer) => {
                 let nodes = tracer.scene.child_pair.as_deref().expect("the scene has the child-pair layout");
