@@ -43,7 +43,7 @@ pub fn held_line(tracer: &Tracer<'_>, method: Method) -> String {
 
 /// Whether `method` on `scene` walks the wide BVH, which the tracer collapses at load.
 pub fn collapses(method: Method, scene: &SceneFile) -> bool {
-    matches!(method.resolve(scene), Method::Bvh8 | Method::Auto)
+    matches!(method.resolve(scene), Method::Bvh8 | Method::Bvh8Packet | Method::Auto)
 }
 
 pub struct CpuBench {

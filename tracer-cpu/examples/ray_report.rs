@@ -30,30 +30,37 @@ use render_spec::Intersect;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use tracer_cpu::bvh8::Simd;
 use tracer_cpu::embree::{self, Flags};
-use tracer_cpu::{Method, Tracer, packet};
+use tracer_cpu::{Method, Tracer, packet, packet8};
 
 /// The tracers of the table, in column order.
 /// "ours ordered MT" is the ordered traversal with Möller-Trumbore (`--intersect mt`), the test
 /// before issue 16, so the edge-consistent test's cost is measured beside Embree in one run.
 /// "ours bvh8" is the wide BVH one ray at a time (`--method bvh8`), "ours bvh8 MT" the same with
 /// Möller-Trumbore.
-const ENGINES: [&str; 8] = [
+/// "ours bvh8" runs the path `trace-cpu` takes (AVX2 where the CPU has it), "ours bvh8 AVX-512"
+/// the AVX-512 path forced (`-` on a CPU without it); "ours bvh8 packet" is `--method
+/// bvh8-packet`, 8-ray packets on the wide BVH.
+const ENGINES: [&str; 10] = [
     "ours ordered",
     "ours packet",
     "ours bvh8",
+    "ours bvh8 AVX-512",
+    "ours bvh8 packet",
     "Embree 1",
     "Embree 1 robust",
     "Embree 8",
     "ours ordered MT",
     "ours bvh8 MT",
 ];
-const ORDERED: usize = 0;
 const PACKET: usize = 1;
 const BVH8: usize = 2;
-const EMBREE1: usize = 3;
-const ROBUST: usize = 4;
-const EMBREE8: usize = 5;
+const AVX512: usize = 3;
+const WIDE_PACKET: usize = 4;
+const EMBREE1: usize = 5;
+const ROBUST: usize = 6;
+const EMBREE8: usize = 7;
 /// Timed rounds go on at least this long per (ray set, thread count), so that the quick cases are
 /// not a handful of 30 ms samples on a shared machine ...
 const MIN_SECONDS: f64 = 2.0;
@@ -198,6 +205,8 @@ fn main() {
             tracer.walk(Method::Ordered).ok().map(|w| Engine::Scalar(w, Intersect::Watertight)),
             packet::available().then_some(Engine::Packet(&tracer)),
             tracer.walk(Method::Bvh8).ok().map(|w| Engine::Scalar(w, Intersect::Watertight)),
+            (tracer.bvh8().is_some() && Simd::Avx512.supported()).then_some(Engine::Bvh8(&tracer, Simd::Avx512)),
+            (tracer.bvh8().is_some() && packet8::available()).then_some(Engine::WidePacket(&tracer)),
             Some(Engine::Embree1(&em)),
             Some(Engine::Embree1(&em_robust)),
             Some(Engine::Embree8(&em)),
@@ -324,7 +333,10 @@ file's triangles:
   renderer forms them;
 - ours bvh8: `Method::Bvh8`, the wide BVH (`tracer-cpu/src/bvh8.rs`: 8 children per node and up to
   8 triangles per leaf, structure of arrays, collapsed at load from the child-pair tree) one ray
-  at a time, all children's boxes or all of a leaf's triangles in one AVX2 sequence;
+  at a time, all children's boxes or all of a leaf's triangles in one AVX2 sequence; ours bvh8
+  AVX-512: the same with the AVX-512 path forced (`TRACER_CPU_SIMD=avx512`); ours bvh8 packet:
+  `Method::Bvh8Packet` (`tracer-cpu/src/packet8.rs`), 8-ray AVX2 packets of the same 4 x 2 blocks
+  on the wide BVH;
 - Embree 1 / Embree 1 robust: Embree 3's `rtcIntersect1`/`rtcOccluded1` on a BVH Embree builds
   (default medium quality) over the same triangles (`v0`, `v0 + e1`, `v0 + e2`), default scene
   flags / `RTC_SCENE_FLAG_ROBUST`; Embree 8: `rtcIntersect8`/`rtcOccluded8` on the same 4 x 2
@@ -380,17 +392,20 @@ fn markdown(
     let _ = writeln!(
         s,
         "### Issue 11's targets: ours / Embree, same rays, same threads\n\nTargets: bvh8 >= 100% of Embree 1 \
-         (default and robust) on every kind; packet >= 100% of Embree 8 on primary and shadow rays.\n"
+         (default and robust) on every kind; packets >= 100% of Embree 8 on primary and shadow rays. \
+         bvh8: the path trace-cpu takes here ({}); bvh8 packet: 8-ray packets on the wide BVH.\n",
+        Simd::detect().name()
     );
     let _ = writeln!(
         s,
-        "| scene | size | kind | threads | bvh8 / Embree 1 | bvh8 / Embree 1 robust | packet / Embree 8 | packet / Embree 1 | bvh8 / ordered |"
+        "| scene | size | kind | threads | bvh8 / Embree 1 | bvh8 / Embree 1 robust | bvh8 AVX-512 / Embree 1 | \
+         bvh8 packet / Embree 8 | packet / Embree 8 | bvh8 packet / Embree 1 | bvh8 AVX-512 / bvh8 |"
     );
-    let _ = writeln!(s, "|---|---|---|---:|---:|---:|---:|---:|---:|");
+    let _ = writeln!(s, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {}x{} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {}x{} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.scene,
             r.size.0,
             r.size.1,
@@ -398,9 +413,11 @@ fn markdown(
             r.threads,
             ratio(r.mrays[BVH8], r.mrays[EMBREE1]),
             ratio(r.mrays[BVH8], r.mrays[ROBUST]),
+            ratio(r.mrays[AVX512], r.mrays[EMBREE1]),
+            ratio(r.mrays[WIDE_PACKET], r.mrays[EMBREE8]),
             ratio(r.mrays[PACKET], r.mrays[EMBREE8]),
-            ratio(r.mrays[PACKET], r.mrays[EMBREE1]),
-            ratio(r.mrays[BVH8], r.mrays[ORDERED]),
+            ratio(r.mrays[WIDE_PACKET], r.mrays[EMBREE1]),
+            ratio(r.mrays[AVX512], r.mrays[BVH8]),
         );
     }
 

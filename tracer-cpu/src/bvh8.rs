@@ -2,6 +2,8 @@
 //! nodes of up to 8 children whose boxes lie component by component (structure of arrays), so one
 //! AVX2 sequence tests a ray against all 8; leaves of up to 8 triangles, also structure of arrays,
 //! so one sequence tests the ray against all of a leaf's triangles with the frame's triangle test.
+//! Three paths ([`Simd`]): AVX2 (the default where the CPU has it), AVX-512 (on request) and a
+//! portable one; `crate::packet8` traces coherent packets of 8 rays through the same tree.
 //!
 //! The collapse (after Embree's BVH8 builder and Wald et al., "Getting Rid of Packets", 2008):
 //! a wide node starts from the two children of a binary node and repeatedly opens the child with
@@ -26,7 +28,7 @@ use bvh_format::{Node, Triangle};
 pub const WIDTH: usize = 8;
 
 /// A child reference: a wide node's index, or with this bit a leaf block's index.
-const LEAF: u32 = 1 << 31;
+pub(crate) const LEAF: u32 = 1 << 31;
 
 /// A wide node: the boxes of up to 8 children, component by component.
 #[repr(C, align(64))]
@@ -84,7 +86,7 @@ impl TriBlock {
     }
 
     /// The triangle in `lane`, as the scalar tests take it.
-    fn triangle(&self, lane: usize) -> Triangle {
+    pub(crate) fn triangle(&self, lane: usize) -> Triangle {
         let v = |k: usize| [self.p[k][0][lane], self.p[k][1][lane], self.p[k][2][lane]];
         Triangle::from_vertices(v(0), v(1), v(2))
     }
@@ -98,12 +100,104 @@ impl TriBlock {
 /// The wide BVH of a scene: nodes in depth-first order (a node's first child right after it),
 /// leaf blocks in the same order.
 pub struct Bvh8 {
-    nodes: Vec<WideNode>,
-    blocks: Vec<TriBlock>,
+    pub(crate) nodes: Vec<WideNode>,
+    pub(crate) blocks: Vec<TriBlock>,
     /// The root's reference (a leaf for a scene of at most 8 triangles).
-    root: u32,
-    /// Whether the AVX2 traversal runs here (else the portable one).
-    avx2: bool,
+    pub(crate) root: u32,
+    /// The instruction set the traversal runs with here ([`Simd::detect`]).
+    simd: Simd,
+}
+
+/// The instruction sets the single-ray traversal is written for. Every one finds bit for bit
+/// the same hits (the box and triangle tests are the scalar ones, operation by operation); they
+/// differ in speed only.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Simd {
+    /// One lane at a time: any CPU.
+    Portable,
+    /// 8 boxes or 8 triangles per sequence of 256-bit instructions.
+    Avx2,
+    /// AVX-512 (F, VL, DQ): the near and far planes of all 8 children in one 16-lane register,
+    /// mask registers and compress instructions for the children hit; the leaf test is AVX2's.
+    /// Only on request ([`Simd::detect`] says why).
+    Avx512,
+}
+
+impl Simd {
+    /// Every path, slowest first.
+    pub const ALL: [Simd; 3] = [Simd::Portable, Simd::Avx2, Simd::Avx512];
+
+    /// The name `TRACER_CPU_SIMD` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Simd::Portable => "portable",
+            Simd::Avx2 => "avx2",
+            Simd::Avx512 => "avx512",
+        }
+    }
+
+    /// Whether this CPU runs the path.
+    pub fn supported(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            match self {
+                Simd::Portable => true,
+                Simd::Avx2 => has!("avx2"),
+                Simd::Avx512 => has!("avx2") && has!("avx512f") && has!("avx512vl") && has!("avx512dq"),
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            self == Simd::Portable
+        }
+    }
+
+    /// The paths this CPU runs, slowest first (what the tests check against each other).
+    pub fn available() -> Vec<Simd> {
+        Simd::ALL.into_iter().filter(|s| s.supported()).collect()
+    }
+
+    /// The path [`Bvh8::trace`] takes: AVX2 where the CPU has it, else the portable one; the
+    /// environment variable `TRACER_CPU_SIMD` (`portable`, `avx2` or `avx512`) asks for another,
+    /// taken where the CPU runs it (else the widest below it that it runs; a name it does not
+    /// know is ignored). AVX-512 is not the default: on the 2-core AMD EPYC (Zen 4) VM it traces
+    /// about 10% fewer rays per second than AVX2 (docs/cpu-benchmark.md; the ray report times
+    /// both side by side on every machine, so a CPU where it wins shows it).
+    pub fn detect() -> Simd {
+        let asked = std::env::var("TRACER_CPU_SIMD").ok().and_then(|v| Simd::parse(&v));
+        Simd::best_up_to(asked.unwrap_or(Simd::Avx2))
+    }
+
+    /// The path `name` names (case and surrounding blanks ignored).
+    pub fn parse(name: &str) -> Option<Simd> {
+        Simd::ALL.into_iter().find(|s| s.name().eq_ignore_ascii_case(name.trim()))
+    }
+
+    /// The fastest path this CPU runs that is no wider than `cap`.
+    pub fn best_up_to(cap: Simd) -> Simd {
+        Simd::ALL.into_iter().rev().find(|s| *s <= cap && s.supported()).unwrap_or(Simd::Portable)
+    }
+}
+
+/// A hit before its barycentrics are divided out, as the traversals keep it: `u = w1 * (1 / sum)`
+/// and `v = w2 * (1 / sum)` (the portable traversal keeps `u`, `v` and 1, which gives the same
+/// bits).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Found {
+    pub t: f32,
+    pub tri: u32,
+    pub w1: f32,
+    pub w2: f32,
+    pub sum: f32,
+}
+
+impl Found {
+    #[inline(always)]
+    pub fn hit(self) -> Hit {
+        let inv = 1.0 / self.sum;
+        Hit { t: self.t, tri: self.tri, u: self.w1 * inv, v: self.w2 * inv }
+    }
 }
 
 /// What the collapse still has to make: the wide subtree of a binary node, or of a range of
@@ -134,7 +228,7 @@ impl Bvh8 {
             nodes: Vec::with_capacity(nodes.len() / 6 + 1),
             blocks: Vec::with_capacity(tris.len() / 4 + 1),
             root: LEAF,
-            avx2: crate::packet::available(),
+            simd: Simd::detect(),
         };
         if nodes.is_empty() {
             out.blocks.push(TriBlock::new(tris, &[]));
@@ -254,9 +348,14 @@ impl Bvh8 {
         std::mem::size_of_val(&self.nodes[..]) + std::mem::size_of_val(&self.blocks[..])
     }
 
+    /// The path [`Self::trace`] runs.
+    pub fn simd(&self) -> Simd {
+        self.simd
+    }
+
     /// Closest hit in `(t_min, t_max]` (`ANY` false) or any hit there (`ANY` true) with the
-    /// triangle test `T`, adding the boxes and triangles tested to `cost`: the AVX2 traversal
-    /// where the CPU has AVX2, else the portable one (the same tests, one lane at a time).
+    /// triangle test `T`, adding the boxes and triangles tested to `cost`: with the fastest
+    /// instruction set this CPU has ([`Simd::detect`]).
     #[inline]
     pub fn trace<const ANY: bool, T: TriangleTest>(
         &self,
@@ -266,12 +365,52 @@ impl Bvh8 {
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Hit> {
+        self.trace_from::<ANY, T>(self.simd, self.root, ray, t_min, (t_max, u32::MAX), stack, cost).map(Found::hit)
+    }
+
+    /// [`Self::trace`] on the path `simd` (the tests run every path this CPU has); a path the CPU
+    /// lacks ([`Simd::supported`]) runs the fastest one below it that it has.
+    #[inline]
+    pub fn trace_on<const ANY: bool, T: TriangleTest>(
+        &self,
+        simd: Simd,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Hit> {
+        let simd = Simd::best_up_to(simd);
+        self.trace_from::<ANY, T>(simd, self.root, ray, t_min, (t_max, u32::MAX), stack, cost).map(Found::hit)
+    }
+
+    /// The subtree `start`'s hits that beat `best` (distance, triangle; [`Hit::beats`]), the
+    /// packets' way to finish a lane alone, on the path `simd`, which this CPU must support.
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn trace_from<const ANY: bool, T: TriangleTest>(
+        &self,
+        simd: Simd,
+        start: u32,
+        ray: &Ray,
+        t_min: f32,
+        best: (f32, u32),
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Found> {
         #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `avx2` is set only where the CPU has AVX2.
-            return unsafe { avx2::trace::<ANY, T>(self, ray, t_min, t_max, stack, cost) };
+        {
+            if simd == Simd::Avx512 {
+                // SAFETY: the callers pass a supported path: AVX-512 F, VL and DQ and AVX2.
+                return unsafe { avx512::trace::<ANY, T>(self, start, ray, t_min, best, stack, cost) };
+            }
+            if simd == Simd::Avx2 {
+                // SAFETY: the callers pass a supported path: AVX2.
+                return unsafe { avx2::trace::<ANY, T>(self, start, ray, t_min, best, stack, cost) };
+            }
         }
-        self.trace_portable::<ANY, T>(ray, t_min, t_max, stack, cost)
+        let _ = simd;
+        self.portable::<ANY, T>(start, ray, t_min, best, stack, cost)
     }
 
     /// [`Self::trace`] without SIMD, for CPUs without AVX2 and as the tests' second opinion.
@@ -283,9 +422,22 @@ impl Bvh8 {
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Hit> {
-        let mut best = Hit { t: t_max, tri: u32::MAX, u: 0.0, v: 0.0 };
+        self.trace_on::<ANY, T>(Simd::Portable, ray, t_min, t_max, stack, cost)
+    }
+
+    fn portable<const ANY: bool, T: TriangleTest>(
+        &self,
+        start: u32,
+        ray: &Ray,
+        t_min: f32,
+        (t_max, tri): (f32, u32),
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Found> {
+        let mut best = Hit { t: t_max, tri, u: 0.0, v: 0.0 };
+        let mut found = false;
         stack.clear();
-        let mut cur = self.root;
+        let mut cur = start;
         loop {
             if cur & LEAF == 0 {
                 let node = &self.nodes[cur as usize];
@@ -317,15 +469,21 @@ impl Bvh8 {
                         && Hit::beats(t, i, best.t, best.tri)
                     {
                         best = Hit { t, tri: i, u, v };
+                        found = true;
                         if ANY {
-                            return Some(best);
+                            break;
                         }
                     }
+                }
+                if ANY && found {
+                    break;
                 }
             }
             loop {
                 match stack.pop() {
-                    None => return (best.tri != u32::MAX).then_some(best),
+                    None => {
+                        return found.then_some(Found { t: best.t, tri: best.tri, w1: best.u, w2: best.v, sum: 1.0 });
+                    }
                     Some((r, near)) if may_hold(near, best.t) => {
                         cur = r;
                         break;
@@ -334,6 +492,7 @@ impl Bvh8 {
                 }
             }
         }
+        Some(Found { t: best.t, tri: best.tri, w1: best.u, w2: best.v, sum: 1.0 })
     }
 }
 
@@ -375,8 +534,8 @@ fn leaf_indices(nodes: &[Node], b: u32, out: &mut Vec<u32>, stack: &mut Vec<u32>
 }
 
 #[cfg(target_arch = "x86_64")]
-mod avx2 {
-    use super::{Bvh8, LEAF, TriBlock, WIDTH};
+pub(crate) mod avx2 {
+    use super::{Bvh8, Found, LEAF, TriBlock, WIDTH};
     use crate::geometry::{Cost, Hit, Ray, TriangleTest, may_hold};
     use crate::traverse::Stack;
     use render_spec::Intersect;
@@ -384,22 +543,22 @@ mod avx2 {
     use std::arch::x86_64::*;
 
     /// The ray, splatted.
-    struct Lanes {
-        o: [__m256; 3],
-        d: [__m256; 3],
-        inv: [__m256; 3],
+    pub(super) struct Lanes {
+        pub o: [__m256; 3],
+        pub d: [__m256; 3],
+        pub inv: [__m256; 3],
     }
 
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn load(a: &[f32; WIDTH]) -> __m256 {
+    pub(super) fn load(a: &[f32; WIDTH]) -> __m256 {
         // SAFETY: `a` holds 8 floats.
         unsafe { _mm256_loadu_ps(a.as_ptr()) }
     }
 
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn store(v: __m256) -> [f32; WIDTH] {
+    pub(super) fn store(v: __m256) -> [f32; WIDTH] {
         let mut a = [0f32; WIDTH];
         // SAFETY: `a` has room for 8 floats.
         unsafe { _mm256_storeu_ps(a.as_mut_ptr(), v) };
@@ -444,7 +603,7 @@ mod avx2 {
     /// (hit mask, t, w1, w2, sum) (`u = w1 * (1 / sum)`, computed for the closest hit only).
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn watertight(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+    pub(super) fn watertight(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
         let (o, d) = (&r.o, &r.d);
         // Written out, not in closures: a closure does not inherit AVX2 (see crate::wide).
         let (a0, a1, a2) = (sub3(&b.p[0], o), sub3(&b.p[1], o), sub3(&b.p[2], o));
@@ -491,7 +650,7 @@ mod avx2 {
     /// operation; returns (hit mask, t, u, v, 1).
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn moller_trumbore(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+    pub(super) fn moller_trumbore(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
         let (o, d) = (&r.o, &r.d);
         let v0 = [load(&b.p[0][0]), load(&b.p[0][1]), load(&b.p[0][2])];
         let e1 = [
@@ -533,9 +692,44 @@ mod avx2 {
         [m, t, u, v, one]
     }
 
+    /// Tests the block's triangles against the ray, updating `best`; true where one beat it. A
+    /// macro, so that both traversals have it inline (a `#[target_feature]` function cannot be
+    /// `#[inline(always)]`, and LLVM kept it out of line, at a cost of 10%).
+    macro_rules! leaf {
+        ($any:expr, $t:ty, $block:expr, $r:expr, $t_min:expr, $best:expr, $cost:expr) => {{
+            let (block, best, cost): (&TriBlock, &mut Found, &mut Cost) = ($block, $best, $cost);
+            // SAFETY: a load of 8 ints.
+            let index = unsafe { _mm256_loadu_si256(block.index.as_ptr().cast()) };
+            let empty = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(index, _mm256_set1_epi32(-1))));
+            cost.tris += WIDTH as u32 - empty.count_ones();
+            let [m, t, w1, w2, sum] = match <$t as TriangleTest>::KIND {
+                Intersect::Watertight => watertight(block, $r, $t_min, _mm256_set1_ps(best.t)),
+                Intersect::MollerTrumbore => moller_trumbore(block, $r, $t_min, _mm256_set1_ps(best.t)),
+            };
+            let mut hit = _mm256_movemask_ps(m) as u32;
+            let mut found = false;
+            if hit != 0 {
+                let (t, w1, w2, sum) = (store(t), store(w1), store(w2), store(sum));
+                while hit != 0 {
+                    let i = hit.trailing_zeros() as usize;
+                    hit &= hit - 1;
+                    if Hit::beats(t[i], block.index[i], best.t, best.tri) {
+                        *best = Found { t: t[i], tri: block.index[i], w1: w1[i], w2: w2[i], sum: sum[i] };
+                        found = true;
+                        if $any {
+                            break;
+                        }
+                    }
+                }
+            }
+            found
+        }};
+    }
+    pub(super) use leaf;
+
     /// Asks for the cache lines of the node or leaf block `r`.
     #[inline(always)]
-    fn prefetch(bvh: &Bvh8, r: u32) {
+    pub(super) fn prefetch(bvh: &Bvh8, r: u32) {
         let (ptr, lines) = if r & LEAF == 0 {
             (bvh.nodes.as_ptr().wrapping_add(r as usize).cast::<i8>(), size_of::<super::WideNode>() / 64)
         } else {
@@ -560,12 +754,13 @@ mod avx2 {
     #[target_feature(enable = "avx2")]
     pub fn trace<const ANY: bool, T: TriangleTest>(
         bvh: &Bvh8,
+        start: u32,
         ray: &Ray,
         t_min: f32,
-        t_max: f32,
+        (t_max, tri): (f32, u32),
         stack: &mut Stack,
         cost: &mut Cost,
-    ) -> Option<Hit> {
+    ) -> Option<Found> {
         let r = Lanes {
             o: [_mm256_set1_ps(ray.origin.x), _mm256_set1_ps(ray.origin.y), _mm256_set1_ps(ray.origin.z)],
             d: [_mm256_set1_ps(ray.dir.x), _mm256_set1_ps(ray.dir.y), _mm256_set1_ps(ray.dir.z)],
@@ -577,11 +772,10 @@ mod avx2 {
         let slack = _mm256_set1_ps(T_SLACK);
         let sign = _mm256_set1_ps(-0.0);
         let t_min_v = _mm256_set1_ps(t_min);
-        let mut best = Hit { t: t_max, tri: u32::MAX, u: 0.0, v: 0.0 };
-        // The closest hit's w1, w2 and their sum (Möller-Trumbore: u, v and 1).
-        let (mut bw1, mut bw2, mut bsum) = (0.0f32, 0.0f32, 1.0f32);
+        let mut best = Found { t: t_max, tri, w1: 0.0, w2: 0.0, sum: 1.0 };
+        let mut found = false;
         stack.clear();
-        let mut cur = bvh.root;
+        let mut cur = start;
         loop {
             if cur & LEAF == 0 {
                 let node = &bvh.nodes[cur as usize];
@@ -649,44 +843,168 @@ mod avx2 {
                 }
             } else {
                 let block = &bvh.blocks[(cur & !LEAF) as usize];
-                // SAFETY: a load of 8 ints.
-                let index = unsafe { _mm256_loadu_si256(block.index.as_ptr().cast()) };
-                let empty = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(index, _mm256_set1_epi32(-1))));
-                cost.tris += WIDTH as u32 - empty.count_ones();
-                let [m, t, w1, w2, sum] = match T::KIND {
-                    Intersect::Watertight => watertight(block, &r, t_min_v, _mm256_set1_ps(best.t)),
-                    Intersect::MollerTrumbore => moller_trumbore(block, &r, t_min_v, _mm256_set1_ps(best.t)),
-                };
-                let mut hit = _mm256_movemask_ps(m) as u32;
-                if hit != 0 {
-                    let (t, w1, w2, sum) = (store(t), store(w1), store(w2), store(sum));
-                    while hit != 0 {
-                        let i = hit.trailing_zeros() as usize;
-                        hit &= hit - 1;
-                        if Hit::beats(t[i], block.index[i], best.t, best.tri) {
-                            best.t = t[i];
-                            best.tri = block.index[i];
-                            (bw1, bw2, bsum) = (w1[i], w2[i], sum[i]);
-                            if ANY {
-                                break;
-                            }
-                        }
-                    }
-                    if ANY && best.tri != u32::MAX {
-                        let inv = 1.0 / bsum;
-                        return Some(Hit { u: bw1 * inv, v: bw2 * inv, ..best });
+                if leaf!(ANY, T, block, &r, t_min_v, &mut best, cost) {
+                    found = true;
+                    if ANY {
+                        return Some(best);
                     }
                 }
             }
             loop {
                 match stack.pop() {
-                    None => {
-                        if best.tri == u32::MAX {
-                            return None;
-                        }
-                        let inv = 1.0 / bsum;
-                        return Some(Hit { u: bw1 * inv, v: bw2 * inv, ..best });
+                    None => return found.then_some(best),
+                    Some((c, near)) if may_hold(near, best.t) => {
+                        cur = c;
+                        break;
                     }
+                    Some(_) => {}
+                }
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use super::avx2::{Lanes, leaf, moller_trumbore, prefetch, store, watertight};
+    use super::{Bvh8, Found, LEAF, TriBlock, WIDTH};
+    use crate::geometry::{Cost, Hit, Ray, TriangleTest, may_hold};
+    use crate::traverse::Stack;
+    use render_spec::Intersect;
+    use render_spec::constants::T_SLACK;
+    use std::arch::x86_64::*;
+
+    /// Lanes 0-7 from `lo`, 8-15 from `hi`.
+    #[target_feature(enable = "avx2,avx512f,avx512vl,avx512dq")]
+    #[inline]
+    fn join(lo: &[f32; WIDTH], hi: &[f32; WIDTH]) -> __m512 {
+        // SAFETY: both hold 8 floats.
+        unsafe {
+            _mm512_insertf32x8::<1>(_mm512_castps256_ps512(_mm256_loadu_ps(lo.as_ptr())), _mm256_loadu_ps(hi.as_ptr()))
+        }
+    }
+
+    /// [`Bvh8::trace`] with AVX-512: per axis, lanes 0-7 hold the distances to the 8 children's
+    /// entry planes and lanes 8-15 the negated distances to their exit planes (the inverse
+    /// direction negated there: `x * -y` is exactly `-(x * y)`), so one `max` per axis makes both
+    /// the entry distance (the largest) and the exit distance (the smallest, negated): the same
+    /// operations in the same order as the AVX2 traversal, with `max(-a, -b) = -min(a, b)` bit for
+    /// bit, NaN and zeros included (the second operand wins on NaN and on equality in both). The
+    /// children hit are packed together with compress instructions, in slot order; the nearest is
+    /// entered and the others go on the stack farthest first, the order of the AVX2 traversal.
+    #[target_feature(enable = "avx2,avx512f,avx512vl,avx512dq")]
+    pub fn trace<const ANY: bool, T: TriangleTest>(
+        bvh: &Bvh8,
+        start: u32,
+        ray: &Ray,
+        t_min: f32,
+        (t_max, tri): (f32, u32),
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Found> {
+        let r = Lanes {
+            o: [_mm256_set1_ps(ray.origin.x), _mm256_set1_ps(ray.origin.y), _mm256_set1_ps(ray.origin.z)],
+            d: [_mm256_set1_ps(ray.dir.x), _mm256_set1_ps(ray.dir.y), _mm256_set1_ps(ray.dir.z)],
+            inv: [_mm256_set1_ps(ray.inv_dir.x), _mm256_set1_ps(ray.inv_dir.y), _mm256_set1_ps(ray.inv_dir.z)],
+        };
+        let o16: [__m512; 3] = std::array::from_fn(|a| _mm512_set1_ps(ray.origin[a]));
+        let inv16: [__m512; 3] = std::array::from_fn(|a| {
+            _mm512_insertf32x8::<1>(_mm512_set1_ps(ray.inv_dir[a]), _mm256_set1_ps(-ray.inv_dir[a]))
+        });
+        let near_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { 3 + a } else { a });
+        let far_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { a } else { 3 + a });
+        let sign = _mm256_set1_ps(-0.0);
+        let slack = _mm256_set1_ps(T_SLACK);
+        let t_min_v = _mm256_set1_ps(t_min);
+        let mut best = Found { t: t_max, tri, w1: 0.0, w2: 0.0, sum: 1.0 };
+        let mut found = false;
+        stack.clear();
+        let mut cur = start;
+        loop {
+            if cur & LEAF == 0 {
+                let node = &bvh.nodes[cur as usize];
+                let b = &node.bounds;
+                // Entry distances start at 0, exit distances at the best hit's (negated).
+                let mut acc = _mm512_maskz_mov_ps(0xff00, _mm512_set1_ps(-best.t));
+                for a in 0..3 {
+                    let d = _mm512_mul_ps(_mm512_sub_ps(join(&b[near_plane[a]], &b[far_plane[a]]), o16[a]), inv16[a]);
+                    acc = _mm512_max_ps(d, acc);
+                }
+                let near = _mm512_castps512_ps256(acc);
+                let far = _mm256_xor_ps(_mm512_extractf32x8_ps::<1>(acc), sign);
+                // `may_hold(near, far)`: near <= far + |far| * T_SLACK.
+                let ok = _mm256_cmp_ps_mask::<_CMP_LE_OQ>(
+                    near,
+                    _mm256_add_ps(far, _mm256_mul_ps(_mm256_andnot_ps(sign, far), slack)),
+                );
+                let mask = ok as u32 & node.valid;
+                cost.nodes += node.valid.count_ones();
+                if mask != 0 {
+                    let first = mask.trailing_zeros() as usize;
+                    let rest = mask & (mask - 1);
+                    if rest == 0 {
+                        cur = node.child[first];
+                        continue;
+                    }
+                    let mut all = mask;
+                    while all != 0 {
+                        prefetch(bvh, node.child[all.trailing_zeros() as usize]);
+                        all &= all - 1;
+                    }
+                    // SAFETY: a load of 8 ints.
+                    let child = unsafe { _mm256_loadu_si256(node.child.as_ptr().cast()) };
+                    let n = mask.count_ones() as usize;
+                    // The register form: compress to memory is microcoded on some CPUs (AMD Zen 4).
+                    let dists = super::avx2::store(_mm256_maskz_compress_ps(mask as u8, near));
+                    let mut kids = [0u32; WIDTH];
+                    // SAFETY: a store of 8 ints.
+                    unsafe {
+                        _mm256_storeu_si256(kids.as_mut_ptr().cast(), _mm256_maskz_compress_epi32(mask as u8, child))
+                    };
+                    if ANY {
+                        // Any hit ends the ray: no order needed.
+                        for k in 1..n {
+                            stack.push((kids[k], dists[k]));
+                        }
+                        cur = kids[0];
+                        continue;
+                    }
+                    if n == 2 {
+                        let (push, enter) = if dists[0] < dists[1] { (1, 0) } else { (0, 1) };
+                        stack.push((kids[push], dists[push]));
+                        cur = kids[enter];
+                        continue;
+                    }
+                    // Farthest first, ties in slot order (the AVX2 traversal's insertion sort).
+                    let mut hits = [(0f32, 0u32); WIDTH];
+                    hits[0] = (dists[0], kids[0]);
+                    for j in 1..n {
+                        let e = (dists[j], kids[j]);
+                        let mut k = j;
+                        while k > 0 && hits[k - 1].0 < e.0 {
+                            hits[k] = hits[k - 1];
+                            k -= 1;
+                        }
+                        hits[k] = e;
+                    }
+                    for &(d, c) in &hits[..n - 1] {
+                        stack.push((c, d));
+                    }
+                    cur = hits[n - 1].1;
+                    continue;
+                }
+            } else {
+                let block = &bvh.blocks[(cur & !LEAF) as usize];
+                if leaf!(ANY, T, block, &r, t_min_v, &mut best, cost) {
+                    found = true;
+                    if ANY {
+                        return Some(best);
+                    }
+                }
+            }
+            loop {
+                match stack.pop() {
+                    None => return found.then_some(best),
                     Some((c, near)) if may_hold(near, best.t) => {
                         cur = c;
                         break;
@@ -821,11 +1139,10 @@ mod tests {
                     &mut stack,
                     &mut cost,
                 );
-                assert_eq!(bvh.trace::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut cost), want);
-                assert_eq!(
-                    bvh.trace_portable::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut cost),
-                    want
-                );
+                for simd in Simd::available() {
+                    let got = bvh.trace_on::<false, Watertight>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut cost);
+                    assert_eq!(got, want, "{simd:?}");
+                }
                 let mt = crate::traverse::child_pair::<false, MollerTrumbore>(
                     &nodes,
                     &tris,
@@ -835,7 +1152,11 @@ mod tests {
                     &mut stack,
                     &mut cost,
                 );
-                assert_eq!(bvh.trace::<false, MollerTrumbore>(&ray, 0.0, f32::INFINITY, &mut stack, &mut cost), mt);
+                for simd in Simd::available() {
+                    let got =
+                        bvh.trace_on::<false, MollerTrumbore>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut cost);
+                    assert_eq!(got, mt, "{simd:?}");
+                }
                 hits += usize::from(want.is_some());
             }
             assert!(hits > 1000, "{n} triangles: only {hits} rays hit");
@@ -850,11 +1171,86 @@ mod tests {
         let bvh = Bvh8::new(&halving_tree(&tris, 2), &tris);
         let mut stack = Stack::default();
         let ray = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z);
-        let (mut a, mut b) = (Cost::default(), Cost::default());
-        let hit = bvh.trace::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut a);
-        let same = bvh.trace_portable::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut b);
-        assert_eq!(hit, same);
-        assert_eq!(a, b, "both traversals visit the same nodes and blocks");
+        let mut a = Cost::default();
+        let hit = bvh.trace_portable::<false, Watertight>(&ray, 0.0, f32::INFINITY, &mut stack, &mut a);
         assert!(a.nodes >= bvh.nodes[0].valid.count_ones() && a.tris > 0, "{a:?}");
+        for simd in Simd::available() {
+            let mut b = Cost::default();
+            let same = bvh.trace_on::<false, Watertight>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut b);
+            assert_eq!(hit, same, "{simd:?}");
+            assert_eq!(a, b, "{simd:?} visits the nodes and blocks the portable traversal visits");
+        }
+    }
+
+    /// Every path the CPU has, against the portable one: closest hits and costs on rays from
+    /// everywhere (many aimed at the cloud, some along axes and through box planes, where the
+    /// slab test's NaN rules decide), any hits up to and short of the closest hit.
+    #[test]
+    fn every_simd_path_finds_the_portable_hits_at_the_same_cost() {
+        let tris = scattered(2000, 11);
+        let bvh = Bvh8::new(&halving_tree(&tris, 3), &tris);
+        let mut rng = ::tests::Rng(5);
+        let mut stack = Stack::default();
+        let paths = Simd::available();
+        println!("paths on this CPU: {paths:?}");
+        let mut hits = 0;
+        for k in 0..20_000 {
+            let o = Vec3::new(rng.signed(), rng.signed(), rng.signed()) * 2.0;
+            let d = match k % 4 {
+                // Along an axis: two inverse direction components are infinite.
+                0 => [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::X, -Vec3::Y, -Vec3::Z][rng.below(6)],
+                // From a vertex's coordinate plane: origins on box planes.
+                1 => {
+                    let v = tris[rng.below(tris.len())].p1;
+                    let o2 = Vec3::new(v[0], o.y, o.z);
+                    let d = Vec3::new(0.0, -o2.y + 0.5, -o2.z + 0.5).normalize();
+                    let ray = Ray::new(o2, d);
+                    check(&bvh, &ray, &paths, &mut stack, &mut hits);
+                    continue;
+                }
+                _ => (Vec3::splat(0.5) + Vec3::new(rng.signed(), rng.signed(), rng.signed()) * 0.4 - o).normalize(),
+            };
+            check(&bvh, &Ray::new(o, d), &paths, &mut stack, &mut hits);
+        }
+        assert!(hits > 5000, "only {hits} rays hit");
+
+        fn check(bvh: &Bvh8, ray: &Ray, paths: &[Simd], stack: &mut Stack, hits: &mut usize) {
+            let mut want_cost = Cost::default();
+            let want = bvh.trace_portable::<false, Watertight>(ray, 0.0, f32::INFINITY, stack, &mut want_cost);
+            let want_mt = bvh.trace_on::<false, MollerTrumbore>(
+                Simd::Portable,
+                ray,
+                0.0,
+                f32::INFINITY,
+                stack,
+                &mut Cost::default(),
+            );
+            *hits += usize::from(want.is_some());
+            for &simd in paths {
+                let mut cost = Cost::default();
+                let got = bvh.trace_on::<false, Watertight>(simd, ray, 0.0, f32::INFINITY, stack, &mut cost);
+                assert_eq!(got, want, "{simd:?} on {ray:?}");
+                assert_eq!(cost, want_cost, "{simd:?} on {ray:?}");
+                let mt = bvh.trace_on::<false, MollerTrumbore>(simd, ray, 0.0, f32::INFINITY, stack, &mut cost);
+                assert_eq!(mt, want_mt, "{simd:?} (Möller-Trumbore) on {ray:?}");
+                let limits = want.map_or(vec![1.0, f32::INFINITY], |h| vec![h.t, h.t * (1.0 - 1e-3), f32::INFINITY]);
+                for t_max in limits {
+                    let any = bvh.trace_on::<true, Watertight>(simd, ray, 0.0, t_max, stack, &mut cost).is_some();
+                    let expected = want.is_some_and(|h| h.t <= t_max);
+                    assert_eq!(any, expected, "{simd:?}: any hit to {t_max} on {ray:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn paths_are_named_and_capped_by_what_the_cpu_runs() {
+        assert_eq!(Simd::parse(" AVX2 "), Some(Simd::Avx2));
+        assert_eq!(Simd::parse("avx512"), Some(Simd::Avx512));
+        assert_eq!(Simd::parse("sse"), None);
+        let avx2 = if Simd::Avx2.supported() { Simd::Avx2 } else { Simd::Portable };
+        assert_eq!(Simd::best_up_to(Simd::Portable), Simd::Portable);
+        assert_eq!(Simd::best_up_to(Simd::Avx2), avx2);
+        assert_eq!(Simd::best_up_to(Simd::Avx512), *Simd::available().last().unwrap());
     }
 }

@@ -5,7 +5,8 @@
 //! - [`traverse`]: scalar ordered child-pair traversal and stackless escape-pointer traversal.
 //! - [`bvh8`]: the wide BVH (8 children per node, collapsed at load from the child-pair tree) and
 //!   its single-ray traversal, 8 boxes or 8 triangles per AVX2 sequence.
-//! - [`packet`]: 8-wide AVX2 packets for coherent primary and shadow rays.
+//! - [`packet`]: 8-wide AVX2 packets for coherent primary and shadow rays over the child-pair tree;
+//!   [`packet8`]: the same packets over the wide BVH.
 //! - [`reference`]: the exact f64 reference: brute-force and traversed closest hits, and images.
 //! - [`vertices`]: where the triangle tests read a triangle's corners, the expanded copy or the
 //!   file's indexed arrays (`--vertices`).
@@ -20,6 +21,7 @@ pub mod embree;
 pub mod geometry;
 pub mod lanes;
 pub mod packet;
+pub mod packet8;
 pub mod reference;
 pub mod render;
 pub mod shade;
@@ -45,6 +47,10 @@ pub enum Method {
     Bvh8,
     /// 8-wide SIMD packets (AVX2) for primary and shadow rays, ordered traversal for the rest.
     Packet,
+    /// 8-wide SIMD packets (AVX2) over the wide BVH ([`packet8`]) for every stage of a block,
+    /// lanes left alone finishing on the wide BVH one at a time ([`Method::Bvh8`], which it is
+    /// without AVX2).
+    Bvh8Packet,
     /// Picked per kind of ray (`lanes::Mixed`): the rays of each stage (primary, shadow,
     /// secondary, AO, diffuse) one at a time on the wide BVH ([`Method::Bvh8`]) or as packets
     /// ([`Method::Packet`]), whichever a short measurement of the frame's own rays at its start
@@ -56,7 +62,8 @@ pub enum Method {
 impl Method {
     /// Every method, in the order `trace-cpu --help` lists them: the one list of CPU method names
     /// (the CLI, `trace-cpu bench`, the examples and the tests take it from here).
-    pub const ALL: [Method; 5] = [Method::Auto, Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8];
+    pub const ALL: [Method; 6] =
+        [Method::Auto, Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8, Method::Bvh8Packet];
 
     /// The method `trace-cpu --method` calls `name`.
     pub fn named(name: &str) -> Option<Method> {
@@ -75,6 +82,8 @@ impl Method {
             Method::Auto if scene.child_pair.is_none() && scene.escape.is_some() => Method::Stackless,
             Method::Packet if packet::available() => Method::Packet,
             Method::Packet => Method::Ordered,
+            Method::Bvh8Packet if packet8::available() => Method::Bvh8Packet,
+            Method::Bvh8Packet => Method::Bvh8,
             m => m,
         }
     }
@@ -86,6 +95,7 @@ impl Method {
             Method::Stackless => "stackless",
             Method::Bvh8 => "bvh8",
             Method::Packet => "packet",
+            Method::Bvh8Packet => "bvh8-packet",
             Method::Auto => "auto",
         }
     }

@@ -123,15 +123,15 @@ pub fn trace<const ANY: bool, T: TriangleTest>(
 /// A deferred subtree on the packet's stack: node, lane mask and per-lane entry distances.
 #[derive(Clone, Copy)]
 pub struct Entry {
-    node: u32,
+    pub(crate) node: u32,
     #[cfg(target_arch = "x86_64")]
-    mask: std::arch::x86_64::__m256,
+    pub(crate) mask: std::arch::x86_64::__m256,
     #[cfg(target_arch = "x86_64")]
-    near: std::arch::x86_64::__m256,
+    pub(crate) near: std::arch::x86_64::__m256,
 }
 
 #[cfg(target_arch = "x86_64")]
-mod avx2 {
+pub(crate) mod avx2 {
     use super::{Entry, LANES, Rays, Results};
     use crate::geometry::{Cost, TriangleTest};
     use crate::vertices::TriangleSource;
@@ -140,27 +140,27 @@ mod avx2 {
     use render_spec::constants::T_SLACK;
     use std::arch::x86_64::*;
 
-    struct Packet {
-        o: [__m256; 3],
-        d: [__m256; 3],
-        inv: [__m256; 3],
+    pub(crate) struct Packet {
+        pub o: [__m256; 3],
+        pub d: [__m256; 3],
+        pub inv: [__m256; 3],
     }
 
     #[inline(always)]
-    fn splat(v: f32) -> __m256 {
+    pub(crate) fn splat(v: f32) -> __m256 {
         // SAFETY: plain register arithmetic; AVX is enabled for every caller of this module.
         unsafe { _mm256_set1_ps(v) }
     }
 
     #[target_feature(enable = "avx2")]
-    fn lanes(f: impl Fn(usize) -> f32) -> __m256 {
+    pub(crate) fn lanes(f: impl Fn(usize) -> f32) -> __m256 {
         let a: [f32; LANES] = std::array::from_fn(f);
         // SAFETY: `a` holds 8 floats.
         unsafe { _mm256_loadu_ps(a.as_ptr()) }
     }
 
     #[target_feature(enable = "avx2")]
-    fn to_array(v: __m256) -> [f32; LANES] {
+    pub(crate) fn to_array(v: __m256) -> [f32; LANES] {
         let mut a = [0f32; LANES];
         // SAFETY: `a` has room for 8 floats.
         unsafe { _mm256_storeu_ps(a.as_mut_ptr(), v) };
@@ -168,7 +168,7 @@ mod avx2 {
     }
 
     #[target_feature(enable = "avx2")]
-    fn to_array_i(v: __m256i) -> [i32; LANES] {
+    pub(crate) fn to_array_i(v: __m256i) -> [i32; LANES] {
         let mut a = [0i32; LANES];
         // SAFETY: `a` has room for 8 ints.
         unsafe { _mm256_storeu_si256(a.as_mut_ptr().cast(), v) };
@@ -181,7 +181,7 @@ mod avx2 {
     /// path skips it.
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn slab(node: &Node, p: &Packet, t_max: __m256) -> (__m256, __m256) {
+    pub(crate) fn slab(node: &Node, p: &Packet, t_max: __m256) -> (__m256, __m256) {
         let mut near = _mm256_setzero_ps();
         let mut far = t_max;
         for a in 0..3 {
@@ -199,23 +199,23 @@ mod avx2 {
     /// [`crate::geometry::may_hold`], 8-wide: `near <= t + |t| * T_SLACK`.
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn may_hold(near: __m256, t: __m256) -> __m256 {
+    pub(crate) fn may_hold(near: __m256, t: __m256) -> __m256 {
         let abs = _mm256_andnot_ps(splat(-0.0), t);
         _mm256_cmp_ps::<_CMP_LE_OQ>(near, add(t, mul(abs, splat(T_SLACK))))
     }
 
     #[inline(always)]
-    fn mul(a: __m256, b: __m256) -> __m256 {
+    pub(crate) fn mul(a: __m256, b: __m256) -> __m256 {
         // SAFETY: register arithmetic under the callers' AVX2.
         unsafe { _mm256_mul_ps(a, b) }
     }
     #[inline(always)]
-    fn sub(a: __m256, b: __m256) -> __m256 {
+    pub(crate) fn sub(a: __m256, b: __m256) -> __m256 {
         // SAFETY: as above.
         unsafe { _mm256_sub_ps(a, b) }
     }
     #[inline(always)]
-    fn add(a: __m256, b: __m256) -> __m256 {
+    pub(crate) fn add(a: __m256, b: __m256) -> __m256 {
         // SAFETY: as above.
         unsafe { _mm256_add_ps(a, b) }
     }
@@ -323,15 +323,61 @@ mod avx2 {
     /// Adds 1 to the counters of the lanes in `mask`.
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn count(acc: __m256i, mask: __m256) -> __m256i {
+    pub(crate) fn count(acc: __m256i, mask: __m256) -> __m256i {
         // An all-ones lane is -1.
         _mm256_sub_epi32(acc, _mm256_castps_si256(mask))
     }
 
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn any(mask: __m256) -> bool {
+    pub(crate) fn any(mask: __m256) -> bool {
         _mm256_movemask_ps(mask) != 0
+    }
+
+    /// The lanes' closest hits so far: distance, triangle, and the edge functions w1, w2 and
+    /// their sum (Möller-Trumbore: u, v and 1).
+    pub(crate) struct Best {
+        pub t: __m256,
+        pub tri: __m256i,
+        pub w1: __m256,
+        pub w2: __m256,
+        pub sum: __m256,
+    }
+
+    /// Tests triangle `tri` (index `i`) against the lanes in `mask` with the test `T` and keeps
+    /// each lane's hit where it beats the lane's best ([`Hit::beats`](crate::Hit::beats)); returns
+    /// the lanes it won.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(crate) fn test<T: TriangleTest>(tri: &Triangle, i: u32, pk: &Packet, mask: __m256, best: &mut Best) -> __m256 {
+        // A constant per instance: the other test is compiled out.
+        let found = match T::KIND {
+            Intersect::Watertight => intersect(tri, pk, _mm256_setzero_ps(), best.t),
+            Intersect::MollerTrumbore => intersect_moller_trumbore(tri, pk, _mm256_setzero_ps(), best.t),
+        };
+        keep(found, i, mask, best)
+    }
+
+    /// Keeps the hits `[hit mask, t, w1, w2, sum]` of triangle `i` in the lanes of `mask` where
+    /// they beat the lane's best; returns the lanes it won.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(crate) fn keep([m, t, w1, w2, sum]: [__m256; 5], i: u32, mask: __m256, best: &mut Best) -> __m256 {
+        // Hit::beats: nearer, or equally near with a lower index (unsigned compare through a
+        // sign flip).
+        let bias = _mm256_set1_epi32(i32::MIN);
+        let idx = _mm256_set1_epi32(i as i32);
+        let lower =
+            _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_xor_si256(best.tri, bias), _mm256_xor_si256(idx, bias)));
+        let nearer = _mm256_cmp_ps::<_CMP_LT_OQ>(t, best.t);
+        let tie = _mm256_and_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(t, best.t), lower);
+        let win = _mm256_and_ps(_mm256_and_ps(m, mask), _mm256_or_ps(nearer, tie));
+        best.t = _mm256_blendv_ps(best.t, t, win);
+        best.w1 = _mm256_blendv_ps(best.w1, w1, win);
+        best.w2 = _mm256_blendv_ps(best.w2, w2, win);
+        best.sum = _mm256_blendv_ps(best.sum, sum, win);
+        best.tri = _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(best.tri), _mm256_castsi256_ps(idx), win));
+        win
     }
 
     #[target_feature(enable = "avx2")]
@@ -363,8 +409,6 @@ mod avx2 {
         let mut hit_any = _mm256_setzero_ps();
         let mut n_nodes = _mm256_setzero_si256();
         let mut n_tris = _mm256_setzero_si256();
-        let zero = _mm256_setzero_ps();
-        let bias = _mm256_set1_epi32(i32::MIN);
         stack.clear();
 
         n_nodes = count(n_nodes, alive);
@@ -378,30 +422,9 @@ mod avx2 {
             if node.is_leaf() {
                 for i in node.index..node.index + node.count {
                     n_tris = count(n_tris, cur_mask);
-                    // A constant per instance: the other test is compiled out.
-                    let [m, t, w1, w2, sum] = match T::KIND {
-                        Intersect::Watertight => intersect(&tris.triangle(i), &pk, zero, best_t),
-                        Intersect::MollerTrumbore => intersect_moller_trumbore(&tris.triangle(i), &pk, zero, best_t),
-                    };
-                    // Hit::beats: nearer, or equally near with a lower index (unsigned compare
-                    // through a sign flip).
-                    let idx = _mm256_set1_epi32(i as i32);
-                    let lower = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
-                        _mm256_xor_si256(best_tri, bias),
-                        _mm256_xor_si256(idx, bias),
-                    ));
-                    let nearer = _mm256_cmp_ps::<_CMP_LT_OQ>(t, best_t);
-                    let tie = _mm256_and_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(t, best_t), lower);
-                    let win = _mm256_and_ps(_mm256_and_ps(m, cur_mask), _mm256_or_ps(nearer, tie));
-                    best_t = _mm256_blendv_ps(best_t, t, win);
-                    best_w1 = _mm256_blendv_ps(best_w1, w1, win);
-                    best_w2 = _mm256_blendv_ps(best_w2, w2, win);
-                    best_sum = _mm256_blendv_ps(best_sum, sum, win);
-                    best_tri = _mm256_castps_si256(_mm256_blendv_ps(
-                        _mm256_castsi256_ps(best_tri),
-                        _mm256_castsi256_ps(idx),
-                        win,
-                    ));
+                    let mut b = Best { t: best_t, tri: best_tri, w1: best_w1, w2: best_w2, sum: best_sum };
+                    let win = test::<T>(&tris.triangle(i), i, &pk, cur_mask, &mut b);
+                    Best { t: best_t, tri: best_tri, w1: best_w1, w2: best_w2, sum: best_sum } = b;
                     hit_any = _mm256_or_ps(hit_any, win);
                     if ANY {
                         alive = _mm256_andnot_ps(win, alive);

@@ -103,7 +103,9 @@ impl<'a> Tracer<'a> {
         let layout = match resolved {
             Method::Stackless => Layout::Escape(self.escape.ok_or_else(|| missing("escape-pointer"))?),
             // Auto's rays one at a time: the wide BVH.
-            Method::Bvh8 | Method::Auto => Layout::Wide(self.bvh8().ok_or_else(|| missing("child-pair"))?),
+            Method::Bvh8 | Method::Bvh8Packet | Method::Auto => {
+                Layout::Wide(self.bvh8().ok_or_else(|| missing("child-pair"))?)
+            }
             Method::Ordered | Method::Packet => {
                 Layout::ChildPair(self.child_pair.ok_or_else(|| missing("child-pair"))?)
             }
@@ -613,6 +615,10 @@ pub fn render_into(
     // Each way of tracing compiled into the loop of its own (what [`Plan::lanes`] makes).
     match method {
         Method::Packet => render_in(tracer, settings, method, || Packets::new(walk), tiles, progress, avx, canvas),
+        Method::Bvh8Packet => {
+            let bvh = tracer.bvh8().expect("the walk is on the wide BVH");
+            render_in(tracer, settings, method, || crate::packet8::Lanes::new(bvh), tiles, progress, avx, canvas)
+        }
         Method::Auto => {
             let (pairs, stages) = (plan.pairs, plan.packet_stages);
             render_in(tracer, settings, method, || Mixed::new(walk, pairs, stages), tiles, progress, avx, canvas)

@@ -7,10 +7,11 @@ use bvh_format::SceneFile;
 use glam::Vec3;
 use rayon::prelude::*;
 use render_spec::Intersect;
+use tracer_cpu::bvh8::Simd;
 use tracer_cpu::geometry::{MollerTrumbore, TriangleTest, Watertight};
 use tracer_cpu::reference::{self, RefHit};
 use tracer_cpu::traverse::Stack;
-use tracer_cpu::{Cost, Hit, Method, Ray, Tracer, packet};
+use tracer_cpu::{Cost, Hit, Method, Ray, Tracer, packet, packet8};
 
 /// How close to a triangle's boundary (in barycentric terms) a hit may be for f32 and f64 to
 /// disagree about which triangle it belongs to: f32 barycentrics of the bunny's millimetre-sized
@@ -70,6 +71,7 @@ fn fast_hits<T: TriangleTest>(
     pstack: &mut Vec<packet::Entry>,
 ) -> Vec<Option<Hit>> {
     let mut ordered = Vec::with_capacity(chunk.len());
+    let simds = Simd::available();
     for &(o, d) in chunk {
         let ray = Ray::new(o, d);
         let mut c = Cost::default();
@@ -79,15 +81,21 @@ fn fast_hits<T: TriangleTest>(
         let w = tracer.walk(Method::Bvh8).unwrap().closest_with(T::KIND, &ray, 0.0, f32::INFINITY, stack, &mut c);
         assert_eq!(a, w, "{name}: ordered and bvh8 disagree on origin {o:?} dir {d:?}");
         let bvh8 = tracer.bvh8().unwrap();
-        let p = bvh8.trace_portable::<false, T>(&ray, 0.0, f32::INFINITY, stack, &mut c);
-        assert_eq!(a, p, "{name}: ordered and portable bvh8 disagree on origin {o:?} dir {d:?}");
+        // Every instruction set this CPU has (portable, AVX2, AVX-512), each forced.
+        for &simd in &simds {
+            let p = bvh8.trace_on::<false, T>(simd, &ray, 0.0, f32::INFINITY, stack, &mut c);
+            assert_eq!(a, p, "{name}: ordered and {simd:?} bvh8 disagree on origin {o:?} dir {d:?}");
+        }
         // Any hit, up to the closest hit's distance and just short of it (where nothing is).
         for t_max in a.map_or(vec![f32::INFINITY, 1.0], |h| vec![h.t, f32::INFINITY, h.t * (1.0 - 1e-3)]) {
             let walk = tracer.walk(Method::Ordered).unwrap();
             let want = walk.occluded_with(T::KIND, &ray, t_max, stack, &mut c);
             let got = tracer.walk(Method::Bvh8).unwrap().occluded_with(T::KIND, &ray, t_max, stack, &mut c);
-            let portable = bvh8.trace_portable::<true, T>(&ray, 0.0, t_max, stack, &mut c).is_some();
-            assert_eq!((got, portable), (want, want), "{name}: any hit to {t_max} on origin {o:?} dir {d:?}");
+            assert_eq!(got, want, "{name}: bvh8 any hit to {t_max} on origin {o:?} dir {d:?}");
+            for &simd in &simds {
+                let got = bvh8.trace_on::<true, T>(simd, &ray, 0.0, t_max, stack, &mut c).is_some();
+                assert_eq!(got, want, "{name}: {simd:?} bvh8 any hit to {t_max} on origin {o:?} dir {d:?}");
+            }
         }
         ordered.push(a);
     }
@@ -101,8 +109,63 @@ fn fast_hits<T: TriangleTest>(
         for (i, a) in ordered.iter().enumerate() {
             assert_eq!(res.get(i), *a, "{name}: packet and ordered disagree on lane {i}");
         }
+        // Wide packets: these incoherent rays, and a coherent packet around each of them (one
+        // origin, directions a few thousandths apart, as neighbouring pixels' primary rays), with
+        // every other lane left out once.
+        wide_packet::<T>(name, tracer, chunk, stack, pstack);
+        for (k, &(o, d)) in chunk.iter().enumerate() {
+            let spread: Vec<(Vec3, Vec3)> = (0..packet::LANES)
+                .filter(|&i| k % 2 == 0 || i % 2 == 0)
+                .map(|i| {
+                    let (x, y) = ((i % 4) as f32 - 1.5, (i / 4) as f32 - 0.5);
+                    (o, (d + Vec3::new(x, y, x * y) * 2e-3).normalize())
+                })
+                .collect();
+            wide_packet::<T>(name, tracer, &spread, stack, pstack);
+        }
     }
     ordered
+}
+
+/// Wide packets ([`packet8`]) on up to 8 rays against the ordered traversal one ray at a time:
+/// closest hits, and any hit up to the closest hit and just short of it.
+fn wide_packet<T: TriangleTest>(
+    name: &str,
+    tracer: &Tracer<'_>,
+    rays: &[(Vec3, Vec3)],
+    stack: &mut Stack,
+    pstack: &mut Vec<packet::Entry>,
+) {
+    let walk = tracer.walk(Method::Ordered).unwrap();
+    let bvh8 = tracer.bvh8().unwrap();
+    let mut c = Cost::default();
+    let mut p = packet::Rays::default();
+    for (i, &(o, d)) in rays.iter().enumerate() {
+        p.set(i, &Ray::new(o, d), f32::INFINITY);
+    }
+    let want: Vec<Option<Hit>> = rays
+        .iter()
+        .map(|&(o, d)| walk.closest_with(T::KIND, &Ray::new(o, d), 0.0, f32::INFINITY, stack, &mut c))
+        .collect();
+    let mut single = Stack::default();
+    let res = packet8::trace::<false, T>(bvh8, &p, pstack, &mut single);
+    for (i, (&(o, d), a)) in rays.iter().zip(&want).enumerate() {
+        assert_eq!(res.get(i), *a, "{name}: wide packet and ordered disagree on lane {i}: origin {o:?} dir {d:?}");
+    }
+    for (i, r) in res.hit.iter().enumerate().skip(rays.len()) {
+        assert!(!r, "{name}: lane {i} holds no ray but hit");
+    }
+    for shorten in [1.0, 1.0 - 1e-3] {
+        let mut q = p;
+        for (i, a) in want.iter().enumerate() {
+            q.t_max[i] = a.map_or(f32::INFINITY, |h| h.t * shorten);
+        }
+        let res = packet8::trace::<true, T>(bvh8, &q, pstack, &mut single);
+        for (i, &(o, d)) in rays.iter().enumerate() {
+            let blocked = walk.occluded_with(T::KIND, &Ray::new(o, d), q.t_max[i], stack, &mut c);
+            assert_eq!(res.hit[i], blocked, "{name}: wide packet any hit to {} on origin {o:?} dir {d:?}", q.t_max[i]);
+        }
+    }
 }
 
 /// Both triangle tests: on each, every path agrees with the others bit for bit and with the f64
@@ -139,18 +202,17 @@ fn check_scene(name: &str, scene: &SceneFile, n: usize, seed: u64) {
             total.edges += c.edges;
             total.unexplained.extend(c.unexplained.iter().cloned());
         }
+        let paths: Vec<String> = Simd::available().iter().map(|s| format!("bvh8 {}", s.name())).collect();
         println!(
-            "{name}: {} rays, {} agree with the f64 reference, {} exact ties, {} within {EDGE} of an edge, {} unexplained{}",
+            "{name}: {} rays, {} agree with the f64 reference, {} exact ties, {} within {EDGE} of an edge, {} unexplained \
+             (ordered, stackless, {}, AVX2 packets and wide packets{} identical)",
             total.rays,
             total.agree,
             total.ties,
             total.edges,
             total.unexplained.len(),
-            if packet::available() {
-                " (ordered, stackless, bvh8 and AVX2 packets identical)"
-            } else {
-                " (no AVX2 here; ordered, stackless and bvh8 identical)"
-            }
+            paths.join(", "),
+            if packet::available() { "" } else { " (absent: no AVX2 here)" }
         );
         let examples: Vec<&String> = total.unexplained.iter().filter(|s| !s.is_empty()).collect();
         assert!(total.unexplained.is_empty(), "{name}: unexplained disagreements, e.g. {examples:#?}");
@@ -202,6 +264,18 @@ fn rays_through_shared_vertices_break_ties_the_same_way_on_every_path() {
                 tracer.walk(Method::Ordered).unwrap().closest_with(test, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
             let w = tracer.walk(Method::Bvh8).unwrap().closest_with(test, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
             assert_eq!(a, w, "ray {i}, {test:?}: bvh8");
+            let bvh8 = tracer.bvh8().unwrap();
+            for simd in Simd::available() {
+                let w = match test {
+                    Intersect::Watertight => {
+                        bvh8.trace_on::<false, Watertight>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut c)
+                    }
+                    Intersect::MollerTrumbore => {
+                        bvh8.trace_on::<false, MollerTrumbore>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut c)
+                    }
+                };
+                assert_eq!(a, w, "ray {i}, {test:?}: bvh8 {simd:?}");
+            }
         }
         rays += 1;
         if a.is_none() {

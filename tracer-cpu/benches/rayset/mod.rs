@@ -12,8 +12,10 @@ use rayon::prelude::*;
 use render_spec::{CameraSpec, Intersect, sequence};
 use std::path::Path;
 use std::time::Instant;
+use tracer_cpu::bvh8::Simd;
 use tracer_cpu::geometry::{Cost, Ray, Watertight, offset_origin};
 use tracer_cpu::packet::{self, LANES, Rays};
+use tracer_cpu::packet8;
 use tracer_cpu::traverse::Stack;
 use tracer_cpu::{Method, Tracer, Walk, shade};
 
@@ -134,6 +136,10 @@ pub enum Engine<'a> {
     Scalar(Walk<'a>, Intersect),
     /// Ours, 8-wide AVX2 packets of 4 x 2 pixel blocks.
     Packet(&'a Tracer<'a>),
+    /// Ours, the wide BVH one ray at a time on a chosen instruction set (the edge-consistent test).
+    Bvh8(&'a Tracer<'a>, Simd),
+    /// Ours, 8-wide AVX2 packets of 4 x 2 pixel blocks over the wide BVH (`packet8`).
+    WidePacket(&'a Tracer<'a>),
     /// Embree, `rtcIntersect1` / `rtcOccluded1`.
     #[cfg(feature = "embree")]
     Embree1(&'a tracer_cpu::embree::Scene),
@@ -164,6 +170,35 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
                         walk.closest_with(test, ray, 0.0, *t_max, stack, &mut cost).map_or(f32::INFINITY, |h| h.t)
                     };
                 }
+            }
+            Engine::Bvh8(tracer, simd) => {
+                let bvh = tracer.bvh8().expect("the scene has the child-pair layout");
+                let mut cost = Cost::default();
+                for (r, o) in rays.iter().zip(out.iter_mut()) {
+                    let Some((ray, t_max)) = r else { continue };
+                    *o = if any {
+                        let hit = bvh.trace_on::<true, Watertight>(simd, ray, 0.0, *t_max, stack, &mut cost);
+                        if hit.is_some() { 0.0 } else { f32::INFINITY }
+                    } else {
+                        bvh.trace_on::<false, Watertight>(simd, ray, 0.0, *t_max, stack, &mut cost)
+                            .map_or(f32::INFINITY, |h| h.t)
+                    };
+                }
+            }
+            Engine::WidePacket(tracer) => {
+                let bvh = tracer.bvh8().expect("the scene has the child-pair layout");
+                blocks(rays, out, w, |p| {
+                    let res = if any {
+                        packet8::trace::<true, Watertight>(bvh, p, pstack, stack)
+                    } else {
+                        packet8::trace::<false, Watertight>(bvh, p, pstack, stack)
+                    };
+                    std::array::from_fn(|i| match res.get(i) {
+                        Some(_) if any => 0.0,
+                        Some(h) => h.t,
+                        None => f32::INFINITY,
+                    })
+                });
             }
             Engine::Packet(tracer) => {
                 let nodes = tracer.scene.child_pair.as_deref().expect("the scene has the child-pair layout");
