@@ -91,11 +91,12 @@ struct Aov {
 }
 
 // Which light a shade pass handles, and which bounce a bounce pass (or which ray an AO pass) is
-// (a push constant).
+// (a push constant); `work`: the counters word the persistent kernels take their work from
+// (stages.wgsl), one per pass of a submission.
 struct Pass {
     light: u32,
     depth: u32,
-    pad0: u32,
+    work: u32,
     pad1: u32,
 }
 
