@@ -43,6 +43,30 @@ impl IntersectArg {
     }
 }
 
+/// Whether the Vulkan tracer's tracing stages run as persistent threads (`trace-vk render
+/// --persistent`, `trace-vk bench --persistent off,on`; `Renderer::set_persistent`): as many
+/// workgroups as the device holds at once, each subgroup taking pixels from a counter and giving
+/// lanes whose ray ended a new pixel (Aila and Laine 2009). LST and stackless; the images are the
+/// plain kernels'.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PersistentArg {
+    /// One invocation per pixel, as many workgroups as the tile has.
+    Off,
+    /// Persistent threads.
+    On,
+}
+
+impl PersistentArg {
+    pub fn on(self) -> bool {
+        self == PersistentArg::On
+    }
+}
+
+/// `--persistent-invocations N`: invocations a persistent kernel launches (1 to 2^24).
+pub fn parse_persistent_invocations(s: &str) -> Result<u32, String> {
+    parse_count(s, 1, 1 << 24, "the invocations a persistent kernel launches").map(|n| n as u32)
+}
+
 /// The most lights a render takes (`--light` repeated, or `--lights N`).
 pub const MAX_LIGHTS: usize = 256;
 

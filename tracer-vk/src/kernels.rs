@@ -938,7 +938,10 @@ mod tests {
                     let s = Specialisation { persistent: true, ray_list, self_hits, split, ..spec(method, true, true) };
                     assert!(s.persistent_stage(stage));
                     let text = source(stage, &s);
-                    assert!(text.contains("fn persistent()") && text.contains("    persistent();"), "{method:?} {stage:?}");
+                    assert!(
+                        text.contains("fn persistent()") && text.contains("    persistent();"),
+                        "{method:?} {stage:?}"
+                    );
                     compile(stage, &s).unwrap_or_else(|e| panic!("{method:?} {stage:?} ray list {ray_list}: {e}"));
                 }
                 let plain = source(stage, &spec(method, true, true));

@@ -794,10 +794,8 @@ impl<'g> Renderer<'g> {
         } else {
             0
         };
-        let counters = g.create_buffer(
-            4 * (counters::LIVE as u64 + indirections.max(1) as u64 + work_words),
-            "ray counters",
-        )?;
+        let counters =
+            g.create_buffer(4 * (counters::LIVE as u64 + indirections.max(1) as u64 + work_words), "ray counters")?;
 
         let mut tally = Tally::default();
         let total = s.width as u64 * s.height as u64;

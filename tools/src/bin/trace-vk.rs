@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use tools::auto::Picker;
 use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
-use tools::render_args::{RenderArgs, parse_count, parse_workgroup};
+use tools::render_args::{PersistentArg, RenderArgs, parse_count, parse_persistent_invocations, parse_workgroup};
 use tools::say;
 use tools::vk_bench::{AUTO, VkBench, check_validation};
 use tracer_vk::kernels::{Method, Vertices};
@@ -61,6 +61,12 @@ enum Command {
         /// images are the same. Given, the report says the bytes uploaded [default: expanded].
         #[arg(long, value_enum)]
         vertices: Option<VerticesArg>,
+        /// Run the tracing stages as persistent threads (lst and stackless; the same image).
+        #[arg(long, value_enum, default_value = "off")]
+        persistent: PersistentArg,
+        /// Invocations a persistent kernel launches [default: 270336, an H100 SXM full].
+        #[arg(long, value_parser = parse_persistent_invocations)]
+        persistent_invocations: Option<u32>,
         #[command(flatten)]
         device: DeviceArgs,
     },
@@ -116,6 +122,13 @@ struct BenchArgs {
     /// than expanded names its rows METHOD+FORM (lst+indexed), and each prints its bytes uploaded.
     #[arg(long, value_delimiter = ',', value_enum, default_value = "expanded")]
     vertices: Vec<VerticesArg>,
+    /// Time each method with plain kernels, persistent threads (`render --persistent`) or both,
+    /// side by side: persistent rows are named METHOD+persistent (lst and stackless only).
+    #[arg(long, value_delimiter = ',', value_enum, default_value = "off")]
+    persistent: Vec<PersistentArg>,
+    /// Invocations a persistent kernel launches [default: 270336, an H100 SXM full].
+    #[arg(long, value_parser = parse_persistent_invocations)]
+    persistent_invocations: Option<u32>,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -159,9 +172,25 @@ fn main() -> ExitCode {
     tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
-        Command::Render { args, method, recalibrate, candidates, workgroup, vertices, device } => {
-            render(&args, method, Auto { recalibrate, candidates }, workgroup, vertices, &device)
-        }
+        Command::Render {
+            args,
+            method,
+            recalibrate,
+            candidates,
+            workgroup,
+            vertices,
+            persistent,
+            persistent_invocations,
+            device,
+        } => render(
+            &args,
+            method,
+            Auto { recalibrate, candidates },
+            workgroup,
+            vertices,
+            (persistent, persistent_invocations),
+            &device,
+        ),
     })
 }
 
@@ -225,6 +254,7 @@ fn render(
     auto: Auto,
     workgroup: (u32, u32),
     vertices: Option<VerticesArg>,
+    (persistent, invocations): (PersistentArg, Option<u32>),
     device: &DeviceArgs,
 ) -> Result<(), String> {
     let candidates = auto.candidates()?;
@@ -255,6 +285,9 @@ fn render(
     if let Some(v) = vertices {
         renderer.set_vertices(v.vertices()).map_err(|e| e.to_string())?;
     }
+    if persistent.on() {
+        renderer.set_persistent(true, invocations).map_err(|e| e.to_string())?;
+    }
     let pixels = u64::from(settings.width) * u64::from(settings.height);
     let bar = Progress::new(pixels, "rendering {bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
     let out = bar
@@ -267,13 +300,14 @@ fn render(
     let written = outputs.write(image, None, args.heatmap_max, scene)?;
     let r = image.rays;
     let mut lines = vec![format!(
-        "{}x{} {}{} with {}{} on {}: {} GPU{}, rays: {} ({}) -> {}",
+        "{}x{} {}{} with {}{}{} on {}: {} GPU{}, rays: {} ({}) -> {}",
         image.width,
         image.height,
         settings.mode.name(),
         tools::render_args::accuracy_note(&settings.accuracy, scene),
         method.name(),
         if args.exact { " (exact)" } else { "" },
+        if persistent.on() { " (persistent threads)" } else { "" },
         gpu.info().name,
         duration(out.gpu_ms / 1e3),
         loaded.timing_note(),
@@ -333,12 +367,14 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
     let mut names: Vec<String> = Vec::new();
     for &m in &b.methods {
         for &v in &b.vertices {
-            let name = match method_of(m) {
-                Some(m) => tools::vk_bench::method_name(m, v.vertices()),
-                None => AUTO.to_owned(),
-            };
-            if !names.contains(&name) {
-                names.push(name);
+            for &p in &b.persistent {
+                let name = match method_of(m) {
+                    Some(m) => tools::vk_bench::method_name(m, v.vertices(), p.on()),
+                    None => AUTO.to_owned(),
+                };
+                if !names.contains(&name) {
+                    names.push(name);
+                }
             }
         }
     }
@@ -351,6 +387,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
         in_flight: b.in_flight,
         tile_pixels: b.tile_pixels,
         report_uploads: b.vertices.iter().any(|&v| v != VerticesArg::Expanded),
+        persistent_invocations: b.persistent_invocations,
         ..VkBench::new(open_for(&b.device, &all)?, b.workgroup, b.exact)
     };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;
