@@ -464,9 +464,10 @@ fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
 /// `--persistent on` (persistent threads taking pixels from a counter, lanes refilled as their
 /// rays end: stages.wgsl) renders the plain kernels' images, distances, normals, triangles, costs
 /// and ray counts bit for bit, for LST and stackless in every mode, with workgroups of one and of
-/// several subgroups, launches from one workgroup (which then takes every pixel) to more than the
-/// tile has, odd sizes, several tiles and samples; the traversals that do not walk in steps
-/// refuse it in one sentence.
+/// several subgroups, launches from one workgroup (on a GPU it then takes every pixel; lavapipe's
+/// subgroups take at most 4 per lane, and as many workgroups are launched as that needs) to more
+/// than the tile has, odd sizes, several tiles and samples; the traversals that do not walk in
+/// steps refuse it in one sentence.
 #[test]
 fn persistent_kernels_render_the_plain_images_bit_for_bit() {
     let gpu = gpu();

@@ -497,6 +497,11 @@ fn stage_convert(x: u32, y: u32, valid: bool) {
 // lanes have finished theirs, those shade their pixels together and take new ones
 // ("while-while" with replacement), so a few long rays do not hold the others' lanes idle.
 //
+// A subgroup takes at most `pass_info.cap` pixels per lane where that is not 0 (the host then
+// launches enough invocations for all): lavapipe ends every loop of an invocation silently once
+// they have run 65535 iterations together (gallivm's LP_MAX_TGSI_LOOP_ITERATIONS), which a
+// subgroup walking thousands of rays passes.
+//
 // Items number the pixels as the plain dispatch orders its invocations: workgroup-sized blocks
 // of the tile in row order, each block's pixels in its invocations' order. A subgroup's lanes take
 // consecutive items, so they trace neighbouring pixels, as the plain kernel's do. The work done
@@ -511,10 +516,11 @@ fn persistent() {
     var job: StageJob;
     var walk: Walk;
     // `busy`: the lane holds a pixel (walking, or walked and waiting to shade it); `walking`: its
-    // walk goes on. `exhausted` is the subgroup's: every item is taken.
+    // walk goes on. `exhausted` is the subgroup's: every item is taken, or it took its cap.
     var busy = false;
     var walking = false;
     var exhausted = false;
+    var taken = 0u;
     loop {
         if busy && !walking {
             stage_end(job, walk.best);
@@ -529,7 +535,8 @@ fn persistent() {
                 base = atomicAdd(&counters[pass_info.work], n);
             }
             base = subgroupBroadcastFirst(base);
-            exhausted = base + n >= items;
+            taken += n;
+            exhausted = base + n >= items || (pass_info.cap != 0u && taken >= pass_info.cap * lanes);
             let item = base + rank;
             if !busy && item < items {
                 let block = item / (WG_X * WG_Y);

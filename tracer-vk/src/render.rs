@@ -134,14 +134,19 @@ struct PassData {
     light: u32,
     depth: u32,
     work: u32,
-    pad: u32,
+    cap: u32,
 }
 
 impl PassData {
-    fn bytes(light: u32, depth: u32, work: u32) -> [u8; kernels::PASS_BYTES as usize] {
-        bytemuck::cast(PassData { light, depth, work, pad: 0 })
+    fn bytes(light: u32, depth: u32, work: u32, cap: u32) -> [u8; kernels::PASS_BYTES as usize] {
+        bytemuck::cast(PassData { light, depth, work, cap })
     }
 }
+
+/// Pixels per lane a subgroup of a persistent kernel takes at most on a CPU device (`cap` in
+/// stages.wgsl: lavapipe ends an invocation's loops after 65535 iterations in all), with
+/// enough workgroups launched that every pixel is taken. A GPU's subgroups take any number.
+const CPU_PERSISTENT_CAP: u32 = 4;
 
 /// Invocations the persistent kernels launch by default ([`Renderer::set_persistent`]): the most
 /// an H100 SXM holds at once (132 multiprocessors of 2048). Fewer leave a larger GPU partly idle;
@@ -936,11 +941,14 @@ impl<'g> Renderer<'g> {
                     // This pass's work word, after the live-path words (passes_per_submission).
                     let work = counters::LIVE as u64 + indirections.max(1) as u64 + dispatches;
                     dispatches += 1;
-                    let push = PassData::bytes(light, depth, work as u32);
+                    let cap = if g.info().kind == DeviceKind::Cpu { CPU_PERSISTENT_CAP } else { 0 };
+                    let push = PassData::bytes(light, depth, work as u32, cap);
                     if self.spec.persistent_stage(stage) {
                         debug_assert!(work < counters.size() / 4, "the counters hold every pass's work word");
-                        let wg = wx * wy;
-                        let launch = self.persistent_invocations.div_ceil(wg).min(groups[0] * groups[1]);
+                        // With a cap, enough workgroups that their subgroups' caps cover the tile.
+                        let all = groups[0] * groups[1];
+                        let launch = self.persistent_invocations.div_ceil(wx * wy);
+                        let launch = if cap > 0 { launch.max(all.div_ceil(cap)) } else { launch }.min(all);
                         return rec.dispatch(&p[&stage], &buffers, &push, [launch, 1, 1]);
                     }
                     // rt-pipeline: the stage's first half writes the rays, the driver traces them,
@@ -1390,7 +1398,7 @@ mod layout_contract {
                 ("light", offset_of!(PassData, light)),
                 ("depth", offset_of!(PassData, depth)),
                 ("work", offset_of!(PassData, work)),
-                ("pad1", offset_of!(PassData, pad)),
+                ("cap", offset_of!(PassData, cap)),
             ],
         );
         assert_eq!(size_of::<PassData>(), kernels::PASS_BYTES as usize, "the push-constant range");
