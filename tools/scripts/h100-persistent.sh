@@ -28,9 +28,9 @@
 #   .bin/trace-vk .bin/bvhc        cargo build --release -p tools
 # and, where .gl/ holds the Vulkan loader packages of /work/shared/device.md, unpacks them first.
 # Writes $OUT (default out/h100-persistent): summary.md (read this), log.txt, main-N.csv/.out,
-# sweep.csv/.out. About 5 minutes.
+# sweep.csv/.out. About 3 to 4 minutes.
 #
-# Env: FRAMES (default 30), REPEATS (default 2), METHODS (default lst,stackless), INVOCATIONS
+# Env: FRAMES (default 30), REPEATS (default 3), METHODS (default lst,stackless), INVOCATIONS
 # (--persistent-invocations; default the renderer's); for a trial run on a small machine only:
 # SMALL, LARGE, SWEEP (sizes), SCENE_FILE.
 set -uo pipefail
@@ -40,7 +40,7 @@ SWEEP=${SWEEP:-480x360,960x720,1920x1440,3840x2880,7680x4320}
 SCENE_FILE=${SCENE_FILE:-scenes/dragon.toml}
 OUT=${OUT:-out/h100-persistent}
 FRAMES=${FRAMES:-30}
-REPEATS=${REPEATS:-2}
+REPEATS=${REPEATS:-3}
 METHODS=${METHODS:-lst,stackless}
 INVOCATIONS=${INVOCATIONS:-}
 BIN=.bin
@@ -92,7 +92,7 @@ bench sweep "$SWEEP" cast 20
   echo "| method | mode | size | off Mrays/s | on Mrays/s | on / off | small/large off | small/large on | target |"
   echo "|---|---|---|--:|--:|--:|--:|--:|---|"
   cat "$OUT"/main-*.csv 2>/dev/null | awk -F, -v small_w="${SMALL%x*}" '
-    $1 == "scene" { next }
+    $2 == "triangles" { next }
     {
       m = $8; p = (m ~ /\+persistent$/) ? "on" : "off"; sub(/\+persistent$/, "", m)
       size = ($4 == small_w) ? "small" : "large"
@@ -136,7 +136,7 @@ bench sweep "$SWEEP" cast 20
   echo "| variant | ms per size | a (ms) | b (ns/pixel) |"
   echo "|---|---|--:|--:|"
   [ -f "$OUT/sweep.csv" ] && awk -F, '
-    $1 == "scene" { next }
+    $2 == "triangles" { next }
     {
       m = $8; px = $4 * $5; ms = $9
       if (!(m in seen)) { seen[m] = 1; order[++k] = m }
