@@ -492,7 +492,8 @@ fn persistent_kernels_render_the_plain_images_bit_for_bit() {
     };
     for method in [VkMethod::Lst, VkMethod::Stackless] {
         // (workgroup, invocations launched, size, samples, tile limit)
-        let cases: [((u32, u32), Option<u32>, (u32, u32), u32, Option<u64>); 4] = [
+        type Case = ((u32, u32), Option<u32>, (u32, u32), u32, Option<u64>);
+        let cases: [Case; 4] = [
             ((8, 8), None, (50, 37), 1, None),
             ((8, 8), Some(1), (40, 30), 4, None),
             ((4, 2), Some(24), (33, 21), 1, Some(300)),
