@@ -466,8 +466,8 @@ fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
 /// and ray counts bit for bit, for LST and stackless in every mode, with workgroups of one and of
 /// several subgroups, launches from one workgroup (on a GPU it then takes every pixel; lavapipe's
 /// subgroups take at most 4 per lane, and as many workgroups are launched as that needs) to more
-/// than the tile has, odd sizes, several tiles and samples; the traversals that do not walk in
-/// steps refuse it in one sentence.
+/// than the tile has, refills from one idle lane to all, odd sizes, several tiles and samples;
+/// the traversals that do not walk in steps refuse it in one sentence.
 #[test]
 fn persistent_kernels_render_the_plain_images_bit_for_bit() {
     let gpu = gpu();
@@ -491,26 +491,30 @@ fn persistent_kernels_render_the_plain_images_bit_for_bit() {
         accuracy: Accuracy { spp, ..Accuracy::default() },
     };
     for method in [VkMethod::Lst, VkMethod::Stackless] {
-        // (workgroup, invocations launched, size, samples, tile limit)
-        type Case = ((u32, u32), Option<u32>, (u32, u32), u32, Option<u64>);
+        // (workgroup, invocations launched, idle lanes of 32 before a refill, size, samples, tile
+        // limit)
+        type Case = ((u32, u32), Option<u32>, u32, (u32, u32), u32, Option<u64>);
         let cases: [Case; 4] = [
-            ((8, 8), None, (50, 37), 1, None),
-            ((8, 8), Some(1), (40, 30), 4, None),
-            ((4, 2), Some(24), (33, 21), 1, Some(300)),
-            ((16, 4), Some(100), (45, 35), 1, None),
+            ((8, 8), None, 8, (50, 37), 1, None),
+            ((8, 8), Some(1), 1, (40, 30), 4, None),
+            ((4, 2), Some(24), 32, (33, 21), 1, Some(300)),
+            ((16, 4), Some(100), 8, (45, 35), 1, None),
         ];
-        for (workgroup, invocations, (w, h), spp, tile) in cases {
+        for (workgroup, invocations, refill, (w, h), spp, tile) in cases {
             let mut r = Renderer::new(&gpu, &scene, method, workgroup).expect("the scene uploads");
             if let Some(p) = tile {
                 r.limit_tile_pixels(p);
             }
             for mode in modes {
                 let s = settings(mode, w, h, spp);
-                let what = format!("{} {mode:?} {w}x{h} workgroup {workgroup:?} launch {invocations:?}", method.name());
+                let what = format!(
+                    "{} {mode:?} {w}x{h} workgroup {workgroup:?} launch {invocations:?} refill {refill}",
+                    method.name()
+                );
                 r.set_persistent(false, None).expect("the plain kernels");
                 let plain = r.render(&s).expect("the GPU renders").image;
-                r.set_persistent(true, invocations).expect("the persistent kernels");
-                assert!(r.specialisation().persistent);
+                r.set_persistent_with(true, invocations, refill).expect("the persistent kernels");
+                assert!(r.specialisation().persistent && r.specialisation().refill == refill);
                 let persistent = r.render(&s).expect("the GPU renders persistently").image;
                 assert!(plain.rays.primary > 0, "{what}: rays were traced");
                 assert_eq!(plain.rgb, persistent.rgb, "{what}: the persistent image differs");

@@ -11,6 +11,9 @@
 #   sweep   cast at 480x360, 960x720, 1920x1440, 3840x2880 and 7680x4320, lst and stackless, off
 #           and on: time per frame, and per variant the least-squares line t = a + b * pixels
 #           (a: the fixed cost per frame, its dispatch's ramp-up and tail; b: ns per pixel)
+#   refill  1920x1440, cast and ao8, persistent only, `--persistent-refill 1,4,8,16,32` (idle
+#           lanes of 32 before a subgroup takes new pixels; 32 is persistent threads without
+#           replacement): whether the default of 8 is the right one
 #
 # What to read (summary.md):
 #   table 1: Mrays/s per method, mode, size, plain and persistent, the persistent gain, and
@@ -20,6 +23,8 @@
 #   table 2: the sweep's fit per variant. A fixed cost a that persistent threads shrink is the
 #            dispatch tail they remove; an unchanged b with a lower a means the small frame gains
 #            only by the tail.
+#   table 3: Mrays/s per refill threshold. If 32 is as fast as 8, replacing finished lanes buys
+#            nothing here (the gain is the fill alone); if another value wins, make it the default.
 # The decision: if `+persistent` is faster at 1920x1440 for a method and mode (both repeats), make
 # `--persistent on` the default for it; if it is slower at 7680x4320 by more than the repeats'
 # spread, keep it a per-size choice (or off).
@@ -28,7 +33,7 @@
 #   .bin/trace-vk .bin/bvhc        cargo build --release -p tools
 # and, where .gl/ holds the Vulkan loader packages of /work/shared/device.md, unpacks them first.
 # Writes $OUT (default out/h100-persistent): summary.md (read this), log.txt, main-N.csv/.out,
-# sweep.csv/.out. About 3 to 4 minutes.
+# sweep.csv/.out, refill-N.csv/.out. About 4 to 5 minutes.
 #
 # Env: FRAMES (default 30), REPEATS (default 3), METHODS (default lst,stackless), INVOCATIONS
 # (--persistent-invocations; default the renderer's); for a trial run on a small machine only:
@@ -82,6 +87,14 @@ for i in $(seq 1 "$REPEATS"); do
   bench "main-$i" "$SMALL,$LARGE" cast,ao8 "$FRAMES"
 done
 bench sweep "$SWEEP" cast 20
+# The refill threshold at the small size, persistent kernels only: idle lanes of 32 before a
+# subgroup takes new pixels (1: at once; 32: only when all are idle, no replacement).
+for refill in 1 4 8 16 32; do
+  log "refill-$refill"
+  "$BIN/trace-vk" bench "$SCENE" --cameras medium --res "$SMALL" --modes cast,ao8 --methods "$METHODS" \
+    --persistent on --persistent-refill "$refill" --frames "$FRAMES" --csv "$OUT/refill-$refill.csv" \
+    "${EXTRA[@]}" >"$OUT/refill-$refill.out" 2>&1 || log "refill-$refill FAILED"
+done
 
 # Columns of the bench CSV: 4 width, 5 height, 6 mode, 8 method, 9 median_ms, 16 mrays_per_s.
 {
@@ -151,6 +164,21 @@ bench sweep "$SWEEP" cast 20
         printf "| %s | %s | %.3f | %.4f |\n", m, times[m], a, b * 1e6
       }
     }' "$OUT/sweep.csv"
+  echo
+  echo "## Refill threshold at $SMALL (persistent): Mrays/s by idle lanes of 32 before a refill"
+  echo
+  echo "| method | mode | 1 | 4 | 8 (default) | 16 | 32 (no replacement) |"
+  echo "|---|---|--:|--:|--:|--:|--:|"
+  for refill in 1 4 8 16 32; do
+    [ -f "$OUT/refill-$refill.csv" ] && awk -F, -v r="$refill" '$2 != "triangles" { print $8 "|" $6 "|" r "|" $16 }' "$OUT/refill-$refill.csv"
+  done | awk -F'|' '
+    { key = $1 " | " $2; v[key, $3] = $4; if (!(key in seen)) { seen[key] = 1; order[++k] = key } }
+    END {
+      for (i = 1; i <= k; i++) {
+        key = order[i]
+        printf "| %s | %.0f | %.0f | %.0f | %.0f | %.0f |\n", key, v[key, 1], v[key, 4], v[key, 8], v[key, 16], v[key, 32]
+      }
+    }'
 } >"$OUT/summary.md"
 cat "$OUT/summary.md"
 log "done"

@@ -80,9 +80,8 @@ pub struct VkBench {
     pub tile_pixels: Option<u64>,
     /// Print each prepared method's bytes uploaded ([`upload_line`]; `trace-vk bench --vertices`).
     pub report_uploads: bool,
-    /// Invocations the persistent kernels launch (`--persistent-invocations`; `None`: the
-    /// renderer's default).
-    pub persistent_invocations: Option<u32>,
+    /// How the persistent kernels run (`--persistent-invocations`, `--persistent-refill`).
+    pub persistent: crate::render_args::PersistentTuning,
 }
 
 impl VkBench {
@@ -97,7 +96,7 @@ impl VkBench {
             in_flight: 1,
             tile_pixels: None,
             report_uploads: false,
-            persistent_invocations: None,
+            persistent: Default::default(),
         }
     }
 
@@ -113,7 +112,8 @@ impl VkBench {
         r.set_exact(exact);
         r.set_vertices(form).map_err(|e| e.to_string())?;
         if persistent {
-            r.set_persistent(true, self.persistent_invocations).map_err(|e| e.to_string())?;
+            let t = self.persistent;
+            r.set_persistent_with(true, t.persistent_invocations, t.persistent_refill).map_err(|e| e.to_string())?;
         }
         if self.report_uploads {
             crate::say!("{}", upload_line(scene, method, form));
@@ -187,8 +187,13 @@ impl Bench for VkBench {
                 String::new()
             },
             self.tile_pixels.map_or(String::new(), |p| format!(", tiles of at most {p} pixels")),
-            self.persistent_invocations
-                .map_or(String::new(), |n| format!(", persistent kernels launch {n} invocations"))
+            match (self.persistent.persistent_invocations, self.persistent.persistent_refill) {
+                (None, 8) => String::new(),
+                (n, refill) => format!(
+                    ", persistent kernels launch {} invocations and refill once {refill} of 32 lanes are idle",
+                    n.map_or("the default".to_owned(), |n| n.to_string())
+                ),
+            }
         )
     }
 

@@ -493,8 +493,8 @@ fn stage_convert(x: u32, y: u32, valid: bool) {
 // HPG 2009): the host launches only as many workgroups as the device holds at once, and each
 // subgroup takes its pixels from a counter (the pass's `work` word) until none is left, so the
 // dispatch ends with the device full instead of with its last, half-empty waves. The lanes walk
-// their rays one node per step (the traversal's `walk_step`); once a quarter of a subgroup's
-// lanes have finished theirs, those shade their pixels together and take new ones
+// their rays one node per step (the traversal's `walk_step`); once enough of a subgroup's lanes
+// (a quarter by default) have finished theirs, those shade their pixels together and take new ones
 // ("while-while" with replacement), so a few long rays do not hold the others' lanes idle.
 //
 // A subgroup takes at most `pass_info.cap` pixels per lane where that is not 0 (the host then
@@ -510,9 +510,9 @@ fn persistent() {
     let blocks_x = (frame.tile.z + WG_X - 1u) / WG_X;
     let items = blocks_x * ((frame.tile.w + WG_Y - 1u) / WG_Y) * WG_X * WG_Y;
     // The subgroup's lanes (fewer than its size in a workgroup smaller than a subgroup); refill
-    // once a quarter of them are idle.
+    // once REFILL_IDLE of every 32 are idle (the host's `--persistent-refill`, by default 8).
     let lanes = subgroupAdd(1u);
-    let refill = max(lanes / 4u, 1u);
+    let refill = max(lanes * REFILL_IDLE / 32u, 1u);
     var job: StageJob;
     var walk: Walk;
     // `busy`: the lane holds a pixel (walking, or walked and waiting to shade it); `walking`: its
@@ -553,13 +553,15 @@ fn persistent() {
         if subgroupAll(!busy) {
             break;
         }
-        // With nothing left to take, the lanes walk until all are done.
-        let enough = select(refill, lanes, exhausted);
+        // With nothing left to take, the lanes walk until all are done. (Counted by the lanes
+        // still walking, so that a device that ran part of a subgroup apart would still leave
+        // the loop once that part is done.)
         loop {
             if walking {
                 walking = walk_step(&walk);
             }
-            if subgroupAdd(select(1u, 0u, walking)) >= enough {
+            let working = subgroupAdd(select(0u, 1u, walking));
+            if working == 0u || (!exhausted && working + refill <= lanes) {
                 break;
             }
         }

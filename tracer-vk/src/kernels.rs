@@ -167,7 +167,13 @@ pub struct Specialisation {
     /// from a counter and refilling its lanes whose rays ended. Methods that
     /// [`Method::walks_in_steps`] only; the images are the plain kernels'.
     pub persistent: bool,
+    /// Persistent kernels: a subgroup's finished lanes take new pixels once this many of every 32
+    /// lanes are idle (1: as soon as one is; 32: only when all are, no replacement).
+    pub refill: u32,
 }
+
+/// [`Specialisation::refill`] by default: a quarter of the lanes idle.
+pub const DEFAULT_REFILL: u32 = 8;
 
 /// How the kernels read the corners of a triangle (`--vertices`), a trade of memory for reads:
 /// both forms give the same bits, so the same images.
@@ -244,6 +250,7 @@ impl Specialisation {
             first_vertex: 0,
             self_hits: false,
             persistent: false,
+            refill: DEFAULT_REFILL,
         }
     }
 
@@ -472,12 +479,14 @@ pub fn source_half(stage: Stage, spec: &Specialisation, half: Half) -> String {
         // The persistent driver (stages.wgsl) runs this stage's parts.
         let (prefix, job) = stage.parts();
         format!(
-            "alias StageJob = {job};\n\
+            "const REFILL_IDLE: u32 = {}u;\n\
+             alias StageJob = {job};\n\
              fn stage_begin(x: u32, y: u32, valid: bool) -> StageJob {{\n    return {prefix}_begin(x, y, valid);\n}}\n\
              fn stage_end(j: StageJob, h: HitRec) {{\n    {prefix}_end(j, h);\n}}\n\
              @compute @workgroup_size(WG_X * WG_Y)\n\
              fn main(@builtin(local_invocation_index) li: u32) {{\n\
-             \x20   lid = li;\n    persistent();\n}}\n"
+             \x20   lid = li;\n    persistent();\n}}\n",
+            spec.refill.clamp(1, 32)
         )
     } else {
         format!(

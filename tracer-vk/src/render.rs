@@ -406,6 +406,7 @@ impl<'g> Renderer<'g> {
             first_vertex: 0,
             self_hits: false,
             persistent: false,
+            refill: kernels::DEFAULT_REFILL,
         };
         let (wx, wy) = workgroup;
         let limit = info.max_workgroup_invocations.min(info.max_workgroup_size[0]).min(MAX_WORKGROUP_INVOCATIONS);
@@ -608,6 +609,17 @@ impl<'g> Renderer<'g> {
     /// does not walk in steps and on a device without the subgroup operations the kernels take
     /// their work with. The images and ray counts are the plain kernels'.
     pub fn set_persistent(&mut self, on: bool, invocations: Option<u32>) -> Result<(), VkRenderError> {
+        self.set_persistent_with(on, invocations, kernels::DEFAULT_REFILL)
+    }
+
+    /// [`Renderer::set_persistent`] with the lanes of every 32 that must be idle before a
+    /// subgroup takes new pixels ([`Specialisation::refill`], 1 to 32).
+    pub fn set_persistent_with(
+        &mut self,
+        on: bool,
+        invocations: Option<u32>,
+        refill: u32,
+    ) -> Result<(), VkRenderError> {
         if on && !self.spec.method.walks_in_steps() {
             return Err(VkRenderError::NotPersistent(self.spec.method.name()));
         }
@@ -615,7 +627,7 @@ impl<'g> Renderer<'g> {
             return Err(VkRenderError::NoSubgroups(self.gpu.info().name.clone()));
         }
         self.persistent_invocations = invocations.unwrap_or(PERSISTENT_INVOCATIONS).max(1);
-        self.specialise(Specialisation { persistent: on, ..self.spec });
+        self.specialise(Specialisation { persistent: on, refill: refill.clamp(1, 32), ..self.spec });
         Ok(())
     }
 

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use tools::auto::Picker;
 use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
-use tools::render_args::{PersistentArg, RenderArgs, parse_count, parse_persistent_invocations, parse_workgroup};
+use tools::render_args::{PersistentArg, PersistentTuning, RenderArgs, parse_count, parse_workgroup};
 use tools::say;
 use tools::vk_bench::{AUTO, VkBench, check_validation};
 use tracer_vk::kernels::{Method, Vertices};
@@ -64,9 +64,8 @@ enum Command {
         /// Run the tracing stages as persistent threads (lst and stackless; the same image).
         #[arg(long, value_enum, default_value = "off")]
         persistent: PersistentArg,
-        /// Invocations a persistent kernel launches [default: 270336, an H100 SXM full].
-        #[arg(long, value_parser = parse_persistent_invocations)]
-        persistent_invocations: Option<u32>,
+        #[command(flatten)]
+        tuning: PersistentTuning,
         #[command(flatten)]
         device: DeviceArgs,
     },
@@ -126,9 +125,8 @@ struct BenchArgs {
     /// side by side: persistent rows are named METHOD+persistent (lst and stackless only).
     #[arg(long, value_delimiter = ',', value_enum, default_value = "off")]
     persistent: Vec<PersistentArg>,
-    /// Invocations a persistent kernel launches [default: 270336, an H100 SXM full].
-    #[arg(long, value_parser = parse_persistent_invocations)]
-    persistent_invocations: Option<u32>,
+    #[command(flatten)]
+    tuning: PersistentTuning,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -172,25 +170,9 @@ fn main() -> ExitCode {
     tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
-        Command::Render {
-            args,
-            method,
-            recalibrate,
-            candidates,
-            workgroup,
-            vertices,
-            persistent,
-            persistent_invocations,
-            device,
-        } => render(
-            &args,
-            method,
-            Auto { recalibrate, candidates },
-            workgroup,
-            vertices,
-            (persistent, persistent_invocations),
-            &device,
-        ),
+        Command::Render { args, method, recalibrate, candidates, workgroup, vertices, persistent, tuning, device } => {
+            render(&args, method, Auto { recalibrate, candidates }, workgroup, vertices, (persistent, tuning), &device)
+        }
     })
 }
 
@@ -254,7 +236,7 @@ fn render(
     auto: Auto,
     workgroup: (u32, u32),
     vertices: Option<VerticesArg>,
-    (persistent, invocations): (PersistentArg, Option<u32>),
+    (persistent, tuning): (PersistentArg, PersistentTuning),
     device: &DeviceArgs,
 ) -> Result<(), String> {
     let candidates = auto.candidates()?;
@@ -286,7 +268,9 @@ fn render(
         renderer.set_vertices(v.vertices()).map_err(|e| e.to_string())?;
     }
     if persistent.on() {
-        renderer.set_persistent(true, invocations).map_err(|e| e.to_string())?;
+        renderer
+            .set_persistent_with(true, tuning.persistent_invocations, tuning.persistent_refill)
+            .map_err(|e| e.to_string())?;
     }
     let pixels = u64::from(settings.width) * u64::from(settings.height);
     let bar = Progress::new(pixels, "rendering {bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
@@ -387,7 +371,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
         in_flight: b.in_flight,
         tile_pixels: b.tile_pixels,
         report_uploads: b.vertices.iter().any(|&v| v != VerticesArg::Expanded),
-        persistent_invocations: b.persistent_invocations,
+        persistent: b.tuning,
         ..VkBench::new(open_for(&b.device, &all)?, b.workgroup, b.exact)
     };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;
