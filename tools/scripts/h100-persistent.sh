@@ -16,10 +16,12 @@
 #           replacement): whether the default of 8 is the right one
 #
 # What to read (summary.md):
-#   table 1: Mrays/s per method, mode, size, plain and persistent, the persistent gain, and
-#            small / large for each. Persistent threads win where `on` beats `off`; the targets are
-#            checked in the last column (6000 Mrays/s cast, 2000 ao8 -- ao8's rays count the
-#            primary ones too, as the bench does -- and small/large >= 85%).
+#   table 1: Mrays/s per method, mode, size, plain and persistent (all rays of the frame over its
+#            time, as the bench counts), the persistent gain, and small / large for each.
+#            Persistent threads win where `on` beats `off`. The last column checks the targets at
+#            the small size: cast Mrays/s >= 6000; the AO rays alone (AO rays over the time ao8
+#            adds to the cast frame, as docs/gpu-benchmark.md counts them) >= 2000; small/large
+#            >= 85%, each with the better of off and on.
 #   table 2: the sweep's fit per variant. A fixed cost a that persistent threads shrink is the
 #            dispatch tail they remove; an unchanged b with a lower a means the small frame gains
 #            only by the tail.
@@ -77,7 +79,7 @@ bench() {
   local name=$1 res=$2 modes=$3 frames=$4
   log "$name: $res $modes"
   "$BIN/trace-vk" bench "$SCENE" --cameras medium --res "$res" --modes "$modes" --methods "$METHODS" \
-    --persistent off,on --frames "$frames" --csv "$OUT/$name.csv" "${EXTRA[@]}" >"$OUT/$name.out" 2>&1
+    --persistent off,on --frames "$frames" --csv "$OUT/$name.csv" ${EXTRA[@]+"${EXTRA[@]}"} >"$OUT/$name.out" 2>&1
   local rc=$?
   cat "$OUT/$name.out"
   [ $rc -eq 0 ] || log "$name FAILED (exit $rc)"
@@ -93,7 +95,7 @@ for refill in 1 4 8 16 32; do
   log "refill-$refill"
   "$BIN/trace-vk" bench "$SCENE" --cameras medium --res "$SMALL" --modes cast,ao8 --methods "$METHODS" \
     --persistent on --persistent-refill "$refill" --frames "$FRAMES" --csv "$OUT/refill-$refill.csv" \
-    "${EXTRA[@]}" >"$OUT/refill-$refill.out" 2>&1 || log "refill-$refill FAILED"
+    ${EXTRA[@]+"${EXTRA[@]}"} >"$OUT/refill-$refill.out" 2>&1 || log "refill-$refill FAILED"
 done
 
 # Columns of the bench CSV: 4 width, 5 height, 6 mode, 8 method, 9 median_ms, 16 mrays_per_s.
@@ -110,34 +112,47 @@ done
       m = $8; p = (m ~ /\+persistent$/) ? "on" : "off"; sub(/\+persistent$/, "", m)
       size = ($4 == small_w) ? "small" : "large"
       key = m SUBSEP $6 SUBSEP size SUBSEP p
-      n[key]++; v[key, n[key]] = $16; list[key] = list[key] (list[key] == "" ? "" : " ") sprintf("%.0f", $16)
+      n[key]++; v[key, n[key]] = $16; t[key, n[key]] = $9; ao[key] = $14
+      list[key] = list[key] (list[key] == "" ? "" : " ") sprintf("%.0f", $16)
       if (!((m SUBSEP $6) in seen)) { seen[m SUBSEP $6] = 1; order[++k] = m SUBSEP $6 }
     }
-    function median(key,   i, j, t, a, c) {
+    function median(arr, key,   i, j, x, a, c) {
       c = n[key]; if (!c) return 0
-      for (i = 1; i <= c; i++) a[i] = v[key, i]
-      for (i = 1; i <= c; i++) for (j = i + 1; j <= c; j++) if (a[j] < a[i]) { t = a[i]; a[i] = a[j]; a[j] = t }
+      for (i = 1; i <= c; i++) a[i] = arr[key, i]
+      for (i = 1; i <= c; i++) for (j = i + 1; j <= c; j++) if (a[j] < a[i]) { x = a[i]; a[i] = a[j]; a[j] = x }
       return (c % 2) ? a[(c + 1) / 2] : (a[c / 2] + a[c / 2 + 1]) / 2
+    }
+    # The AO rays over the time ao8 adds to the cast frame (docs/gpu-benchmark.md counts AO so),
+    # in Mrays/s; 0 without a cast row.
+    function added(m, mode, size, p,   kc, ka, dt) {
+      kc = m SUBSEP "cast" SUBSEP size SUBSEP p; ka = m SUBSEP mode SUBSEP size SUBSEP p
+      dt = median(t, ka) - median(t, kc)
+      return (n[kc] && dt > 0) ? ao[ka] / dt / 1000 : 0
     }
     END {
       for (i = 1; i <= k; i++) {
         split(order[i], mm, SUBSEP)
         for (s = 1; s <= 2; s++) {
           size = (s == 1) ? "small" : "large"
-          off = median(order[i] SUBSEP size SUBSEP "off"); on = median(order[i] SUBSEP size SUBSEP "on")
-          so = median(order[i] SUBSEP "small" SUBSEP "off") / (median(order[i] SUBSEP "large" SUBSEP "off") + 1e-9)
-          sn = median(order[i] SUBSEP "small" SUBSEP "on") / (median(order[i] SUBSEP "large" SUBSEP "on") + 1e-9)
-          target = ""
+          base = order[i] SUBSEP size
+          off = median(v, base SUBSEP "off"); on = median(v, base SUBSEP "on")
+          so = median(v, order[i] SUBSEP "small" SUBSEP "off") / (median(v, order[i] SUBSEP "large" SUBSEP "off") + 1e-9)
+          sn = median(v, order[i] SUBSEP "small" SUBSEP "on") / (median(v, order[i] SUBSEP "large" SUBSEP "on") + 1e-9)
+          note = ""
+          if (mm[2] ~ /^ao/) {
+            a0 = added(mm[1], mm[2], size, "off"); a1 = added(mm[1], mm[2], size, "on")
+            note = sprintf("AO rays alone %.0f off, %.0f on; ", a0, a1)
+          }
           if (size == "small") {
-            goal = (mm[2] == "cast") ? 6000 : (mm[2] ~ /^ao/ ? 2000 : 0)
-            best = (on > off) ? on : off
-            if (goal) target = sprintf("%s %.0f%% of %d; ", (best >= goal) ? "met" : "missed", 100 * best / goal, goal)
+            if (mm[2] == "cast") { goal = 6000; best = (on > off) ? on : off }
+            else if (mm[2] ~ /^ao/) { goal = 2000; best = (a1 > a0) ? a1 : a0 }
+            else goal = 0
+            if (goal) note = note sprintf("%s: %.0f%% of %d; ", (best >= goal) ? "met" : "missed", 100 * best / goal, goal)
             bestratio = (sn > so) ? sn : so
-            target = target sprintf("ratio %s", (bestratio >= 0.85) ? "met" : "missed")
+            note = note sprintf("ratio %s", (bestratio >= 0.85) ? "met" : "missed")
           }
           printf "| %s | %s | %s | %.0f [%s] | %.0f [%s] | %.2f | %.0f%% | %.0f%% | %s |\n", mm[1], mm[2], size, \
-            off, list[order[i] SUBSEP size SUBSEP "off"], on, list[order[i] SUBSEP size SUBSEP "on"], \
-            (off > 0) ? on / off : 0, 100 * so, 100 * sn, target
+            off, list[base SUBSEP "off"], on, list[base SUBSEP "on"], (off > 0) ? on / off : 0, 100 * so, 100 * sn, note
         }
       }
     }'
