@@ -466,6 +466,93 @@ fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
     assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
 }
 
+/// `--persistent on` (persistent threads taking pixels from a counter, lanes refilled as their
+/// rays end: stages.wgsl) renders the plain kernels' images, distances, normals, triangles, costs
+/// and ray counts bit for bit, for LST and stackless in every mode, with workgroups of one and of
+/// several subgroups, launches from one workgroup (on a GPU it then takes every pixel; lavapipe's
+/// subgroups take at most 4 per lane, and as many workgroups are launched as that needs) to more
+/// than the tile has, refills from one idle lane to all, odd sizes, several tiles and samples;
+/// the traversals that do not walk in steps refuse it in one sentence.
+#[test]
+fn persistent_kernels_render_the_plain_images_bit_for_bit() {
+    let gpu = gpu();
+    let scene = compile("room.toml");
+    let cam = CameraSpec::from(scene.camera("medium").expect("the camera exists"));
+    let aov_bits = |i: &render_spec::Image| {
+        let a = i.aov.as_ref().expect("AOVs were asked for");
+        let t: Vec<u32> = a.t.iter().map(|x| x.to_bits()).collect();
+        let n: Vec<[u32; 3]> = a.normal.iter().map(|n| n.map(f32::to_bits)).collect();
+        (t, n, a.prim.clone(), a.nodes.clone(), a.tris.clone())
+    };
+    let modes = [Mode::Cast, Mode::Whitted, Mode::Ao(Ao { samples: 3, length: 0.1 }), Mode::Diffuse];
+    let settings = |mode: Mode, width: u32, height: u32, spp: u32| Settings {
+        width,
+        height,
+        camera: cam,
+        mode,
+        lights: scene.lights.clone(),
+        max_indirections: scene.settings.max_indirections,
+        aovs: true,
+        accuracy: Accuracy { spp, ..Accuracy::default() },
+    };
+    for method in [VkMethod::Lst, VkMethod::Stackless] {
+        // (workgroup, invocations launched, idle lanes of 32 before a refill, size, samples, tile
+        // limit)
+        type Case = ((u32, u32), Option<u32>, u32, (u32, u32), u32, Option<u64>);
+        let cases: [Case; 4] = [
+            ((8, 8), None, 8, (50, 37), 1, None),
+            ((8, 8), Some(1), 1, (40, 30), 4, None),
+            ((4, 2), Some(24), 32, (33, 21), 1, Some(300)),
+            ((16, 4), Some(100), 8, (45, 35), 1, None),
+        ];
+        for (workgroup, invocations, refill, (w, h), spp, tile) in cases {
+            let mut r = Renderer::new(&gpu, &scene, method, workgroup).expect("the scene uploads");
+            if let Some(p) = tile {
+                r.limit_tile_pixels(p);
+            }
+            for mode in modes {
+                let s = settings(mode, w, h, spp);
+                let what = format!(
+                    "{} {mode:?} {w}x{h} workgroup {workgroup:?} launch {invocations:?} refill {refill}",
+                    method.name()
+                );
+                r.set_persistent(false, None).expect("the plain kernels");
+                let plain = r.render(&s).expect("the GPU renders").image;
+                r.set_persistent_with(true, invocations, refill).expect("the persistent kernels");
+                assert!(r.specialisation().persistent && r.specialisation().refill == refill);
+                let persistent = r.render(&s).expect("the GPU renders persistently").image;
+                assert!(plain.rays.primary > 0, "{what}: rays were traced");
+                assert_eq!(plain.rgb, persistent.rgb, "{what}: the persistent image differs");
+                assert!(aov_bits(&plain) == aov_bits(&persistent), "{what}: the persistent AOVs differ");
+                assert_eq!(plain.rays, persistent.rays, "{what}: rays");
+            }
+        }
+        // Rays the host gives (the ray-list kernels).
+        let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the scene uploads");
+        let (lo, hi) = scene.bounds();
+        let centre = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0, (lo[2] + hi[2]) / 2.0];
+        let rays: Vec<([f32; 3], [f32; 3])> = (0..77)
+            .map(|i| {
+                let a = i as f32 * 0.37;
+                let o = [centre[0] + 10.0 * a.cos(), centre[1] + 2.0, centre[2] + 10.0 * a.sin()];
+                (o, [centre[0] - o[0], centre[1] - o[1] - 1.0, centre[2] - o[2]])
+            })
+            .collect();
+        let plain = r.cast_rays(&rays, Accuracy::default()).expect("the plain kernels cast");
+        r.set_persistent(true, Some(64)).expect("the persistent kernels");
+        let persistent = r.cast_rays(&rays, Accuracy::default()).expect("the persistent kernels cast");
+        assert!(aov_bits(&plain) == aov_bits(&persistent), "{}: cast rays", method.name());
+    }
+    for method in [VkMethod::Sst, VkMethod::SstSubgroup] {
+        let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the scene uploads");
+        let e = r.set_persistent(true, None).expect_err("only the walking traversals run persistently");
+        assert!(e.to_string().contains(method.name()) && !e.to_string().contains('\n'), "{e}");
+        assert!(!r.specialisation().persistent);
+    }
+    let messages = gpu.validation_messages();
+    assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
+}
+
 /// A file without the wide layout refuses cwbvh before any work, in one sentence that says how to
 /// compile one with it.
 #[test]

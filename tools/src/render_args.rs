@@ -62,6 +62,51 @@ impl VerticesArg {
     }
 }
 
+/// Whether the Vulkan tracer's tracing stages run as persistent threads (`trace-vk render
+/// --persistent`, `trace-vk bench --persistent off,on`; `Renderer::set_persistent`): as many
+/// workgroups as the device holds at once, each subgroup taking pixels from a counter and giving
+/// lanes whose ray ended a new pixel (Aila and Laine 2009). LST and stackless; the images are the
+/// plain kernels'.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PersistentArg {
+    /// One invocation per pixel, as many workgroups as the tile has.
+    Off,
+    /// Persistent threads.
+    On,
+}
+
+impl PersistentArg {
+    pub fn on(self) -> bool {
+        self == PersistentArg::On
+    }
+}
+
+/// How persistent kernels run (`trace-vk render` and `bench`, with `--persistent on`).
+#[derive(Args, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PersistentTuning {
+    /// Invocations a persistent kernel launches [default: 270336, an H100 SXM full].
+    #[arg(long, value_parser = parse_persistent_invocations)]
+    pub persistent_invocations: Option<u32>,
+    /// Lanes of every 32 that must be idle before a persistent subgroup gives them new pixels (1:
+    /// as soon as one is; 32: only when all are, no replacement).
+    #[arg(long, value_parser = parse_persistent_refill, default_value = "8")]
+    pub persistent_refill: u32,
+}
+
+impl Default for PersistentTuning {
+    fn default() -> Self {
+        PersistentTuning { persistent_invocations: None, persistent_refill: 8 }
+    }
+}
+
+fn parse_persistent_invocations(s: &str) -> Result<u32, String> {
+    parse_count(s, 1, 1 << 24, "the invocations a persistent kernel launches").map(|n| n as u32)
+}
+
+fn parse_persistent_refill(s: &str) -> Result<u32, String> {
+    parse_count(s, 1, 32, "the idle lanes of 32 before a refill").map(|n| n as u32)
+}
+
 /// The most lights a render takes (`--light` repeated, or `--lights N`).
 pub const MAX_LIGHTS: usize = 256;
 

@@ -20,10 +20,15 @@ pub const EXACT_SUFFIX: &str = "+exact";
 /// Marks a method name for the indexed vertex form (`trace-vk bench --vertices indexed`).
 pub use crate::bench::INDEXED_SUFFIX;
 
-/// The bench's name of `method` reading triangles in `form`: the method's own for the default
-/// expanded form, with [`INDEXED_SUFFIX`] for the indexed one.
-pub fn method_name(method: Method, form: Vertices) -> String {
-    crate::bench::with_form(method.name(), form)
+/// Marks a method name for its persistent kernels (`trace-vk bench --persistent on`).
+pub const PERSISTENT_SUFFIX: &str = "+persistent";
+
+/// The bench's name of `method` reading triangles in `form`, persistent or not: the method's own
+/// for the default expanded form and plain kernels, with [`INDEXED_SUFFIX`] for the indexed form
+/// and then [`PERSISTENT_SUFFIX`] for persistent threads (`lst+indexed+persistent`).
+pub fn method_name(method: Method, form: Vertices, persistent: bool) -> String {
+    let name = crate::bench::with_form(method.name(), form);
+    if persistent { name + PERSISTENT_SUFFIX } else { name }
 }
 
 /// What `method` with triangles in `form` uploads of `scene` (nodes of its layout, triangles,
@@ -72,6 +77,8 @@ pub struct VkBench {
     pub tile_pixels: Option<u64>,
     /// Print each prepared method's bytes uploaded ([`upload_line`]; `trace-vk bench --vertices`).
     pub report_uploads: bool,
+    /// How the persistent kernels run (`--persistent-invocations`, `--persistent-refill`).
+    pub persistent: crate::render_args::PersistentTuning,
 }
 
 impl VkBench {
@@ -86,6 +93,7 @@ impl VkBench {
             in_flight: 1,
             tile_pixels: None,
             report_uploads: false,
+            persistent: Default::default(),
         }
     }
 
@@ -95,10 +103,15 @@ impl VkBench {
         method: Method,
         exact: bool,
         form: Vertices,
+        persistent: bool,
     ) -> Result<Renderer<'a>, String> {
         let mut r = Renderer::new(&self.gpu, scene, method, self.workgroup).map_err(|e| e.to_string())?;
         r.set_exact(exact);
         r.set_vertices(form).map_err(|e| e.to_string())?;
+        if persistent {
+            let t = self.persistent;
+            r.set_persistent_with(true, t.persistent_invocations, t.persistent_refill).map_err(|e| e.to_string())?;
+        }
         if self.report_uploads {
             crate::say!("{}", upload_line(scene, method, form));
         }
@@ -137,7 +150,7 @@ impl<'a> VkRenderer<'a> {
                     crate::say!("{}x{} {}: {}", s.width, s.height, s.mode.name(), pick.line());
                     let renderer = match current.take() {
                         Some((_, m, r)) if m == pick.method => r,
-                        _ => bench.renderer(picker.scene, pick.method, picker.exact, Vertices::Expanded)?,
+                        _ => bench.renderer(picker.scene, pick.method, picker.exact, Vertices::Expanded, false)?,
                     };
                     *current = Some((s.clone(), pick.method, renderer));
                 }
@@ -161,7 +174,7 @@ impl Bench for VkBench {
 
     fn timing(&self) -> String {
         format!(
-            "a frame's time is the GPU time of its passes from timestamp queries (workgroup {}x{}{}{}{})",
+            "a frame's time is the GPU time of its passes from timestamp queries (workgroup {}x{}{}{}{}{})",
             self.workgroup.0,
             self.workgroup.1,
             if self.exact { ", exact kernels: no fused multiply-adds" } else { "" },
@@ -170,7 +183,14 @@ impl Bench for VkBench {
             } else {
                 String::new()
             },
-            self.tile_pixels.map_or(String::new(), |p| format!(", tiles of at most {p} pixels"))
+            self.tile_pixels.map_or(String::new(), |p| format!(", tiles of at most {p} pixels")),
+            match (self.persistent.persistent_invocations, self.persistent.persistent_refill) {
+                (None, 8) => String::new(),
+                (n, refill) => format!(
+                    ", persistent kernels launch {} invocations and refill once {refill} of 32 lanes are idle",
+                    n.map_or("the default".to_owned(), |n| n.to_string())
+                ),
+            }
         )
     }
 
@@ -196,13 +216,24 @@ impl Bench for VkBench {
                 Picker::new(&self.gpu, scene, path, self.workgroup, exact, self.recalibrate).among(&self.candidates);
             return Ok(VkRenderer::Auto(Box::new(Auto { bench: self, picker, current: None })));
         }
+        let (name, persistent) = match name.strip_suffix(PERSISTENT_SUFFIX) {
+            Some(name) => (name, true),
+            None => (name, false),
+        };
         let (name, form) = crate::bench::split_form(name);
-        Ok(VkRenderer::Fixed(Box::new(self.renderer(scene, method_of(name)?, exact, form)?)))
+        Ok(VkRenderer::Fixed(Box::new(self.renderer(scene, method_of(name)?, exact, form, persistent)?)))
     }
 
     fn unsupported(&self, method: &str) -> Option<String> {
         let name = method.strip_suffix(EXACT_SUFFIX).unwrap_or(method);
-        let m = method_of(name).ok()?;
+        let (name, persistent) = match name.strip_suffix(PERSISTENT_SUFFIX) {
+            Some(name) => (name, true),
+            None => (name, false),
+        };
+        let m = method_of(name.strip_suffix(INDEXED_SUFFIX).unwrap_or(name)).ok()?;
+        if persistent && !m.walks_in_steps() {
+            return Some(format!("the {} traversal does not run as persistent threads", m.name()));
+        }
         crate::auto::support(&self.gpu, m).err()
     }
 

@@ -91,12 +91,14 @@ struct Aov {
 }
 
 // Which light a shade pass handles, and which bounce a bounce pass (or which ray an AO pass) is
-// (a push constant).
+// (a push constant); `work`: the counters word the persistent kernels take their work from
+// (stages.wgsl), one per pass of a submission, and `cap`: the most pixels per lane a subgroup of
+// them takes (0: no limit).
 struct Pass {
     light: u32,
     depth: u32,
-    pad0: u32,
-    pad1: u32,
+    work: u32,
+    cap: u32,
 }
 
 @group(0) @binding(0) var<storage, read> frame: Frame;

@@ -58,6 +58,13 @@ impl Method {
     pub fn reads_file_tree(self) -> bool {
         self != Method::RtPipeline
     }
+
+    /// Whether the method's kernels can run as persistent threads ([`Specialisation::persistent`]):
+    /// its traversal file walks one node per step (`walk_begin`, `walk_step`). SST walks with the
+    /// whole workgroup and rt-pipeline with the driver.
+    pub fn walks_in_steps(self) -> bool {
+        matches!(self, Method::Lst | Method::Stackless)
+    }
 }
 
 /// Which half of a stage an rt-pipeline kernel is (rt_pipeline.wgsl): the one that writes the
@@ -90,6 +97,24 @@ pub enum Stage {
 }
 
 impl Stage {
+    /// Whether the stage traces rays (every one but the conversion).
+    pub fn traces(self) -> bool {
+        self != Stage::Convert
+    }
+
+    /// The stage's parts in stages.wgsl: `{prefix}_begin`, `{prefix}_end` and `{Prefix}Job`.
+    fn parts(self) -> (&'static str, &'static str) {
+        match self {
+            Stage::Cast => ("cast", "CastJob"),
+            Stage::Primary => ("primary", "PrimaryJob"),
+            Stage::Shade => ("shade", "ShadeJob"),
+            Stage::Bounce => ("bounce", "BounceJob"),
+            Stage::Ao => ("ao", "AoJob"),
+            Stage::Diffuse => ("diffuse", "DiffuseJob"),
+            Stage::Convert => ("convert", ""),
+        }
+    }
+
     fn entry(self) -> &'static str {
         match self {
             Stage::Cast => "stage_cast",
@@ -137,7 +162,18 @@ pub struct Specialisation {
     /// (`--self-hits`; [`counters::SELF_SHADOW`] and after): a variant, so the default kernels
     /// carry no such test.
     pub self_hits: bool,
+    /// The tracing stages run as persistent threads (`--persistent on`; `persistent` in
+    /// stages.wgsl): as many workgroups as the device holds at once, each subgroup taking pixels
+    /// from a counter and refilling its lanes whose rays ended. Methods that
+    /// [`Method::walks_in_steps`] only; the images are the plain kernels'.
+    pub persistent: bool,
+    /// Persistent kernels: a subgroup's finished lanes take new pixels once this many of every 32
+    /// lanes are idle (1: as soon as one is; 32: only when all are, no replacement).
+    pub refill: u32,
 }
+
+/// [`Specialisation::refill`] by default: a quarter of the lanes idle.
+pub const DEFAULT_REFILL: u32 = 8;
 
 /// How the kernels read the corners of a triangle (`--vertices`): defined with the settings both
 /// tracers share.
@@ -194,7 +230,14 @@ impl Specialisation {
             vertices: Vertices::Expanded,
             first_vertex: 0,
             self_hits: false,
+            persistent: false,
+            refill: DEFAULT_REFILL,
         }
+    }
+
+    /// Whether `stage`'s kernel is a persistent one (and so takes subgroup operations).
+    pub fn persistent_stage(&self, stage: Stage) -> bool {
+        self.persistent && self.method.walks_in_steps() && stage.traces()
     }
 
     /// The `//#if` blocks of the kernel files this specialisation keeps.
@@ -412,13 +455,29 @@ pub fn source_half(stage: Stage, spec: &Specialisation, half: Half) -> String {
     } else {
         format!("{}(x, y, x < frame.tile.x + frame.tile.z && y < frame.tile.y + frame.tile.w);", stage.entry())
     };
-    let entry = format!(
-        "@compute @workgroup_size(WG_X * WG_Y)\n\
-         fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32{params}) {{\n\
-         \x20   lid = li;\n{subgroup_setup}\
-         \x20   let x = frame.tile.x + wg.x * WG_X + li % WG_X;\n    let y = frame.tile.y + wg.y * WG_Y + li / WG_X;\n\
-         \x20   {call}\n}}\n"
-    );
+    let entry = if spec.persistent_stage(stage) {
+        features.push("PERSISTENT");
+        // The persistent driver (stages.wgsl) runs this stage's parts.
+        let (prefix, job) = stage.parts();
+        format!(
+            "const REFILL_IDLE: u32 = {}u;\n\
+             alias StageJob = {job};\n\
+             fn stage_begin(x: u32, y: u32, valid: bool) -> StageJob {{\n    return {prefix}_begin(x, y, valid);\n}}\n\
+             fn stage_end(j: StageJob, h: HitRec) {{\n    {prefix}_end(j, h);\n}}\n\
+             @compute @workgroup_size(WG_X * WG_Y)\n\
+             fn main(@builtin(local_invocation_index) li: u32) {{\n\
+             \x20   lid = li;\n    persistent();\n}}\n",
+            spec.refill.clamp(1, 32)
+        )
+    } else {
+        format!(
+            "@compute @workgroup_size(WG_X * WG_Y)\n\
+             fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) li: u32{params}) {{\n\
+             \x20   lid = li;\n{subgroup_setup}\
+             \x20   let x = frame.tile.x + wg.x * WG_X + li % WG_X;\n    let y = frame.tile.y + wg.y * WG_Y + li / WG_X;\n\
+             \x20   {call}\n}}\n"
+        )
+    };
     let text = format!(
         "{}\n{}\n{}\n{}",
         prelude(spec),
@@ -622,7 +681,7 @@ pub fn compile_half(stage: Stage, spec: &Specialisation, half: Half) -> Result<V
         _ => format!("{} {:?} kernel", spec.method.name(), stage),
     };
     let text = source_half(stage, spec, half);
-    let words = if spec.method == Method::SstSubgroup {
+    let words = if spec.method == Method::SstSubgroup || spec.persistent_stage(stage) {
         shader::translate_with_subgroups(&text, &label, &[])?
     } else {
         shader::translate(&text, &label, &[])?
@@ -826,7 +885,7 @@ mod tests {
             assert!(collect.contains("return rt_hits[rt_slot];") && !collect.contains("rt_rays[rt_slot] ="));
             // The stage function of the emit half returns right after its trace() call.
             let body = &emit[emit.find(&format!("fn {}(", stage.entry())).expect("the stage")..];
-            let after = &body[body.find("= trace(").expect("the stage traces")..];
+            let after = &body[body.find("= trace_query(").expect("the stage traces")..];
             let next = after.lines().nth(1).expect("a line after the trace").trim();
             assert!(next.starts_with("return;"), "{stage:?}: `{next}` follows the trace in the ray half");
             assert!(!collect.contains("this half only writes the ray"));
@@ -854,6 +913,39 @@ mod tests {
             assert!(!CWBVH.contains(shared), "cwbvh.wgsl has its own `{shared}`");
         }
         assert!(CWBVH.contains("intersect_leaf(") && CWBVH.contains("slab("));
+    }
+
+    /// The persistent kernels translate for every tracing stage of the methods that walk in
+    /// steps, with every variant that changes the stages' text, split bindings included; the plain
+    /// kernels have none of the persistent driver, and a method that cannot walk in steps keeps its
+    /// plain kernels whatever the setting.
+    #[test]
+    fn persistent_kernels_translate_and_the_plain_ones_have_none_of_their_code() {
+        let split = Split { node_chunks: 2, node_chunk: 1000, tri_chunks: 2, tri_chunk: 700 };
+        for method in [Method::Lst, Method::Stackless] {
+            for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Ao, Stage::Diffuse] {
+                for (ray_list, self_hits, split) in [(false, false, Split::NONE), (true, true, split)] {
+                    let s = Specialisation { persistent: true, ray_list, self_hits, split, ..spec(method, true, true) };
+                    assert!(s.persistent_stage(stage));
+                    let text = source(stage, &s);
+                    assert!(
+                        text.contains("fn persistent()") && text.contains("    persistent();"),
+                        "{method:?} {stage:?}"
+                    );
+                    compile(stage, &s).unwrap_or_else(|e| panic!("{method:?} {stage:?} ray list {ray_list}: {e}"));
+                }
+                let plain = source(stage, &spec(method, true, true));
+                assert!(!plain.contains("fn persistent(") && !plain.contains("subgroupAdd("), "{method:?} {stage:?}");
+            }
+            let convert = Specialisation { persistent: true, ..spec(method, true, true) };
+            assert!(!convert.persistent_stage(Stage::Convert));
+            assert!(!source(Stage::Convert, &convert).contains("fn persistent("));
+        }
+        for method in [Method::Sst, Method::SstSubgroup, Method::RtPipeline, Method::Cwbvh] {
+            let s = Specialisation { persistent: true, ..spec(method, true, true) };
+            assert!(!s.persistent_stage(Stage::Cast));
+            assert!(!source(Stage::Cast, &s).contains("fn persistent("), "{method:?}");
+        }
     }
 
     #[test]

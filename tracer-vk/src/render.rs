@@ -74,8 +74,12 @@ pub enum VkRenderError {
         "a {x} x {y} workgroup is not allowed: width and height must be powers of two with at most {limit} invocations in all on this device, such as 8x8 (the default), 16x16 or 32x4"
     )]
     Workgroup { x: u32, y: u32, limit: u64 },
-    #[error("{0} lacks the subgroup operations the sst-subgroup traversal votes with; use sst")]
+    #[error(
+        "{0} lacks the subgroup operations that the sst-subgroup traversal votes with and persistent kernels take their work with; use sst, or --persistent off"
+    )]
     NoSubgroups(String),
+    #[error("the {0} traversal does not run as persistent threads; use lst or stackless, or --persistent off")]
+    NotPersistent(&'static str),
     #[error(
         "SST needs {needed} bytes of workgroup memory for a tree {depth} deep with leaves of up to {leaf} triangles, more than the device's {limit}; use LST, or rebuild with a smaller --max-leaf-size"
     )]
@@ -129,14 +133,25 @@ struct FrameData {
 struct PassData {
     light: u32,
     depth: u32,
-    pad: [u32; 2],
+    work: u32,
+    cap: u32,
 }
 
 impl PassData {
-    fn bytes(light: u32, depth: u32) -> [u8; kernels::PASS_BYTES as usize] {
-        bytemuck::cast(PassData { light, depth, pad: [0; 2] })
+    fn bytes(light: u32, depth: u32, work: u32, cap: u32) -> [u8; kernels::PASS_BYTES as usize] {
+        bytemuck::cast(PassData { light, depth, work, cap })
     }
 }
+
+/// Pixels per lane a subgroup of a persistent kernel takes at most on a CPU device (`cap` in
+/// stages.wgsl: lavapipe ends an invocation's loops after 65535 iterations in all), with
+/// enough workgroups launched that every pixel is taken. A GPU's subgroups take any number.
+const CPU_PERSISTENT_CAP: u32 = 4;
+
+/// Invocations the persistent kernels launch by default ([`Renderer::set_persistent`]): the most
+/// an H100 SXM holds at once (132 multiprocessors of 2048). Fewer leave a larger GPU partly idle;
+/// more cost a smaller one only workgroups that find the work taken and end at once.
+pub const PERSISTENT_INVOCATIONS: u32 = 132 * 2048;
 
 /// Per-pixel state of one tile, kept between frames and reused by every tile that fits.
 struct Targets {
@@ -184,6 +199,8 @@ pub struct Renderer<'g> {
     /// [`Renderer::cast_rays`]: the rays of the frame being cast, one per pixel (origin, 1,
     /// direction, 1: `PathRay` of common.wgsl).
     ray_list: Option<Vec<[f32; 8]>>,
+    /// Invocations a persistent kernel launches ([`Renderer::set_persistent`]).
+    persistent_invocations: u32,
 }
 
 /// The kernels' storage buffers by binding number, as common.wgsl names them; `render_tile` binds
@@ -388,6 +405,8 @@ impl<'g> Renderer<'g> {
             vertices: Vertices::Expanded,
             first_vertex: 0,
             self_hits: false,
+            persistent: false,
+            refill: kernels::DEFAULT_REFILL,
         };
         let (wx, wy) = workgroup;
         let limit = info.max_workgroup_invocations.min(info.max_workgroup_size[0]).min(MAX_WORKGROUP_INVOCATIONS);
@@ -448,6 +467,7 @@ impl<'g> Renderer<'g> {
             tile_pixels: tiles::device_tile_pixels(info),
             frames_per_submission: 1,
             ray_list: None,
+            persistent_invocations: PERSISTENT_INVOCATIONS,
         })
     }
 
@@ -581,6 +601,34 @@ impl<'g> Renderer<'g> {
                 *p = None;
             }
         }
+    }
+
+    /// Runs the tracing stages as persistent threads (`--persistent on`, [`Specialisation::persistent`]),
+    /// launching about `invocations` invocations per dispatch (rounded up to whole workgroups;
+    /// `None`: [`PERSISTENT_INVOCATIONS`]). Refused, in one sentence, for a method whose traversal
+    /// does not walk in steps and on a device without the subgroup operations the kernels take
+    /// their work with. The images and ray counts are the plain kernels'.
+    pub fn set_persistent(&mut self, on: bool, invocations: Option<u32>) -> Result<(), VkRenderError> {
+        self.set_persistent_with(on, invocations, kernels::DEFAULT_REFILL)
+    }
+
+    /// [`Renderer::set_persistent`] with the lanes of every 32 that must be idle before a
+    /// subgroup takes new pixels ([`Specialisation::refill`], 1 to 32).
+    pub fn set_persistent_with(
+        &mut self,
+        on: bool,
+        invocations: Option<u32>,
+        refill: u32,
+    ) -> Result<(), VkRenderError> {
+        if on && !self.spec.method.walks_in_steps() {
+            return Err(VkRenderError::NotPersistent(self.spec.method.name()));
+        }
+        if on && !self.gpu.info().supports_subgroup_ops {
+            return Err(VkRenderError::NoSubgroups(self.gpu.info().name.clone()));
+        }
+        self.persistent_invocations = invocations.unwrap_or(PERSISTENT_INVOCATIONS).max(1);
+        self.specialise(Specialisation { persistent: on, refill: refill.clamp(1, 32), ..self.spec });
+        Ok(())
     }
 
     /// Renders in tiles of at most `pixels` pixels (at least one workgroup's), below what the
@@ -756,7 +804,15 @@ impl<'g> Renderer<'g> {
         // Storage buffers may not be empty: a scene without lights binds one unused entry.
         let lights = if s.lights.is_empty() { vec![Light::new([0.0; 3], [0.0; 3])] } else { s.lights.clone() };
         let lights_buf = g.create_buffer_with(&lights, "lights")?;
-        let counters = g.create_buffer(4 * (counters::LIVE as u64 + indirections.max(1) as u64), "ray counters")?;
+        // After the live-path words, one work word per pass of a submission for the persistent
+        // kernels (`persistent` in stages.wgsl).
+        let work_words = if self.spec.persistent {
+            passes_per_submission(s.mode, s.lights.len() as u32, indirections, self.frames_per_submission)
+        } else {
+            0
+        };
+        let counters =
+            g.create_buffer(4 * (counters::LIVE as u64 + indirections.max(1) as u64 + work_words), "ray counters")?;
 
         let mut tally = Tally::default();
         let total = s.width as u64 * s.height as u64;
@@ -894,8 +950,19 @@ impl<'g> Renderer<'g> {
             let mut dispatches = 0u64;
             let timings = g.run(|rec| {
                 let mut pass = |rec: &mut crate::device::Recorder, stage: Stage, light: u32, depth: u32| {
+                    // This pass's work word, after the live-path words (passes_per_submission).
+                    let work = counters::LIVE as u64 + indirections.max(1) as u64 + dispatches;
                     dispatches += 1;
-                    let push = PassData::bytes(light, depth);
+                    let cap = if g.info().kind == DeviceKind::Cpu { CPU_PERSISTENT_CAP } else { 0 };
+                    let push = PassData::bytes(light, depth, work as u32, cap);
+                    if self.spec.persistent_stage(stage) {
+                        debug_assert!(work < counters.size() / 4, "the counters hold every pass's work word");
+                        // With a cap, enough workgroups that their subgroups' caps cover the tile.
+                        let all = groups[0] * groups[1];
+                        let launch = self.persistent_invocations.div_ceil(wx * wy);
+                        let launch = if cap > 0 { launch.max(all.div_ceil(cap)) } else { launch }.min(all);
+                        return rec.dispatch(&p[&stage], &buffers, &push, [launch, 1, 1]);
+                    }
                     // rt-pipeline: the stage's first half writes the rays, the driver traces them,
                     // the second half is the stage with their hits.
                     if let (Some(rt), Some(emit)) = (rt, rays.get(&stage)) {
@@ -975,6 +1042,20 @@ impl<'g> Renderer<'g> {
             first = end;
         }
     }
+}
+
+/// The most passes one submission of a tile records (`Renderer::render_tile`): per frame the
+/// primary pass, the shade (one per light), AO (one per ray) or diffuse passes, every bounce with
+/// its shade passes, and the conversion; a submission makes at most all the bounces.
+fn passes_per_submission(mode: Mode, lights: u32, indirections: u32, copies: u32) -> u64 {
+    let shade = u64::from(lights.max(1));
+    let per_frame = match mode {
+        Mode::Cast => 1,
+        Mode::Ao(ao) => 2 + u64::from(ao.samples),
+        Mode::Diffuse => 3,
+        Mode::Whitted => 2 + shade + u64::from(indirections) * (1 + shade),
+    };
+    per_frame * u64::from(copies.max(1))
 }
 
 /// Refuses a submission whose counts do not add up: every dispatch must have finished every
@@ -1320,7 +1401,6 @@ mod layout_contract {
                 ("ao", offset_of!(FrameData, ao)),
             ],
         );
-        let pad = offset_of!(PassData, pad);
         check(
             &m,
             &l,
@@ -1329,8 +1409,8 @@ mod layout_contract {
             &[
                 ("light", offset_of!(PassData, light)),
                 ("depth", offset_of!(PassData, depth)),
-                ("pad0", pad),
-                ("pad1", pad + 4),
+                ("work", offset_of!(PassData, work)),
+                ("cap", offset_of!(PassData, cap)),
             ],
         );
         assert_eq!(size_of::<PassData>(), kernels::PASS_BYTES as usize, "the push-constant range");

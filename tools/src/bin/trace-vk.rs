@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use tools::auto::Picker;
 use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
-use tools::render_args::{RenderArgs, VerticesArg, parse_count, parse_workgroup};
+use tools::render_args::{PersistentArg, PersistentTuning, RenderArgs, VerticesArg, parse_count, parse_workgroup};
 use tools::say;
 use tools::vk_bench::{AUTO, VkBench, check_validation};
 use tracer_vk::kernels::Method;
@@ -56,6 +56,11 @@ enum Command {
         /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
         #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
         workgroup: (u32, u32),
+        /// Run the tracing stages as persistent threads (lst and stackless; the same image).
+        #[arg(long, value_enum, default_value = "off")]
+        persistent: PersistentArg,
+        #[command(flatten)]
+        tuning: PersistentTuning,
         #[command(flatten)]
         device: DeviceArgs,
     },
@@ -90,6 +95,12 @@ struct BenchArgs {
     /// a large frame cut into small frames' dispatches, rays as coherent as the large frame's.
     #[arg(long, value_parser = parse_tile_pixels)]
     tile_pixels: Option<u64>,
+    /// Time each method with plain kernels, persistent threads (`render --persistent`) or both,
+    /// side by side: persistent rows are named METHOD+persistent (lst and stackless only).
+    #[arg(long, value_delimiter = ',', value_enum, default_value = "off")]
+    persistent: Vec<PersistentArg>,
+    #[command(flatten)]
+    tuning: PersistentTuning,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -133,8 +144,8 @@ fn main() -> ExitCode {
     tools::cli::run(|| match command {
         Command::Devices => devices(),
         Command::Bench(b) => bench(&b),
-        Command::Render { args, method, recalibrate, candidates, workgroup, device } => {
-            render(&args, method, Auto { recalibrate, candidates }, workgroup, &device)
+        Command::Render { args, method, recalibrate, candidates, workgroup, persistent, tuning, device } => {
+            render(&args, method, Auto { recalibrate, candidates }, workgroup, (persistent, tuning), &device)
         }
     })
 }
@@ -198,6 +209,7 @@ fn render(
     method: MethodArg,
     auto: Auto,
     workgroup: (u32, u32),
+    (persistent, tuning): (PersistentArg, PersistentTuning),
     device: &DeviceArgs,
 ) -> Result<(), String> {
     let vertices = args.vertices;
@@ -229,6 +241,11 @@ fn render(
     if let Some(v) = vertices {
         renderer.set_vertices(v.vertices()).map_err(|e| e.to_string())?;
     }
+    if persistent.on() {
+        renderer
+            .set_persistent_with(true, tuning.persistent_invocations, tuning.persistent_refill)
+            .map_err(|e| e.to_string())?;
+    }
     let pixels = u64::from(settings.width) * u64::from(settings.height);
     let bar = Progress::new(pixels, "rendering {bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
     let out = bar
@@ -241,13 +258,14 @@ fn render(
     let written = outputs.write(image, None, args.heatmap_max, scene)?;
     let r = image.rays;
     let mut lines = vec![format!(
-        "{}x{} {}{} with {}{} on {}: {} GPU{}, rays: {} ({}) -> {}",
+        "{}x{} {}{} with {}{}{} on {}: {} GPU{}, rays: {} ({}) -> {}",
         image.width,
         image.height,
         settings.mode.name(),
         tools::render_args::accuracy_note(&settings.accuracy, scene),
         method.name(),
         if args.exact { " (exact)" } else { "" },
+        if persistent.on() { " (persistent threads)" } else { "" },
         gpu.info().name,
         duration(out.gpu_ms / 1e3),
         loaded.timing_note(),
@@ -307,12 +325,14 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
     let mut names: Vec<String> = Vec::new();
     for &m in &b.methods {
         for &v in &b.matrix.vertices {
-            let name = match method_of(m) {
-                Some(m) => tools::vk_bench::method_name(m, v.vertices()),
-                None => AUTO.to_owned(),
-            };
-            if !names.contains(&name) {
-                names.push(name);
+            for &p in &b.persistent {
+                let name = match method_of(m) {
+                    Some(m) => tools::vk_bench::method_name(m, v.vertices(), p.on()),
+                    None => AUTO.to_owned(),
+                };
+                if !names.contains(&name) {
+                    names.push(name);
+                }
             }
         }
     }
@@ -325,6 +345,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
         in_flight: b.in_flight,
         tile_pixels: b.tile_pixels,
         report_uploads: b.matrix.vertices.iter().any(|&v| v != VerticesArg::Expanded),
+        persistent: b.tuning,
         ..VkBench::new(open_for(&b.device, &all)?, b.workgroup, b.exact)
     };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;
