@@ -109,7 +109,9 @@ pub struct Specialisation {
     pub method: Method,
     /// Entries of LST's and SST's stacks: the file's max depth (at least 1).
     pub stack_size: u32,
-    /// Most triangles in one leaf (SST caches a leaf in workgroup memory).
+    /// Triangles SST's leaf cache (in workgroup memory) holds: the file's largest leaf, or fewer
+    /// where the device's workgroup memory would not hold it ([`sst_leaf_cache`]); a larger leaf
+    /// is then tested in chunks.
     pub leaf_size: u32,
     pub workgroup: (u32, u32),
     /// Some material reflects (kr > 0).
@@ -627,6 +629,14 @@ pub fn exact_rounding_wgsl() -> &'static str {
 pub fn sst_shared_bytes(spec: &Specialisation) -> u64 {
     let wg = spec.workgroup.0 as u64 * spec.workgroup.1 as u64;
     32 * spec.stack_size.max(1) as u64 + 48 + 2 * 32 + 48 * spec.leaf_size.max(1) as u64 + 4 * wg + 2 * 4
+}
+
+/// The largest leaf cache, up to `spec.leaf_size` triangles, with which SST's workgroup memory
+/// fits in `limit` bytes; `None` when not even one triangle fits beside the stack.
+pub fn sst_leaf_cache(spec: &Specialisation, limit: u64) -> Option<u32> {
+    let one = sst_shared_bytes(&Specialisation { leaf_size: 1, ..*spec });
+    let more = limit.checked_sub(one)? / 48;
+    Some(spec.leaf_size.max(1).min(1 + more.min(u32::MAX as u64 - 1) as u32))
 }
 
 /// Translates one kernel to SPIR-V.

@@ -77,9 +77,9 @@ pub enum VkRenderError {
     #[error("{0} lacks the subgroup operations the sst-subgroup traversal votes with; use sst")]
     NoSubgroups(String),
     #[error(
-        "SST needs {needed} bytes of workgroup memory for a tree {depth} deep with leaves of up to {leaf} triangles, more than the device's {limit}; use LST, or rebuild with a smaller --max-leaf-size"
+        "SST needs {needed} bytes of workgroup memory for its stack of a tree {depth} deep and a leaf cache of one triangle, more than the device's {limit}; use LST or stackless"
     )]
-    SharedMemory { depth: u32, leaf: u32, needed: u64, limit: u64 },
+    SharedMemory { depth: u32, needed: u64, limit: u64 },
     #[error(
         "the scene's {what} need {bytes} bytes in one storage buffer, more than this device's {limit_name} of {limit} bytes; it takes scenes of up to {fits} {what}"
     )]
@@ -368,7 +368,7 @@ impl<'g> Renderer<'g> {
         let (tri_chunks, tri_chunk) = chunking(info, binding_bytes, "triangles", &arrays.tris)?;
         let split = Split { node_chunks, node_chunk, tri_chunks, tri_chunk };
         let stats = scene.stats();
-        let spec = Specialisation {
+        let mut spec = Specialisation {
             method,
             // cwbvh's node groups: one per level of the wide tree at most.
             stack_size: match nodes {
@@ -408,16 +408,14 @@ impl<'g> Renderer<'g> {
             });
         }
         if matches!(method, Method::Sst | Method::SstSubgroup) {
-            let needed = kernels::sst_shared_bytes(&spec);
+            // The stack must fit whole; the leaf cache takes what is left, and a larger leaf is
+            // loaded in chunks of it.
             let limit = info.max_shared_memory as u64;
-            if needed > limit {
-                return Err(VkRenderError::SharedMemory {
-                    depth: spec.stack_size,
-                    leaf: spec.leaf_size,
-                    needed,
-                    limit,
-                });
-            }
+            spec.leaf_size = kernels::sst_leaf_cache(&spec, limit).ok_or_else(|| VkRenderError::SharedMemory {
+                depth: spec.stack_size,
+                needed: kernels::sst_shared_bytes(&Specialisation { leaf_size: 1, ..spec }),
+                limit,
+            })?;
         }
         fits(info, "normal indices", &arrays.normal_indices)?;
         fits(info, "normals", &arrays.normals)?;

@@ -65,7 +65,15 @@ fn translate_with(
         fail(text)
     })?;
 
-    let options = spv::Options { lang_version: (1, 3), ..spv::Options::default() };
+    // No zero-initialisation of workgroup memory: only SST's kernel has any, and it writes each
+    // variable before reading it (tracer-vk/shaders/sst.wgsl). naga's polyfill stores every whole
+    // array at the kernel's start, and lavapipe then compiled SST for minutes with a leaf cache of
+    // 256 triangles (docs/stability.md, finding 8).
+    let options = spv::Options {
+        lang_version: (1, 3),
+        zero_initialize_workgroup_memory: spv::ZeroInitializeWorkgroupMemoryMode::None,
+        ..spv::Options::default()
+    };
     let pipeline = spv::PipelineOptions { shader_stage: naga::ShaderStage::Compute, entry_point: "main".to_string() };
     spv::write_vec(&module, &info, &options, Some(&pipeline))
         .map_err(|e| fail(with_causes(format!("error: SPIR-V writer: {e}"), &e)))

@@ -61,6 +61,10 @@ struct Cli {
     /// Describe the machine in the report as this (default: the CPU model and the device's name).
     #[arg(long)]
     machine: Option<String>,
+    /// The report's section to write, "## TITLE" up to the next "## " heading (appended when the
+    /// report has none), so that runs of different axes keep each other's tables.
+    #[arg(long, default_value = "Results")]
+    section: String,
     /// The size axis's largest scene: triangle counts 10^3, 10^4, ... up to this, and this.
     #[arg(long, default_value_t = cases::DEFAULT_MAX_TRIANGLES, value_parser = parse_triangles)]
     max_triangles: u64,
@@ -122,21 +126,28 @@ fn sweep(cli: &Cli) -> Result<(), String> {
         .map(|r| format!("{} {}: {} {}", r.axis, r.label, r.line(), report::cell(&r.tally)))
         .collect();
     let axes: String = cli.axis.iter().map(|a| format!(" --axis {a:?}")).collect();
+    let section = if cli.section == "Results" { String::new() } else { format!(" --section {:?}", cli.section) };
+    let chart = if cli.chart == std::path::Path::new("docs/stability/failure-rates") {
+        String::new()
+    } else {
+        format!(" --chart {}", cli.chart.display())
+    };
     let command = format!(
-        "cargo run --release -p tools --bin stress --{}{}{axes} --timeout {} --max-triangles {}",
+        "cargo run --release -p tools --bin stress --{}{}{axes}{section}{chart} --timeout {} --max-triangles {}",
         if cli.quick { " --quick" } else { "" },
         if cli.cpu_only { " --cpu-only" } else { "" },
         cli.timeout,
         cli.max_triangles
     );
-    let mut md = std::fs::read_to_string(&cli.out).ok().map(|s| head_of(&s)).unwrap_or_default();
-    md += &format!(
-        "## Results\n\nMade by `{command}` on {machine} in {:.0} s. Chart: [{name}.svg]({name}.svg) \
+    let mut body = format!(
+        "## {}\n\nMade by `{command}` on {machine} in {:.0} s. Chart: [{name}.svg]({name}.svg) \
          (failed pixels per point and method; a refused point has no marker).\n\n![failure rates]({name}.png)\n\n",
+        cli.section,
         started.elapsed().as_secs_f64(),
         name = relative(&cli.chart, &cli.out),
     );
-    md += &report::markdown(&rows, &AXES);
+    body += &report::markdown(&rows, &AXES);
+    let md = report::splice_section(&std::fs::read_to_string(&cli.out).unwrap_or_default(), &cli.section, &body);
     if let Some(dir) = cli.chart.parent() {
         std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     }
@@ -156,12 +167,6 @@ fn sweep(cli: &Cli) -> Result<(), String> {
         }
         Err(format!("{} points failed in silence (listed above)", silent.len()))
     }
-}
-
-/// The hand-written part of the report: everything before the line "## Results".
-fn head_of(text: &str) -> String {
-    let at = if text.starts_with("## Results\n") { Some(0) } else { text.find("\n## Results\n").map(|i| i + 1) };
-    at.map_or(text.to_owned(), |i| text[..i].to_owned())
 }
 
 /// The chart's path as the report links it.
