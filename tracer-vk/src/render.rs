@@ -588,6 +588,12 @@ impl<'g> Renderer<'g> {
         self.tile_pixels = tiles::device_tile_pixels(self.gpu.info()).min(pixels.max(wg));
     }
 
+    /// Holds at most `triangles` (at least one) in SST's leaf cache, so that larger leaves are
+    /// tested in chunks as on a device with little workgroup memory: for tests.
+    pub fn limit_leaf_cache(&mut self, triangles: u32) {
+        self.specialise(Specialisation { leaf_size: self.spec.leaf_size.min(triangles.max(1)), ..self.spec });
+    }
+
     /// Records `n` copies of each frame back to back into one submission, waited for once, and
     /// reports their mean: GPU time and rays per frame (issue 10 item 3: whether small frames fill
     /// the GPU when the gaps between submissions go). Every copy redoes the same work from the
