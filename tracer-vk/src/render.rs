@@ -1085,11 +1085,12 @@ pub fn upload_bytes_with(scene: &SceneFile, method: Method, form: Vertices) -> u
 
 /// The deepest LST stack a CPU Vulkan device (lavapipe) is asked to compile. LST keeps its stack
 /// in two private arrays of the tree's depth, and lavapipe compiles a kernel at its first dispatch
-/// (inside the submission, so a slow compile reads as a hang): a first frame of a 400-deep chain
-/// took 0.9 s including the compile, 700 deep 71 s, 1000 deep more than the 120 s timeout (600 s
-/// in docs/stability.md), while later frames take milliseconds. The H100 renders the 1000-deep
-/// chain at once. Measured with `tools::stress::scenes::chain` on this machine's lavapipe.
-pub const CPU_DEVICE_STACK_LIMIT: u32 = 512;
+/// (inside the submission, so a slow compile reads as a hang); the compile time grows steeply with
+/// the stack. A Whitted frame's first submission of `tools::stress::scenes::chain` on this 2-core
+/// VM's lavapipe at load 12: 500 deep 3.9 s, 1000 deep 21 s, 2000 deep 91 s (with naga's zero
+/// initialisers of the arrays, which `shader.rs` now takes out: 500 deep 109 s, 1000 deep past the
+/// 120 s timeout). Later frames take milliseconds; the H100 renders a 1000-deep chain at once.
+pub const CPU_DEVICE_STACK_LIMIT: u32 = 1024;
 
 /// `data` in buffers of `per_chunk` records each (at least one buffer, for an empty array too),
 /// labelled with the array's name and, after the first, the chunk's number.
