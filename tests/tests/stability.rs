@@ -90,6 +90,39 @@ fn lst_refuses_a_stack_lavapipe_cannot_compile_before_the_first_frame() {
     assert!(Renderer::new(&gpu, &deep, Method::Stackless, (8, 8)).is_ok());
 }
 
+/// SST keeps a stack of whole nodes in workgroup memory and shrinks its leaf cache to what is
+/// left: it refuses, naming the bytes, only a tree whose stack does not fit beside a cache of one
+/// triangle, and takes the deepest tree whose stack does.
+#[test]
+fn sst_refuses_only_a_stack_its_workgroup_memory_cannot_hold() {
+    use tracer_vk::kernels::{Method, sst_shared_bytes};
+    use tracer_vk::render::{Renderer, VkRenderError};
+    let gpu = common::gpu();
+    let limit = gpu.info().max_shared_memory as u64;
+    let fits = |depth: u32| {
+        let spec = tracer_vk::kernels::Specialisation {
+            stack_size: depth,
+            leaf_size: 1,
+            ..tracer_vk::kernels::Specialisation::every_feature(Method::Sst)
+        };
+        sst_shared_bytes(&spec) <= limit
+    };
+    let deepest = (1..100_000).take_while(|&d| fits(d)).last().expect("a stack of one fits");
+    for method in [Method::Sst, Method::SstSubgroup] {
+        let too_deep = tools::stress::scenes::chain(deepest + 2);
+        assert_eq!(too_deep.stats().max_depth, deepest + 1);
+        let e = Renderer::new(&gpu, &too_deep, method, (8, 8)).err().expect("refused");
+        let VkRenderError::SharedMemory { depth, needed, limit: l } = e else { panic!("{e:?}") };
+        assert_eq!((depth, l), (deepest + 1, limit));
+        assert!(needed > limit);
+        let text = e.to_string();
+        assert!(text.contains(&needed.to_string()) && text.contains("stackless") && !text.contains('\n'), "{text}");
+        let deepest_chain = tools::stress::scenes::chain(deepest + 1);
+        let r = Renderer::new(&gpu, &deepest_chain, method, (8, 8)).expect("fits");
+        assert_eq!(r.specialisation().stack_size, deepest);
+    }
+}
+
 /// The subnormal-direction axis tests what it says: the tilted mirror's normal has a subnormal x
 /// component, every primary ray of the one-pixel-wide frame has x = 0, most hit the
 /// mirror, and their reflection (the CPU's own `reflect`) has a subnormal, non-zero x component, and

@@ -777,6 +777,20 @@ mod tests {
     }
 
     #[test]
+    fn sst_leaf_cache_takes_the_workgroup_memory_the_stack_leaves() {
+        let spec = Specialisation { stack_size: 1, leaf_size: 1000, ..Specialisation::every_feature(Method::Sst) };
+        // 32 (stack) + 48 (step) + 64 (children) + 256 (votes of 8x8) + 8 (flags) + 48 per triangle.
+        assert_eq!(sst_shared_bytes(&Specialisation { leaf_size: 1, ..spec }), 456);
+        assert_eq!(sst_leaf_cache(&spec, 48 * 1024), Some(1000), "the whole leaf in 48 KiB");
+        assert_eq!(sst_leaf_cache(&spec, 32 * 1024), Some(1 + (32768 - 456) / 48));
+        let deep = Specialisation { stack_size: 1010, ..spec };
+        assert_eq!(sst_shared_bytes(&Specialisation { leaf_size: 1, ..deep }), 32 * 1010 + 424);
+        assert_eq!(sst_leaf_cache(&deep, 32 * 1024), Some(1 + (32768 - 32744) / 48));
+        assert_eq!(sst_leaf_cache(&Specialisation { stack_size: 1011, ..spec }, 32 * 1024), None);
+        assert_eq!(sst_leaf_cache(&Specialisation { leaf_size: 3, ..spec }, 32 * 1024), Some(3));
+    }
+
+    #[test]
     fn features_and_stack_size_follow_the_scene() {
         let s = source(Stage::Bounce, &spec(Method::Lst, true, false));
         assert!(s.contains("const STACK_SIZE: u32 = 23u;"));
