@@ -61,6 +61,10 @@ struct Cli {
     /// Describe the machine in the report as this (default: the CPU model and the device's name).
     #[arg(long)]
     machine: Option<String>,
+    /// Leave out the frames of more pixels than this from the size axis (16384x16384 is 2^28),
+    /// where a machine cannot render them within its session.
+    #[arg(long, default_value_t = 1 << 28, value_parser = parse_pixels)]
+    max_frame_pixels: u64,
     /// The report's section to write, "## TITLE" up to the next "## " heading (appended when the
     /// report has none), so that runs of different axes keep each other's tables.
     #[arg(long, default_value = "Results")]
@@ -72,6 +76,10 @@ struct Cli {
 
 fn parse_triangles(s: &str) -> Result<u64, String> {
     parse_count(s, 1000, u32::MAX as u64, "the largest triangle count")
+}
+
+fn parse_pixels(s: &str) -> Result<u64, String> {
+    parse_count(s, 1, 1 << 28, "the largest frame in pixels")
 }
 
 fn parse_device(s: &str) -> Result<usize, String> {
@@ -110,7 +118,8 @@ fn sweep(cli: &Cli) -> Result<(), String> {
     say!("generating the scenes ...");
     let extent = if cli.quick { Extent::Quick } else { Extent::Full };
     let wanted = |axis: &str| cli.axis.is_empty() || cli.axis.iter().any(|a| axis.contains(a.as_str()));
-    let cases = cases::all(extent, cli.max_triangles, &wanted);
+    let mut cases = cases::all(extent, cli.max_triangles, &wanted);
+    cases.retain(|c| c.axis != AXES[13] || c.pixels() <= cli.max_frame_pixels);
     let runs: usize = cases.iter().map(|c| if c.both_tests { 2 } else { 1 }).sum();
     let progress = Progress::new((runs * methods.len()) as u64, "{bar:40} {pos}/{len} {msg}", false);
     let rows = tools::stress::sweep(cases, &methods, gpu, Duration::from_secs(cli.timeout), &|row| {
@@ -126,6 +135,11 @@ fn sweep(cli: &Cli) -> Result<(), String> {
         .map(|r| format!("{} {}: {} {}", r.axis, r.label, r.line(), report::cell(&r.tally)))
         .collect();
     let axes: String = cli.axis.iter().map(|a| format!(" --axis {a:?}")).collect();
+    let frames = if cli.max_frame_pixels == 1 << 28 {
+        String::new()
+    } else {
+        format!(" --max-frame-pixels {}", cli.max_frame_pixels)
+    };
     let section = if cli.section == "Results" { String::new() } else { format!(" --section {:?}", cli.section) };
     let chart = if cli.chart == std::path::Path::new("docs/stability/failure-rates") {
         String::new()
@@ -133,7 +147,7 @@ fn sweep(cli: &Cli) -> Result<(), String> {
         format!(" --chart {}", cli.chart.display())
     };
     let command = format!(
-        "cargo run --release -p tools --bin stress --{}{}{axes}{section}{chart} --timeout {} --max-triangles {}",
+        "cargo run --release -p tools --bin stress --{}{}{axes}{section}{chart}{frames} --timeout {} --max-triangles {}",
         if cli.quick { " --quick" } else { "" },
         if cli.cpu_only { " --cpu-only" } else { "" },
         cli.timeout,
