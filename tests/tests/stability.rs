@@ -61,29 +61,66 @@ fn no_method_fails_in_silence_on_any_axis() {
 }
 
 /// A 1000-deep chain gave no LST frame on lavapipe (docs/stability.md, finding 5): lavapipe
-/// compiles the kernel's 1000-entry private stack for minutes inside the first submission. LST
-/// now refuses a stack deeper than `CPU_DEVICE_STACK_LIMIT` on CPU devices before the first frame,
-/// naming the depth; stackless renders the same chain, and LST still takes the deepest allowed.
+/// compiled the kernel's zero-initialised private stack for minutes inside the first submission.
+/// Without the initialisers the 1000-deep chain compiles in seconds; LST refuses a stack deeper
+/// than `CPU_DEVICE_STACK_LIMIT` on CPU devices before the first frame, naming the depth, and
+/// stackless renders that chain.
 #[test]
 fn lst_refuses_a_stack_lavapipe_cannot_compile_before_the_first_frame() {
     use tracer_vk::kernels::Method;
     use tracer_vk::render::{CPU_DEVICE_STACK_LIMIT, Renderer, VkRenderError};
     let gpu = common::gpu();
-    let deep = tools::stress::scenes::chain(1001);
+    let deep = tools::stress::scenes::chain(CPU_DEVICE_STACK_LIMIT + 2);
     let depth = deep.stats().max_depth;
+    assert!(depth > CPU_DEVICE_STACK_LIMIT);
     let lst = Renderer::new(&gpu, &deep, Method::Lst, (8, 8));
     if gpu.info().kind == tracer_vk::DeviceKind::Cpu {
-        let e = lst.err().expect("a 1000-deep stack is refused on a CPU device");
+        let e = lst.err().expect("a stack past the limit is refused on a CPU device");
         assert!(matches!(&e, VkRenderError::PrivateStack { depth: d, .. } if *d == depth), "{e:?}");
         let text = e.to_string();
         assert!(text.contains(&depth.to_string()) && text.contains("stackless") && !text.contains('\n'), "{text}");
         let allowed = tools::stress::scenes::chain(CPU_DEVICE_STACK_LIMIT);
         assert!(allowed.stats().max_depth <= CPU_DEVICE_STACK_LIMIT);
         assert!(Renderer::new(&gpu, &allowed, Method::Lst, (8, 8)).is_ok());
+        // The sweep's deepest chain is within it.
+        assert!(tools::stress::scenes::chain(1001).stats().max_depth <= CPU_DEVICE_STACK_LIMIT);
     } else {
         assert!(lst.is_ok(), "only CPU devices limit LST's stack");
     }
     assert!(Renderer::new(&gpu, &deep, Method::Stackless, (8, 8)).is_ok());
+}
+
+/// SST keeps a stack of whole nodes in workgroup memory and shrinks its leaf cache to what is
+/// left: it refuses, naming the bytes, only a tree whose stack does not fit beside a cache of one
+/// triangle, and takes the deepest tree whose stack does.
+#[test]
+fn sst_refuses_only_a_stack_its_workgroup_memory_cannot_hold() {
+    use tracer_vk::kernels::{Method, sst_shared_bytes};
+    use tracer_vk::render::{Renderer, VkRenderError};
+    let gpu = common::gpu();
+    let limit = gpu.info().max_shared_memory as u64;
+    let fits = |depth: u32| {
+        let spec = tracer_vk::kernels::Specialisation {
+            stack_size: depth,
+            leaf_size: 1,
+            ..tracer_vk::kernels::Specialisation::every_feature(Method::Sst)
+        };
+        sst_shared_bytes(&spec) <= limit
+    };
+    let deepest = (1..100_000).take_while(|&d| fits(d)).last().expect("a stack of one fits");
+    for method in [Method::Sst, Method::SstSubgroup] {
+        let too_deep = tools::stress::scenes::chain(deepest + 2);
+        assert_eq!(too_deep.stats().max_depth, deepest + 1);
+        let e = Renderer::new(&gpu, &too_deep, method, (8, 8)).err().expect("refused");
+        let VkRenderError::SharedMemory { depth, needed, limit: l } = e else { panic!("{e:?}") };
+        assert_eq!((depth, l), (deepest + 1, limit));
+        assert!(needed > limit);
+        let text = e.to_string();
+        assert!(text.contains(&needed.to_string()) && text.contains("stackless") && !text.contains('\n'), "{text}");
+        let deepest_chain = tools::stress::scenes::chain(deepest + 1);
+        let r = Renderer::new(&gpu, &deepest_chain, method, (8, 8)).expect("fits");
+        assert_eq!(r.specialisation().stack_size, deepest);
+    }
 }
 
 /// The subnormal-direction axis tests what it says: the tilted mirror's normal has a subnormal x

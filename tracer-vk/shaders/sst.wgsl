@@ -6,7 +6,15 @@
 // reduction sums the votes (or, in the subgroup variant, subgroupAdd and one barrier), and the
 // majority decides which child comes first. The other goes on a stack of whole nodes in workgroup
 // memory. Rays that miss the child taken go inactive until the next pop, which re-activates all of
-// them. STACK_SIZE is the file's max depth; LEAF_SIZE its largest leaf.
+// them. STACK_SIZE is the file's max depth; LEAF_SIZE the triangles the leaf cache holds: the
+// file's largest leaf, or fewer where the device's workgroup memory would not hold that many
+// (larger leaves are then loaded and tested in chunks).
+//
+// Workgroup memory is not zero-initialised (tracer-vk/src/shader.rs): every variable below is
+// written before it is read. naga's zero-initialisation stored each whole array at the kernel's
+// start, and lavapipe's compile time grew steeply with the leaf cache (a Whitted frame's first
+// submission: 10 s for a cache of 8 triangles, 99 s for 128, over 120 s for 256; 4 to 6 s for
+// any size without it).
 //
 // Invocation 0 makes every decision and publishes it as one step (the node to visit and how the
 // rays take part), read by all at the top of the next iteration: an inner node costs the barriers
@@ -105,22 +113,33 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
         }
         let node = step.node;
         if node.count > 0u {
-            for (var i = lid; i < node.count; i += WG_SIZE) {
-                sst_tris[i] = fetch_tri(node.index + i);
-            }
-            workgroupBarrier();
-            if taking_part {
-                for (var i = 0u; i < node.count; i++) {
-                    cost_tris += 1u;
-                    let idx = node.index + i;
-                    let h = intersect(sst_tris[i], r, t_min, best.t);
-                    if h.x >= 0.0 && (h.x < best.t || (h.x == best.t && idx < best.tri)) {
-                        best = HitRec(h.x, idx, h.y, h.z);
-                        if any_hit {
-                            live = false;
-                            break;
+            // The leaf in chunks of LEAF_SIZE triangles: one chunk unless the leaf is larger than
+            // the cache (the host shrinks the cache until the stack and it fit the device's
+            // workgroup memory). `node` is uniform, so every invocation runs the same chunks and
+            // reaches every barrier.
+            for (var base = 0u; base < node.count; base += LEAF_SIZE) {
+                let n = min(node.count - base, LEAF_SIZE);
+                for (var i = lid; i < n; i += WG_SIZE) {
+                    sst_tris[i] = fetch_tri(node.index + base + i);
+                }
+                workgroupBarrier();
+                if taking_part && live {
+                    for (var i = 0u; i < n; i++) {
+                        cost_tris += 1u;
+                        let idx = node.index + base + i;
+                        let h = intersect(sst_tris[i], r, t_min, best.t);
+                        if h.x >= 0.0 && (h.x < best.t || (h.x == best.t && idx < best.tri)) {
+                            best = HitRec(h.x, idx, h.y, h.z);
+                            if any_hit {
+                                live = false;
+                                break;
+                            }
                         }
                     }
+                }
+                // The next chunk overwrites the cache only once every ray is done with this one.
+                if base + LEAF_SIZE < node.count {
+                    workgroupBarrier();
                 }
             }
             if live {

@@ -134,7 +134,9 @@ pub struct Specialisation {
     pub method: Method,
     /// Entries of LST's and SST's stacks: the file's max depth (at least 1).
     pub stack_size: u32,
-    /// Most triangles in one leaf (SST caches a leaf in workgroup memory).
+    /// Triangles SST's leaf cache (in workgroup memory) holds: the file's largest leaf, or fewer
+    /// where the device's workgroup memory would not hold it ([`sst_leaf_cache`]); a larger leaf
+    /// is then tested in chunks.
     pub leaf_size: u32,
     pub workgroup: (u32, u32),
     /// Some material reflects (kr > 0).
@@ -669,6 +671,14 @@ pub fn sst_shared_bytes(spec: &Specialisation) -> u64 {
     32 * spec.stack_size.max(1) as u64 + 48 + 2 * 32 + 48 * spec.leaf_size.max(1) as u64 + 4 * wg + 2 * 4
 }
 
+/// The largest leaf cache, up to `spec.leaf_size` triangles, with which SST's workgroup memory
+/// fits in `limit` bytes; `None` when not even one triangle fits beside the stack.
+pub fn sst_leaf_cache(spec: &Specialisation, limit: u64) -> Option<u32> {
+    let one = sst_shared_bytes(&Specialisation { leaf_size: 1, ..*spec });
+    let more = limit.checked_sub(one)? / 48;
+    Some(spec.leaf_size.max(1).min(1 + more.min(u32::MAX as u64 - 1) as u32))
+}
+
 /// Translates one kernel to SPIR-V.
 pub fn compile(stage: Stage, spec: &Specialisation) -> Result<Vec<u32>, VkError> {
     compile_half(stage, spec, Half::Collect)
@@ -804,6 +814,21 @@ mod tests {
             variant.contains("return intersect_moller_trumbore(") && !variant.contains("return intersect_watertight(")
         );
         assert!(variant.contains("return p + n * frame.sample.w;") && !variant.contains("return offset_origin(p, n);"));
+    }
+
+    #[test]
+    fn sst_leaf_cache_takes_the_workgroup_memory_the_stack_leaves() {
+        let spec = Specialisation { stack_size: 1, leaf_size: 1000, ..Specialisation::every_feature(Method::Sst) };
+        // 32 (stack) + 48 (step) + 64 (children) + 256 (votes of 8x8) + 8 (flags) + 48 per triangle.
+        assert_eq!(sst_shared_bytes(&Specialisation { leaf_size: 1, ..spec }), 456);
+        assert_eq!(sst_leaf_cache(&spec, 48 * 1024), Some(1000), "the whole leaf in 48 KiB");
+        assert_eq!(sst_leaf_cache(&spec, 32 * 1024), Some(1 + (32768 - 456) / 48));
+        let deep = Specialisation { stack_size: 1010, ..spec };
+        assert_eq!(sst_shared_bytes(&Specialisation { leaf_size: 1, ..deep }), 32 * 1010 + 424);
+        // The stack and one triangle take 32744 bytes; the 24 left hold no second triangle.
+        assert_eq!(sst_leaf_cache(&deep, 32 * 1024), Some(1));
+        assert_eq!(sst_leaf_cache(&Specialisation { stack_size: 1011, ..spec }, 32 * 1024), None);
+        assert_eq!(sst_leaf_cache(&Specialisation { leaf_size: 3, ..spec }, 32 * 1024), Some(3));
     }
 
     #[test]

@@ -81,9 +81,9 @@ pub enum VkRenderError {
     #[error("the {0} traversal does not run as persistent threads; use lst or stackless, or --persistent off")]
     NotPersistent(&'static str),
     #[error(
-        "SST needs {needed} bytes of workgroup memory for a tree {depth} deep with leaves of up to {leaf} triangles, more than the device's {limit}; use LST, or rebuild with a smaller --max-leaf-size"
+        "SST needs {needed} bytes of workgroup memory for its stack of a tree {depth} deep and a leaf cache of one triangle, more than the device's {limit}; use LST or stackless"
     )]
-    SharedMemory { depth: u32, leaf: u32, needed: u64, limit: u64 },
+    SharedMemory { depth: u32, needed: u64, limit: u64 },
     #[error(
         "the scene's {what} need {bytes} bytes in one storage buffer, more than this device's {limit_name} of {limit} bytes; it takes scenes of up to {fits} {what}"
     )]
@@ -385,7 +385,7 @@ impl<'g> Renderer<'g> {
         let (tri_chunks, tri_chunk) = chunking(info, binding_bytes, "triangles", &arrays.tris)?;
         let split = Split { node_chunks, node_chunk, tri_chunks, tri_chunk };
         let stats = scene.stats();
-        let spec = Specialisation {
+        let mut spec = Specialisation {
             method,
             // cwbvh's node groups: one per level of the wide tree at most.
             stack_size: match nodes {
@@ -427,16 +427,14 @@ impl<'g> Renderer<'g> {
             });
         }
         if matches!(method, Method::Sst | Method::SstSubgroup) {
-            let needed = kernels::sst_shared_bytes(&spec);
+            // The stack must fit whole; the leaf cache takes what is left, and a larger leaf is
+            // loaded in chunks of it.
             let limit = info.max_shared_memory as u64;
-            if needed > limit {
-                return Err(VkRenderError::SharedMemory {
-                    depth: spec.stack_size,
-                    leaf: spec.leaf_size,
-                    needed,
-                    limit,
-                });
-            }
+            spec.leaf_size = kernels::sst_leaf_cache(&spec, limit).ok_or_else(|| VkRenderError::SharedMemory {
+                depth: spec.stack_size,
+                needed: kernels::sst_shared_bytes(&Specialisation { leaf_size: 1, ..spec }),
+                limit,
+            })?;
         }
         fits(info, "normal indices", &arrays.normal_indices)?;
         fits(info, "normals", &arrays.normals)?;
@@ -636,6 +634,12 @@ impl<'g> Renderer<'g> {
     pub fn limit_tile_pixels(&mut self, pixels: u64) {
         let wg = self.spec.workgroup.0 as u64 * self.spec.workgroup.1 as u64;
         self.tile_pixels = tiles::device_tile_pixels(self.gpu.info()).min(pixels.max(wg));
+    }
+
+    /// Holds at most `triangles` (at least one) in SST's leaf cache, so that larger leaves are
+    /// tested in chunks as on a device with little workgroup memory: for tests.
+    pub fn limit_leaf_cache(&mut self, triangles: u32) {
+        self.specialise(Specialisation { leaf_size: self.spec.leaf_size.min(triangles.max(1)), ..self.spec });
     }
 
     /// Records `n` copies of each frame back to back into one submission, waited for once, and
@@ -1162,11 +1166,12 @@ pub fn upload_bytes_with(scene: &SceneFile, method: Method, form: Vertices) -> u
 
 /// The deepest LST stack a CPU Vulkan device (lavapipe) is asked to compile. LST keeps its stack
 /// in two private arrays of the tree's depth, and lavapipe compiles a kernel at its first dispatch
-/// (inside the submission, so a slow compile reads as a hang): a first frame of a 400-deep chain
-/// took 0.9 s including the compile, 700 deep 71 s, 1000 deep more than the 120 s timeout (600 s
-/// in docs/stability.md), while later frames take milliseconds. The H100 renders the 1000-deep
-/// chain at once. Measured with `tools::stress::scenes::chain` on this machine's lavapipe.
-pub const CPU_DEVICE_STACK_LIMIT: u32 = 512;
+/// (inside the submission, so a slow compile reads as a hang); the compile time grows steeply with
+/// the stack. A Whitted frame's first submission of `tools::stress::scenes::chain` on this 2-core
+/// VM's lavapipe at load 12: 500 deep 3.9 s, 1000 deep 21 s, 2000 deep 91 s (with naga's zero
+/// initialisers of the arrays, which `shader.rs` now takes out: 500 deep 109 s, 1000 deep past the
+/// 120 s timeout). Later frames take milliseconds; the H100 renders a 1000-deep chain at once.
+pub const CPU_DEVICE_STACK_LIMIT: u32 = 1024;
 
 /// `data` in buffers of `per_chunk` records each (at least one buffer, for an empty array too),
 /// labelled with the array's name and, after the first, the chunk's number.

@@ -65,10 +65,65 @@ fn translate_with(
         fail(text)
     })?;
 
-    let options = spv::Options { lang_version: (1, 3), ..spv::Options::default() };
+    // No zero-initialisation of workgroup memory: only SST's kernel has any, and it writes each
+    // variable before reading it (tracer-vk/shaders/sst.wgsl). naga's polyfill stores every whole
+    // array at the kernel's start, and lavapipe then compiled SST for minutes with a leaf cache of
+    // 256 triangles (docs/stability.md, finding 8).
+    let options = spv::Options {
+        lang_version: (1, 3),
+        zero_initialize_workgroup_memory: spv::ZeroInitializeWorkgroupMemoryMode::None,
+        ..spv::Options::default()
+    };
     let pipeline = spv::PipelineOptions { shader_stage: naga::ShaderStage::Compute, entry_point: "main".to_string() };
     spv::write_vec(&module, &info, &options, Some(&pipeline))
+        .map(without_array_initialisers)
         .map_err(|e| fail(with_causes(format!("error: SPIR-V writer: {e}"), &e)))
+}
+
+/// The module with the zero initialisers of its function-local arrays taken out. naga gives every
+/// local variable one, and lavapipe's compile time grows steeply with an initialised array's
+/// length: LST's two stack arrays of a chain 500 deep made the first frame take 109 s, and 1000
+/// deep more than 120 s; without the initialisers 3.9 s and 21 s (docs/stability.md, finding 5). The kernels' local arrays are the stacks of LST and cwbvh,
+/// which are written before they are read (a pop follows its push), and SST's pair of children,
+/// stored when declared.
+fn without_array_initialisers(words: Vec<u32>) -> Vec<u32> {
+    const OP_TYPE_ARRAY: u32 = 28;
+    const OP_TYPE_POINTER: u32 = 32;
+    const OP_VARIABLE: u32 = 59;
+    const FUNCTION: u32 = 7;
+    if words.len() < 5 {
+        return words;
+    }
+    let mut arrays = std::collections::HashSet::new();
+    let mut array_pointers = std::collections::HashSet::new();
+    let mut out = words[..5].to_vec();
+    let mut at = 5;
+    while at < words.len() {
+        let (count, op) = ((words[at] >> 16) as usize, words[at] & 0xffff);
+        if count == 0 || at + count > words.len() {
+            // Not a module naga would write: left as it is.
+            return words;
+        }
+        let operands = &words[at + 1..at + count];
+        match op {
+            OP_TYPE_ARRAY => {
+                arrays.insert(operands[0]);
+            }
+            OP_TYPE_POINTER if operands[1] == FUNCTION && arrays.contains(&operands[2]) => {
+                array_pointers.insert(operands[0]);
+            }
+            OP_VARIABLE if count == 5 && operands[2] == FUNCTION && array_pointers.contains(&operands[0]) => {
+                out.push((4 << 16) | OP_VARIABLE);
+                out.extend_from_slice(&operands[..3]);
+                at += count;
+                continue;
+            }
+            _ => {}
+        }
+        out.extend_from_slice(&words[at..at + count]);
+        at += count;
+    }
+    out
 }
 
 /// naga's validation errors nest ("Function [1] 'main' is invalid" <- "Expression [4] is invalid"
@@ -136,6 +191,49 @@ mod tests {
             assert!(message.len() >= shown.len() - 30, "{message}");
             eprintln!("{shown}\n--- full:\n{message}");
         }
+    }
+
+    /// Local arrays and workgroup memory lose their zero initialisers (lavapipe compiled them for
+    /// minutes); other local variables keep theirs, and the module still loads.
+    #[test]
+    fn arrays_and_workgroup_memory_are_not_zero_initialised() {
+        let src = r#"
+            @group(0) @binding(0) var<storage, read_write> data: array<u32>;
+            var<workgroup> cache: array<u32, 64>;
+            @compute @workgroup_size(64)
+            fn main(@builtin(local_invocation_index) i: u32) {
+                var stack: array<u32, 32>;
+                var count: u32;
+                stack[i % 32u] = data[i];
+                cache[i] = stack[(i + 1u) % 32u];
+                workgroupBarrier();
+                count += cache[63u - i];
+                data[i] = count;
+            }
+        "#;
+        let words = translate(src, "init", &[]).unwrap();
+        let module = rspirv::dr::load_words(&words).expect("a valid module");
+        let function = module.functions.iter().flat_map(|f| f.blocks.iter()).flat_map(|b| b.instructions.iter());
+        let variables: Vec<_> = module
+            .types_global_values
+            .iter()
+            .chain(function)
+            .filter(|i| i.class.opcode == rspirv::spirv::Op::Variable)
+            .collect();
+        let class = |i: &&rspirv::dr::Instruction| i.operands[0].unwrap_storage_class();
+        let array_type = |i: &&rspirv::dr::Instruction| {
+            let pointer = module.types_global_values.iter().find(|t| t.result_id == i.result_type).unwrap();
+            let pointee = pointer.operands[1].unwrap_id_ref();
+            module.types_global_values.iter().find(|t| t.result_id == Some(pointee)).unwrap().class.opcode
+                == rspirv::spirv::Op::TypeArray
+        };
+        use rspirv::spirv::StorageClass;
+        let local: Vec<_> = variables.iter().filter(|i| class(i) == StorageClass::Function).collect();
+        let (arrays, others): (Vec<&&rspirv::dr::Instruction>, Vec<_>) = local.into_iter().partition(|i| array_type(i));
+        assert!(!arrays.is_empty() && arrays.iter().all(|i| i.operands.len() == 1), "{arrays:?}");
+        assert!(others.iter().any(|i| i.operands.len() == 2), "the scalar keeps its initialiser: {others:?}");
+        let shared: Vec<_> = variables.iter().filter(|i| class(i) == StorageClass::Workgroup).collect();
+        assert!(shared.len() == 1 && shared[0].operands.len() == 1, "{shared:?}");
     }
 
     #[test]

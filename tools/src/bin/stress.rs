@@ -61,6 +61,14 @@ struct Cli {
     /// Describe the machine in the report as this (default: the CPU model and the device's name).
     #[arg(long)]
     machine: Option<String>,
+    /// Leave out the frames of more pixels than this from the size axis (16384x16384 is 2^28),
+    /// where a machine cannot render them within its session.
+    #[arg(long, default_value_t = 1 << 28, value_parser = parse_pixels)]
+    max_frame_pixels: u64,
+    /// The report's section to write, "## TITLE" up to the next "## " heading (appended when the
+    /// report has none), so that runs of different axes keep each other's tables.
+    #[arg(long, default_value = "Results")]
+    section: String,
     /// The size axis's largest scene: triangle counts 10^3, 10^4, ... up to this, and this.
     #[arg(long, default_value_t = cases::DEFAULT_MAX_TRIANGLES, value_parser = parse_triangles)]
     max_triangles: u64,
@@ -68,6 +76,10 @@ struct Cli {
 
 fn parse_triangles(s: &str) -> Result<u64, String> {
     parse_count(s, 1000, u32::MAX as u64, "the largest triangle count")
+}
+
+fn parse_pixels(s: &str) -> Result<u64, String> {
+    parse_count(s, 1, 1 << 28, "the largest frame in pixels")
 }
 
 fn parse_device(s: &str) -> Result<usize, String> {
@@ -106,7 +118,8 @@ fn sweep(cli: &Cli) -> Result<(), String> {
     say!("generating the scenes ...");
     let extent = if cli.quick { Extent::Quick } else { Extent::Full };
     let wanted = |axis: &str| cli.axis.is_empty() || cli.axis.iter().any(|a| axis.contains(a.as_str()));
-    let cases = cases::all(extent, cli.max_triangles, &wanted);
+    let mut cases = cases::all(extent, cli.max_triangles, &wanted);
+    cases.retain(|c| c.axis != AXES[13] || c.pixels() <= cli.max_frame_pixels);
     let runs: usize = cases.iter().map(|c| if c.both_tests { 2 } else { 1 }).sum();
     let progress = Progress::new((runs * methods.len()) as u64, "{bar:40} {pos}/{len} {msg}", false);
     let rows = tools::stress::sweep(cases, &methods, gpu, Duration::from_secs(cli.timeout), &|row| {
@@ -122,21 +135,33 @@ fn sweep(cli: &Cli) -> Result<(), String> {
         .map(|r| format!("{} {}: {} {}", r.axis, r.label, r.line(), report::cell(&r.tally)))
         .collect();
     let axes: String = cli.axis.iter().map(|a| format!(" --axis {a:?}")).collect();
+    let frames = if cli.max_frame_pixels == 1 << 28 {
+        String::new()
+    } else {
+        format!(" --max-frame-pixels {}", cli.max_frame_pixels)
+    };
+    let section = if cli.section == "Results" { String::new() } else { format!(" --section {:?}", cli.section) };
+    let chart = if cli.chart == std::path::Path::new("docs/stability/failure-rates") {
+        String::new()
+    } else {
+        format!(" --chart {}", cli.chart.display())
+    };
     let command = format!(
-        "cargo run --release -p tools --bin stress --{}{}{axes} --timeout {} --max-triangles {}",
+        "cargo run --release -p tools --bin stress --{}{}{axes}{section}{chart}{frames} --timeout {} --max-triangles {}",
         if cli.quick { " --quick" } else { "" },
         if cli.cpu_only { " --cpu-only" } else { "" },
         cli.timeout,
         cli.max_triangles
     );
-    let mut md = std::fs::read_to_string(&cli.out).ok().map(|s| head_of(&s)).unwrap_or_default();
-    md += &format!(
-        "## Results\n\nMade by `{command}` on {machine} in {:.0} s. Chart: [{name}.svg]({name}.svg) \
+    let mut body = format!(
+        "## {}\n\nMade by `{command}` on {machine} in {:.0} s. Chart: [{name}.svg]({name}.svg) \
          (failed pixels per point and method; a refused point has no marker).\n\n![failure rates]({name}.png)\n\n",
+        cli.section,
         started.elapsed().as_secs_f64(),
         name = relative(&cli.chart, &cli.out),
     );
-    md += &report::markdown(&rows, &AXES);
+    body += &report::markdown(&rows, &AXES);
+    let md = report::splice_section(&std::fs::read_to_string(&cli.out).unwrap_or_default(), &cli.section, &body);
     if let Some(dir) = cli.chart.parent() {
         std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     }
@@ -156,12 +181,6 @@ fn sweep(cli: &Cli) -> Result<(), String> {
         }
         Err(format!("{} points failed in silence (listed above)", silent.len()))
     }
-}
-
-/// The hand-written part of the report: everything before the line "## Results".
-fn head_of(text: &str) -> String {
-    let at = if text.starts_with("## Results\n") { Some(0) } else { text.find("\n## Results\n").map(|i| i + 1) };
-    at.map_or(text.to_owned(), |i| text[..i].to_owned())
 }
 
 /// The chart's path as the report links it.

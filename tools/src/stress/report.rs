@@ -102,6 +102,23 @@ pub fn markdown(rows: &[Row], axes: &[&str]) -> String {
     s
 }
 
+/// `text` with its section "## `title`" (up to the next "## " heading, or the end) replaced by
+/// `body`, or `body` appended where there is none: everything else, hand-written or another run's
+/// section, is kept.
+pub fn splice_section(text: &str, title: &str, body: &str) -> String {
+    let heading = format!("## {title}\n");
+    let start = if text.starts_with(&heading) { Some(0) } else { text.find(&format!("\n{heading}")).map(|i| i + 1) };
+    match start {
+        Some(start) => {
+            let end = text[start + 1..].find("\n## ").map_or(text.len(), |i| start + 1 + i + 1);
+            format!("{}{body}{}", &text[..start], &text[end..])
+        }
+        None if text.is_empty() || text.ends_with("\n\n") => format!("{text}{body}"),
+        None if text.ends_with('\n') => format!("{text}\n{body}"),
+        None => format!("{text}\n\n{body}"),
+    }
+}
+
 /// Writes the chart as `stem.svg` and `stem.png` (drawn in memory, each file replaced only when
 /// complete).
 pub fn charts(rows: &[Row], axes: &[&str], stem: &Path) -> Result<(), String> {
@@ -186,4 +203,25 @@ where
             .map_err(err)?;
     }
     root.present().map_err(err)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::splice_section;
+
+    #[test]
+    fn a_section_is_replaced_up_to_the_next_and_the_rest_kept() {
+        let doc = "# Title\n\ntext\n\n## Results\n\nold\n\n### axis\n\n| a |\n\n## Results: size\n\nsize\n";
+        let new = splice_section(doc, "Results", "## Results\n\nnew\n\n");
+        assert_eq!(new, "# Title\n\ntext\n\n## Results\n\nnew\n\n## Results: size\n\nsize\n");
+        let size = splice_section(&new, "Results: size", "## Results: size\n\nbig\n");
+        assert_eq!(size, "# Title\n\ntext\n\n## Results\n\nnew\n\n## Results: size\n\nbig\n");
+        // A heading that only starts like the title is another section.
+        assert_eq!(
+            splice_section("## Results: size\n\nx\n", "Results", "## Results\n"),
+            "## Results: size\n\nx\n\n## Results\n"
+        );
+        assert_eq!(splice_section("", "Results", "## Results\n"), "## Results\n");
+        assert_eq!(splice_section("## Results\nold", "Results", "## Results\nnew\n"), "## Results\nnew\n");
+    }
 }
