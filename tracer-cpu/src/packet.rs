@@ -159,6 +159,22 @@ pub(crate) mod avx2 {
         unsafe { _mm256_loadu_ps(a.as_ptr()) }
     }
 
+    /// The packet of `rays` splatted, with `Ray::new`'s reciprocal 8-wide (the same correctly
+    /// rounded division), and the lanes still looking: the valid ones.
+    #[target_feature(enable = "avx2")]
+    pub(crate) fn packet_of(rays: &Rays) -> (Packet, __m256) {
+        let load = |a: &[f32; LANES]| {
+            // SAFETY: `a` holds 8 floats.
+            unsafe { _mm256_loadu_ps(a.as_ptr()) }
+        };
+        let o = [load(&rays.origin[0]), load(&rays.origin[1]), load(&rays.origin[2])];
+        let d = [load(&rays.dir[0]), load(&rays.dir[1]), load(&rays.dir[2])];
+        let one = splat(1.0);
+        let inv = [_mm256_div_ps(one, d[0]), _mm256_div_ps(one, d[1]), _mm256_div_ps(one, d[2])];
+        let alive = lanes(|i| if rays.valid[i] { f32::from_bits(u32::MAX) } else { 0.0 });
+        (Packet { o, d, inv }, alive)
+    }
+
     #[target_feature(enable = "avx2")]
     pub(crate) fn to_array(v: __m256) -> [f32; LANES] {
         let mut a = [0f32; LANES];
@@ -391,14 +407,8 @@ pub(crate) mod avx2 {
             // SAFETY: `a` holds 8 floats.
             unsafe { _mm256_loadu_ps(a.as_ptr()) }
         };
-        let o = [load(&rays.origin[0]), load(&rays.origin[1]), load(&rays.origin[2])];
-        let d = [load(&rays.dir[0]), load(&rays.dir[1]), load(&rays.dir[2])];
-        // `Ray::new`'s reciprocal, 8-wide: the same correctly rounded division.
-        let one = splat(1.0);
-        let inv = [_mm256_div_ps(one, d[0]), _mm256_div_ps(one, d[1]), _mm256_div_ps(one, d[2])];
-        let pk = Packet { o, d, inv };
         // Lanes still looking: valid ones, minus (for any-hit) those already blocked.
-        let mut alive = lanes(|i| if rays.valid[i] { f32::from_bits(u32::MAX) } else { 0.0 });
+        let (pk, mut alive) = packet_of(rays);
         let mut best_t = load(&rays.t_max);
         let mut best_tri = _mm256_set1_epi32(-1);
         // The closest hit's edge functions w1, w2 and their sum (one for lanes without a hit;
@@ -486,7 +496,7 @@ pub(crate) mod avx2 {
 
         let (hit, tri) = (to_array(hit_any), to_array_i(best_tri));
         let (nn, nt) = (to_array_i(n_nodes), to_array_i(n_tris));
-        let inv = _mm256_div_ps(one, best_sum);
+        let inv = _mm256_div_ps(splat(1.0), best_sum);
         let (best_u, best_v) = (mul(best_w1, inv), mul(best_w2, inv));
         let mut out = Results { t: to_array(best_t), u: to_array(best_u), v: to_array(best_v), ..Results::default() };
         // A loop, not `array::from_fn`: its closure would not be compiled for AVX2 nor inlined.

@@ -86,7 +86,7 @@ mod avx2 {
     use crate::geometry::plane_normal;
     use crate::geometry::{Cost, TriangleTest};
     use crate::packet::avx2::{
-        Best, Packet, add, any, count, keep, lanes, may_hold, mul, slab, splat, test, to_array, to_array_i,
+        Best, Packet, add, any, count, keep, may_hold, mul, packet_of, slab, splat, test, to_array, to_array_i,
     };
     use crate::packet::{Entry, LANES, Rays, Results};
     use crate::traverse::Stack;
@@ -217,20 +217,14 @@ mod avx2 {
             // SAFETY: `a` holds 8 floats.
             unsafe { _mm256_loadu_ps(a.as_ptr()) }
         };
-        let o = [load(&rays.origin[0]), load(&rays.origin[1]), load(&rays.origin[2])];
-        let d = [load(&rays.dir[0]), load(&rays.dir[1]), load(&rays.dir[2])];
-        // `Ray::new`'s reciprocal, 8-wide: the same correctly rounded division.
-        let one = splat(1.0);
-        let inv = [_mm256_div_ps(one, d[0]), _mm256_div_ps(one, d[1]), _mm256_div_ps(one, d[2])];
-        let pk = Packet { o, d, inv };
         // Lanes still looking: valid ones, minus (for any-hit) those already blocked.
-        let mut alive = lanes(|i| if rays.valid[i] { f32::from_bits(u32::MAX) } else { 0.0 });
+        let (pk, mut alive) = packet_of(rays);
         let mut best = Best {
             t: load(&rays.t_max),
             tri: _mm256_set1_epi32(-1),
             w1: _mm256_setzero_ps(),
             w2: _mm256_setzero_ps(),
-            sum: one,
+            sum: splat(1.0),
         };
         let mut hit_any = _mm256_setzero_ps();
         let mut n_nodes = _mm256_setzero_si256();
@@ -238,7 +232,7 @@ mod avx2 {
         // Whether every valid lane's inverse direction has one sign per axis (as a coherent
         // packet's have), and if so which planes the rays enter.
         let valid = _mm256_movemask_ps(alive);
-        let negative: [i32; 3] = std::array::from_fn(|a| _mm256_movemask_ps(inv[a]) & valid);
+        let negative: [i32; 3] = std::array::from_fn(|a| _mm256_movemask_ps(pk.inv[a]) & valid);
         let signed = negative.iter().all(|&n| n == 0 || n == valid);
         let near_plane: [usize; 3] = std::array::from_fn(|a| if negative[a] != 0 { 3 + a } else { a });
         let far_plane: [usize; 3] = std::array::from_fn(|a| if negative[a] != 0 { a } else { 3 + a });
@@ -387,7 +381,7 @@ mod avx2 {
 
         let (hit, tri) = (to_array(hit_any), to_array_i(best.tri));
         let (nn, nt) = (to_array_i(n_nodes), to_array_i(n_tris));
-        let inv = _mm256_div_ps(one, best.sum);
+        let inv = _mm256_div_ps(splat(1.0), best.sum);
         let (u, v) = (_mm256_mul_ps(best.w1, inv), _mm256_mul_ps(best.w2, inv));
         let mut out = Results { t: to_array(best.t), u: to_array(u), v: to_array(v), ..Results::default() };
         // A loop, not `array::from_fn`: its closure would not be compiled for AVX2 nor inlined.
