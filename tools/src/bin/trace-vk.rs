@@ -101,7 +101,7 @@ struct BenchArgs {
     /// Time each method with plain kernels (rows METHOD+plain), persistent threads in every
     /// tracing stage (METHOD+persistent) or auto's choice (`render --persistent`; rows METHOD),
     /// side by side. Only lst and stackless run persistently: the other methods' off and auto
-    /// are one row, METHOD.
+    /// are one row, METHOD, and on (which they refuse) adds none beside them.
     #[arg(long, value_delimiter = ',', value_enum, default_value = "auto")]
     persistent: Vec<PersistentArg>,
     #[command(flatten)]
@@ -343,6 +343,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
         [] => vec![None],
         list => list.iter().map(|&r| Some(r)).collect(),
     };
+    let only_on = b.persistent.iter().all(|p| p.persistent() == Persistent::On);
     for &m in &b.methods {
         for &v in &b.matrix.vertices {
             for &p in &b.persistent {
@@ -350,6 +351,8 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                     let p = p.persistent();
                     let refill = if p == Persistent::Off { None } else { refill };
                     let name = match method_of(m) {
+                        // `on` refuses such a method; beside off or auto, its plain row is all it has.
+                        Some(m) if p == Persistent::On && !m.walks_in_steps() && !only_on => continue,
                         Some(m) => tools::vk_bench::method_name(m, v.vertices(), p, refill),
                         None => AUTO.to_owned(),
                     };
