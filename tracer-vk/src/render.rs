@@ -615,12 +615,12 @@ impl<'g> Renderer<'g> {
     /// [`Renderer::set_persistent`] with the lanes of every 32 that must be idle before a
     /// subgroup takes new pixels ([`Specialisation::refill`], 1 to 32; `None`: the setting's own).
     ///
-    /// On a CPU device (lavapipe) auto chooses as on a GPU: its persistent kernels are safe there
-    /// because every subgroup takes at most [`CPU_PERSISTENT_CAP`] pixels per lane (so its loops
-    /// stay far below gallivm's 65,535 iterations, which a few thousand walks would pass), and the
-    /// counts check refuses, in one sentence, any frame whose work a loop limit cut short. The
-    /// images are the plain kernels' bit for bit, so the tests on lavapipe run the very stage mix
-    /// that a GPU runs by default.
+    /// On a CPU device (lavapipe) auto chooses as on a GPU rather than plain: its persistent
+    /// kernels are safe there because every subgroup takes at most [`CPU_PERSISTENT_CAP`] pixels
+    /// per lane, so a lane's loops run the steps of a few walks, not of the thousands that pass
+    /// gallivm's 65,535 iterations, and the counts check refuses, in one sentence, any frame whose
+    /// work a loop limit cut short. The images are the plain kernels' bit for bit, so the tests on
+    /// lavapipe run the very stage mix that a GPU runs by default.
     pub fn set_persistent_with(
         &mut self,
         mode: Persistent,
