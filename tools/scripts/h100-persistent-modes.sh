@@ -33,7 +33,8 @@
 #   .bin/trace-vk .bin/bvhc        cargo build --release -p tools
 # and, where .gl/ holds the Vulkan loader packages of /work/shared/device.md, unpacks them first.
 # Writes $OUT (default out/h100-persistent-modes): summary.md (read this), log.txt, bench.csv and
-# bench.md. About 4 to 6 minutes (88 settings).
+# bench.md. About 3 to 5 minutes (88 settings, 1.5 to 2 s each as in h100-matrix.sh and
+# h100-persistent.sh, plus compiling the forest).
 #
 # Env: FRAMES (default 20), RES (default 1920x1440), SCENE_NAMES (default "dragon forest"; the
 # scenes/NAME.toml files), MODES (default cast,whitted1,ao8,diffuse), REFILLS (default 8,16).
