@@ -139,12 +139,15 @@ fn parse_args() -> Result<Options, String> {
                 o.engines = value()?
                     .split(',')
                     .map(|e| {
-                        ENGINES.iter().position(|n| *n == e.trim()).ok_or_else(|| {
-                            format!("unknown engine {e:?} (one of {})", ENGINES.join(", "))
-                        })
+                        ENGINES
+                            .iter()
+                            .position(|n| *n == e.trim())
+                            .ok_or_else(|| format!("unknown engine {e:?} (one of {})", ENGINES.join(", ")))
                     })
                     .collect::<Result<_, _>>()?;
                 o.engines.push(EMBREE1);
+                o.engines.sort_unstable();
+                o.engines.dedup();
             }
             "-h" | "--help" => {
                 eprintln!("see the top of tracer-cpu/examples/ray_report.rs for the options");
@@ -415,7 +418,7 @@ fn markdown(
             rayset::Clock::Wall => "wall-clock time",
             rayset::Clock::Cpu => "CPU time of all threads (rays per CPU-second)",
         },
-        ENGINES.len(),
+        opts.engines.len(),
         opts.reps,
         big_reps(opts.reps)
     );

@@ -691,17 +691,17 @@ pub(crate) mod avx2 {
             }
         };
     }
-    vector!(
-        __m128, 4, __m128i, _mm_set1_ps, _mm_setzero_ps, _mm_loadu_ps, _mm_storeu_ps, _mm_loadu_si128,
-        _mm_set1_epi32, _mm_cmpeq_epi32, _mm_castsi128_ps, _mm_add_ps, _mm_sub_ps, _mm_mul_ps, _mm_div_ps,
-        _mm_max_ps, _mm_min_ps, _mm_and_ps, _mm_or_ps, _mm_andnot_ps, _mm_cmp_ps, _mm_movemask_ps
-    );
-    vector!(
-        __m256, 8, __m256i, _mm256_set1_ps, _mm256_setzero_ps, _mm256_loadu_ps, _mm256_storeu_ps,
-        _mm256_loadu_si256, _mm256_set1_epi32, _mm256_cmpeq_epi32, _mm256_castsi256_ps, _mm256_add_ps,
-        _mm256_sub_ps, _mm256_mul_ps, _mm256_div_ps, _mm256_max_ps, _mm256_min_ps, _mm256_and_ps, _mm256_or_ps,
-        _mm256_andnot_ps, _mm256_cmp_ps, _mm256_movemask_ps
-    );
+    vector! {
+        __m128, 4, __m128i, _mm_set1_ps, _mm_setzero_ps, _mm_loadu_ps, _mm_storeu_ps, _mm_loadu_si128, _mm_set1_epi32,
+        _mm_cmpeq_epi32, _mm_castsi128_ps, _mm_add_ps, _mm_sub_ps, _mm_mul_ps, _mm_div_ps, _mm_max_ps, _mm_min_ps,
+        _mm_and_ps, _mm_or_ps, _mm_andnot_ps, _mm_cmp_ps, _mm_movemask_ps
+    }
+    vector! {
+        __m256, 8, __m256i, _mm256_set1_ps, _mm256_setzero_ps, _mm256_loadu_ps, _mm256_storeu_ps, _mm256_loadu_si256,
+        _mm256_set1_epi32, _mm256_cmpeq_epi32, _mm256_castsi256_ps, _mm256_add_ps, _mm256_sub_ps, _mm256_mul_ps,
+        _mm256_div_ps, _mm256_max_ps, _mm256_min_ps, _mm256_and_ps, _mm256_or_ps, _mm256_andnot_ps, _mm256_cmp_ps,
+        _mm256_movemask_ps
+    }
 
     /// The ray, splatted.
     pub(super) struct Lanes<V> {
@@ -733,11 +733,7 @@ pub(crate) mod avx2 {
     /// `y * z' - z * y'` and so on: the cross product, in the scalar tests' order.
     #[inline(always)]
     fn cross<V: Vector>(a: &[V; 3], b: &[V; 3]) -> [V; 3] {
-        [
-            a[1].mul(b[2]).sub(a[2].mul(b[1])),
-            a[2].mul(b[0]).sub(a[0].mul(b[2])),
-            a[0].mul(b[1]).sub(a[1].mul(b[0])),
-        ]
+        [a[1].mul(b[2]).sub(a[2].mul(b[1])), a[2].mul(b[0]).sub(a[0].mul(b[2])), a[0].mul(b[1]).sub(a[1].mul(b[0]))]
     }
 
     #[inline(always)]
@@ -769,10 +765,8 @@ pub(crate) mod avx2 {
         let w0 = edge_function(&a1, &a2, d);
         let w1 = edge_function(&a2, &a0, d);
         let zero = V::zero();
-        let positive =
-            w0.cmp::<_CMP_GE_OQ>(zero).and(w1.cmp::<_CMP_GE_OQ>(zero)).and(w2.cmp::<_CMP_GE_OQ>(zero));
-        let negative =
-            w0.cmp::<_CMP_LE_OQ>(zero).and(w1.cmp::<_CMP_LE_OQ>(zero)).and(w2.cmp::<_CMP_LE_OQ>(zero));
+        let positive = w0.cmp::<_CMP_GE_OQ>(zero).and(w1.cmp::<_CMP_GE_OQ>(zero)).and(w2.cmp::<_CMP_GE_OQ>(zero));
+        let negative = w0.cmp::<_CMP_LE_OQ>(zero).and(w1.cmp::<_CMP_LE_OQ>(zero)).and(w2.cmp::<_CMP_LE_OQ>(zero));
         let sum = w0.add(w1).add(w2);
         // The plane normal, as geometry::plane_normal computes it.
         let n = cross(&edge(&b.p, 1), &edge(&b.p, 2));

@@ -112,7 +112,9 @@ impl<'a> Tracer<'a> {
     /// Bytes of scene data this tracer holds: the file as read ([`crate::file_bytes`]), the
     /// expanded triangles where it made them, and the wide BVHs where they were collapsed.
     pub fn held_bytes(&self) -> u64 {
-        crate::file_bytes(self.scene) + std::mem::size_of_val(&self.tris[..]) as u64 + self.wide_bytes().unwrap_or(0) as u64
+        crate::file_bytes(self.scene)
+            + std::mem::size_of_val(&self.tris[..]) as u64
+            + self.wide_bytes().unwrap_or(0) as u64
     }
 
     /// The scalar traversal `method` names, bound to the layout it reads: the child-pair layout
