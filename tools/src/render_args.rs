@@ -220,7 +220,7 @@ pub struct RenderArgs {
     /// expanded (a copy of 48 bytes per triangle: trace-cpu holds it beside the file, trace-vk
     /// uploads it) or indexed (the file's own arrays: trace-cpu reads them in place, trace-vk
     /// uploads 16 bytes per triangle and per vertex; one read more per triangle). trace-cpu's
-    /// bvh8 and auto test the leaf blocks of their wide BVH, a copy of their own in either form.
+    /// bvh8, bvh4 and auto test the leaf blocks of their wide BVH, a copy of their own in either form.
     /// Given, the report says the bytes held (trace-cpu) or uploaded (trace-vk) per triangle
     /// [default: expanded].
     #[arg(long, value_enum)]

@@ -20,7 +20,7 @@
 //!   --size WxH          [default: 1920x1440]
 //!   --threads LIST      e.g. 1,16 [default: 1 and all]
 //!   --modes LIST        cast,whitted [default: both]
-//!   --methods LIST      any of trace-cpu's: auto,packet,ordered,stackless,bvh8 [default: packet]
+//!   --methods LIST      any of trace-cpu's: auto,packet,ordered,stackless,bvh8,bvh4,bvh8-packet [default: packet]
 //!   --reps N            at least N interleaved rounds, and at least 2 s of them [default: 5]
 //!   --clock wall|cpu    time passes by the wall clock, or by the CPU time of the process's
 //!                       threads (rays per CPU-second; for a machine shared with other work,
