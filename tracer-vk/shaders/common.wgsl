@@ -477,8 +477,8 @@ fn fetch_tri(i: u32) -> Tri {
 }
 
 // Tests a leaf's triangles against the best hit so far (nearer wins, then the lower index).
-fn intersect_leaf(first: u32, count: u32, r: Ray, t_min: f32, best: ptr<function, HitRec>, any_hit: bool) -> bool {
-    for (var i = first; i < first + count; i++) {
+fn intersect_leaf(n: Node, r: Ray, t_min: f32, best: ptr<function, HitRec>, any_hit: bool) -> bool {
+    for (var i = n.index; i < n.index + n.count; i++) {
         cost_tris += 1u;
         let h = intersect(fetch_tri(i), r, t_min, (*best).t);
         if h.x >= 0.0 && (h.x < (*best).t || (h.x == (*best).t && i < (*best).tri)) {

@@ -106,7 +106,7 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
             let first = countTrailingZeros(leaves);
             let run = countTrailingZeros(~(leaves >> first));
             leaves &= ~((0xFFFFFFFFu >> (32u - run)) << first);
-            if intersect_leaf(n.tri_base + first, run, r, t_min, &best, any_hit) {
+            if intersect_leaf(Node(vec3<f32>(0.0), run, vec3<f32>(0.0), n.tri_base + first), r, t_min, &best, any_hit) {
                 return best;
             }
         }

@@ -7,23 +7,16 @@
 // The walk is a state (`Walk`) advanced one node at a time (`walk_step`): `trace` steps it to the
 // end, and the persistent kernels (stages.wgsl) step many walks and start a new one in a lane
 // whose walk ended.
-//
-// A node's record is read once, when its parent tests its box: the walk keeps the entered node's
-// `index` and `count` (and the stack keeps them for a pushed node), so a step's only memory read
-// is its two children's boxes. Reading the entered node again would put a second dependent load
-// in front of every step, and a walk is a chain of such loads.
 
 struct Walk {
     r: Ray,
     t_min: f32,
     any_hit: bool,
     best: HitRec,
-    // A pushed node's (index, count) and entry distance.
-    stack_node: array<vec2<u32>, STACK_SIZE>,
+    stack_node: array<u32, STACK_SIZE>,
     stack_near: array<f32, STACK_SIZE>,
     sp: u32,
-    // The entered node's index and count (Node), read when its box was tested.
-    current: vec2<u32>,
+    current: u32,
     steps: u32,
 }
 
@@ -37,11 +30,10 @@ fn walk_begin(w: ptr<function, Walk>, r: Ray, t_min: f32, t_max: f32, any_hit: b
     (*w).t_min = t_min;
     (*w).any_hit = any_hit;
     (*w).sp = 0u;
+    (*w).current = 0u;
     (*w).steps = 0u;
     cost_nodes += 1u;
-    let root = nodes[0];
-    (*w).current = vec2<u32>(root.index, root.count);
-    return slab(root, r, t_max) >= 0.0;
+    return slab(nodes[0], r, t_max) >= 0.0;
 }
 
 // Visits one node; false when the walk has ended (its hit is `best`).
@@ -53,25 +45,20 @@ fn walk_step(w: ptr<function, Walk>) -> bool {
         return false;
     }
     let r = (*w).r;
-    let index = (*w).current.x;
-    let count = (*w).current.y;
-    if count > 0u {
+    let n = nodes[(*w).current];
+    if n.count > 0u {
         // The leaf test updates a local copy (naga 30's SPIR-V writer fails on a pointer into
         // the walk's record).
         var best = (*w).best;
-        let ended = intersect_leaf(index, count, r, (*w).t_min, &best, (*w).any_hit);
+        let ended = intersect_leaf(n, r, (*w).t_min, &best, (*w).any_hit);
         (*w).best = best;
         if ended {
             return false;
         }
     } else {
         cost_nodes += 2u;
-        let left = nodes[index];
-        let right = nodes[index + 1u];
-        let tl = slab(left, r, (*w).best.t);
-        let tr = slab(right, r, (*w).best.t);
-        let l = vec2<u32>(left.index, left.count);
-        let rr = vec2<u32>(right.index, right.count);
+        let tl = slab(nodes[n.index], r, (*w).best.t);
+        let tr = slab(nodes[n.index + 1u], r, (*w).best.t);
         if tl >= 0.0 && tr >= 0.0 {
             let right_first = tr < tl;
             let sp = (*w).sp;
@@ -79,18 +66,18 @@ fn walk_step(w: ptr<function, Walk>) -> bool {
                 fault(FAULT_STACK);
                 return false;
             }
-            (*w).stack_node[sp] = select(rr, l, right_first);
+            (*w).stack_node[sp] = select(n.index + 1u, n.index, right_first);
             (*w).stack_near[sp] = select(tr, tl, right_first);
             (*w).sp = sp + 1u;
-            (*w).current = select(l, rr, right_first);
+            (*w).current = select(n.index, n.index + 1u, right_first);
             return true;
         }
         if tl >= 0.0 {
-            (*w).current = l;
+            (*w).current = n.index;
             return true;
         }
         if tr >= 0.0 {
-            (*w).current = rr;
+            (*w).current = n.index + 1u;
             return true;
         }
     }

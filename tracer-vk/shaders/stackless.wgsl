@@ -34,7 +34,7 @@ fn walk_step(w: ptr<function, Walk>) -> bool {
             // The leaf test updates a local copy (naga 30's SPIR-V writer fails on a pointer
             // into the walk's record).
             var best = (*w).best;
-            let ended = intersect_leaf(n.index, n.count, (*w).r, (*w).t_min, &best, (*w).any_hit);
+            let ended = intersect_leaf(n, (*w).r, (*w).t_min, &best, (*w).any_hit);
             (*w).best = best;
             if ended {
                 return false;
