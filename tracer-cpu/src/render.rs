@@ -333,6 +333,13 @@ impl Canvas {
         }
     }
 
+    /// The buffers of a frame rendered before, to render the next frame into without fresh
+    /// memory (a benchmark's repeated frames, as the ray report reuses its output): every pixel
+    /// of the image and of the AOVs is written again, so what they held does not show.
+    pub fn reuse(image: Image) -> Self {
+        Canvas { width: image.width, height: image.height, rgb: image.rgb, aov: image.aov }
+    }
+
     /// Whether these buffers are a frame of `settings`.
     fn fits(&self, settings: &Settings) -> bool {
         (self.width, self.height, self.aov.is_some()) == (settings.width, settings.height, settings.aovs)

@@ -881,7 +881,7 @@ mod tests {
             "flat surface",
             &inputs,
             |a| {
-                let s = shade::surface_of(a[0], a[1], [zero.into(); 3], a[5], a[6], a[7].x, a[7].y, a[7].z);
+                let s = shade::surface_of(a[0], a[1], [zero; 3], a[5], a[6], a[7].x, a[7].y, a[7].z);
                 (flat(&[s.point, s.geometric, s.shading]), vec![s.front])
             },
             |a| {
