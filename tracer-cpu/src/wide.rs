@@ -35,7 +35,7 @@ pub trait Real:
     /// `if self > o { self } else { o }`: `f32::max`, except that a tie of +0 and -0 gives `o`
     /// and a NaN `o` is kept.
     fn max(self, o: Self) -> Self;
-    /// `render_spec::phong_pow` in the lanes of `m`, 1 elsewhere (idle lanes skip it).
+    /// `render_spec::phong_pow` in the lanes of `m`, 1 elsewhere (none computed when no lane is live).
     fn powf_in(self, e: Self, m: Self::Mask) -> Self;
     fn lt(self, o: Self) -> Self::Mask;
     fn le(self, o: Self) -> Self::Mask;
