@@ -362,4 +362,10 @@ fn the_canvas_does_not_change_the_image() {
     let (other, _) = settings(&room, "medium", Mode::Whitted, Method::Packet, 31, 45);
     let other = Canvas::new(&Settings { aovs: false, ..other });
     same_image(&want, &render_into(&tracer, &s, &plan, other, &|_| {}).unwrap(), "a canvas of another size");
+    // The buffers of another frame of the same size (other pixels, other AOVs) are overwritten.
+    let (cast, _) = settings(&room, "wide", Mode::Cast, Method::Packet, 45, 31);
+    let before = tracer_cpu::render(&tracer, &cast, method).unwrap();
+    assert_ne!(before.rgb, want.rgb);
+    let reused = Canvas::reuse(before);
+    same_image(&want, &render_into(&tracer, &s, &plan, reused, &|_| {}).unwrap(), "another frame's buffers");
 }
