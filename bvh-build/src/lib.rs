@@ -14,6 +14,7 @@ pub mod import;
 pub mod peers;
 pub mod scene;
 pub mod sweep;
+mod top;
 pub mod unit;
 mod weld;
 pub mod wide;
