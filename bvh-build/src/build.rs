@@ -2,7 +2,7 @@
 //! degenerate input, rayon parallelism, and the final child-pair layout. A [`Splitter`] (binned or
 //! sweep) only decides where to split one node.
 
-use crate::top::{TOP_UNITS, Top, TopChild};
+use crate::top::{Top, TopChild, top_units};
 use bvh_format::Node;
 use glam::Vec3A;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -261,7 +261,7 @@ fn build_with<S: Splitter>(refs: &mut [PrimRef], ctx: Ctx<'_, S>, escape: bool) 
     drop(spare);
     let mut top = None;
     if ctx.reshape_top {
-        let mut t = Top::extract(&slots, n, TOP_UNITS);
+        let mut t = Top::extract(&slots, n, top_units(n));
         if t.optimise() {
             order = t.prepare(&slots, &order);
             top = Some(t);

@@ -16,12 +16,15 @@
 # the change: `cargo build --release -p bvh-build --features compare --example build_report` there,
 # and its binary copied to .bin/build_report_before.
 # The scenes are tracked files under scenes/ (million.toml places dragon.glb and two bunny.glb,
-# 17 MiB), so the working tree carries them; nothing is generated on the host.
+# 17 MiB), so the working tree carries them; the one generated on the host is room_big.toml, the
+# room with its glass sphere at 1024 x 512 segments (1,047,514 triangles), into $OUT.
 # Device tool: command `bash tools/scripts/h100-build.sh`, carry [".bin"]. Writes into $OUT
 # (default ./out/h100-build): two.md (2 threads: 16 bins and bvh), two-before.md (the same with
 # the earlier build), build.md (all threads, every builder), before.md (all threads, 16 bins and
-# bvh with the earlier build), others.md, profile.txt, phases.txt, compile.txt, host.txt, log.txt.
-# Expected run time: about 4 minutes with RUNS=7 (the full sweep of million and forest, a second
+# bvh with the earlier build), others.md (16 and 64 bins and the sweep on the other scenes),
+# others-before.md (the same with the earlier build: its sweep is the plain greedy one, without
+# the reinsertion in the top), profile.txt, phases.txt, compile.txt, host.txt, log.txt.
+# Expected run time: about 5 minutes with RUNS=7 (the full sweep of million and forest, a second
 # or two per build, is a third of it); RUNS=5 for a shorter run.
 set -euo pipefail
 OUT=${OUT:-out/h100-build}
@@ -63,11 +66,19 @@ mkdir -p "$OUT/all"
 cp "$OUT/all/build-benchmark.md" "$OUT/build.md"
 
 log "== 16 and 64 bins against the sweep on the scenes beyond the benchmark (all threads) =="
+sed 's/segments = 48/segments = 1024/; s/rings = 24/rings = 512/' scenes/room.toml >"$OUT/room_big.toml"
+OTHERS=scenes/toycar.glb,scenes/car.toml,scenes/forest.toml,scenes/room.toml,$OUT/room_big.toml
 mkdir -p "$OUT/others"
-.bin/build_report --runs 3 --builders binned16,binned64,sweep \
-  --scenes scenes/toycar.glb,scenes/car.toml,scenes/forest.toml,scenes/room.toml --out "$OUT/others" 2>/dev/null |
+.bin/build_report --runs 3 --builders binned16,binned64,sweep --scenes "$OTHERS" --out "$OUT/others" 2>/dev/null |
   grep -E '^\||^- '
 cp "$OUT/others/build-benchmark.md" "$OUT/others.md"
+if [ -x .bin/build_report_before ]; then
+  log "== the same with the earlier build =="
+  mkdir -p "$OUT/others-before"
+  .bin/build_report_before --runs 3 --builders binned16,binned64,sweep --scenes "$OTHERS" --out "$OUT/others-before" \
+    2>/dev/null | grep -E '^\||^- '
+  cp "$OUT/others-before/build-benchmark.md" "$OUT/others-before.md"
+fi
 
 log "== where the time of bvhc compile goes (medians of $RUNS) =="
 for s in million.toml dragon.toml bunny.toml; do
