@@ -205,7 +205,9 @@ pub const PARALLEL_NODE: usize = 1 << 15;
 pub(crate) struct Slot {
     pub(crate) min: [f32; 3],
     pub(crate) max: [f32; 3],
-    /// Triangle count for a leaf, 0 for an inner node.
+    /// Triangle count for a leaf; for an inner node the height of its subtree (a leaf's is 0),
+    /// which the reinsertion in the top needs to keep the tree's depth ([`crate::top`]). A leaf
+    /// is the slot whose subtree is one node.
     pub(crate) count: u32,
     /// First primitive (leaf) or slot of the right child (inner node).
     pub(crate) index: u32,
@@ -257,7 +259,7 @@ fn build_with<S: Splitter>(refs: &mut [PrimRef], ctx: Ctx<'_, S>, escape: bool) 
     // The second buffer that large nodes are partitioned into; small trees never need it.
     let mut spare: Vec<PrimRef> = if n > ctx.parallel_node { bytemuck::zeroed_vec(n) } else { Vec::new() };
     let root = bounds_parallel(refs);
-    build_node(&ctx, Prims { refs, spare: &mut spare, order: &mut order }, 0, &mut slots, 0, root, 0);
+    let _ = build_node(&ctx, Prims { refs, spare: &mut spare, order: &mut order }, 0, &mut slots, 0, root, 0);
     drop(spare);
     let mut top = None;
     if ctx.reshape_top {
@@ -299,7 +301,8 @@ impl<'a> Prims<'a> {
 }
 
 /// Builds the subtree of `p.refs` into `slots` (its own part of the gapped array, starting at
-/// absolute slot `slot`); `first` is the index of its first primitive. Returns its node count.
+/// absolute slot `slot`); `first` is the index of its first primitive. Returns its node count and
+/// height.
 fn build_node<S: Splitter>(
     ctx: &Ctx<'_, S>,
     mut p: Prims<'_>,
@@ -308,7 +311,7 @@ fn build_node<S: Splitter>(
     slot: usize,
     bounds: NodeBounds,
     depth: u32,
-) -> u32 {
+) -> (u32, u32) {
     let n = p.refs.len();
     let may_leaf = n <= ctx.costs.max_leaf_size;
     let split = if n == 1 {
@@ -340,7 +343,7 @@ fn build_node<S: Splitter>(
         if let Some(pr) = ctx.progress {
             pr.fetch_add(n, Ordering::Relaxed);
         }
-        return 1;
+        return (1, 0);
     };
     let mid = split.mid;
     debug_assert!(mid > 0 && mid < n);
@@ -348,15 +351,15 @@ fn build_node<S: Splitter>(
         std::mem::swap(&mut p.refs, &mut p.spare);
     }
     let right_slot = slot + 2 * mid;
-    here.count = 0;
     here.index = right_slot as u32;
     let (left_p, right_p) = p.split_at(mid);
     let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
     let left = || build_node(ctx, left_p, first, left_slots, slot + 1, split.left, depth + 1);
     let right = || build_node(ctx, right_p, first + mid, right_slots, right_slot, split.right, depth + 1);
-    let (l, r) = if n > PARALLEL_SUBTREES { rayon::join(left, right) } else { (left(), right()) };
+    let ((l, lh), (r, rh)) = if n > PARALLEL_SUBTREES { rayon::join(left, right) } else { (left(), right()) };
     here.nodes = 1 + l + r;
-    here.nodes
+    here.count = 1 + lh.max(rh);
+    (here.nodes, here.count)
 }
 
 /// Splits at the object median along the widest centroid axis; with all centroids equal, simply
@@ -409,7 +412,7 @@ impl Shape<'_> {
         match at {
             At::Slot(s, shift) => {
                 let sl = &self.slots[s as usize];
-                if sl.count > 0 {
+                if sl.nodes == 1 {
                     let index = sl.index.wrapping_add(shift);
                     (Node { min: sl.min, count: sl.count, max: sl.max, index }, 1, None)
                 } else {
@@ -761,6 +764,7 @@ mod tests {
             let (a, b) =
                 (stats(Tree::child_pair(&plain.nodes), 1.0, 1.0), stats(Tree::child_pair(&reshaped.nodes), 1.0, 1.0));
             assert!(b.sah_cost <= a.sah_cost, "SAH {} after reinsertion, {} before", b.sah_cost, a.sah_cost);
+            assert!(b.max_depth <= a.max_depth, "{} levels after reinsertion, {} before", b.max_depth, a.max_depth);
             assert_eq!(a.node_count, b.node_count);
         }
         // In the room the top is far from the best: the reinsertion must find something.

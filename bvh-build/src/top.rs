@@ -46,6 +46,8 @@ struct TNode {
     slot: u32,
     first: u32,
     count: u32,
+    /// Height of the whole tree below this node (a leaf's is 0).
+    height: u32,
 }
 
 impl TNode {
@@ -58,6 +60,9 @@ impl TNode {
 pub(crate) struct Top {
     nodes: Vec<TNode>,
     root: u32,
+    /// The tree's depth as built: no move may make it deeper (the build's depth bound, and the
+    /// GPU's stacks, sized by the depth, hold).
+    limit: u32,
     /// Per treelet node after [`Top::prepare`]: the nodes of its subtree in the finished tree.
     subtree: Vec<u32>,
     /// Per unit after [`Top::prepare`]: how far its leaves' triangle ranges move in the new leaf
@@ -99,6 +104,8 @@ impl Top {
     pub(crate) fn extract(slots: &[Slot], n: usize, units: usize) -> Top {
         let unit = |s: usize, first: usize, count: usize, parent: u32| {
             let bbox = Aabb { min: slots[s].min.into(), max: slots[s].max.into() };
+            // An inner slot keeps its height where a leaf keeps its count.
+            let height = if slots[s].nodes == 1 { 0 } else { slots[s].count };
             TNode {
                 bbox,
                 area: bbox.half_area(),
@@ -107,11 +114,12 @@ impl Top {
                 slot: s as u32,
                 first: first as u32,
                 count: count as u32,
+                height,
             }
         };
         let mut nodes = vec![unit(0, 0, n, NONE)];
         let mut open = BinaryHeap::new();
-        if slots[0].count == 0 {
+        if slots[0].nodes > 1 {
             open.push(Open(nodes[0].area, 0));
         }
         let mut count = 1;
@@ -125,7 +133,7 @@ impl Top {
             for (slot, f, c) in [(s + 1, first, mid), (r, first + mid, total - mid)] {
                 let k = nodes.len() as u32;
                 nodes.push(unit(slot, f, c, id));
-                if slots[slot].count == 0 {
+                if slots[slot].nodes > 1 {
                     open.push(Open(nodes[k as usize].area, k));
                 }
             }
@@ -133,7 +141,8 @@ impl Top {
             nodes[id as usize].kids = [k - 2, k - 1];
             count += 1;
         }
-        Top { nodes, root: 0, subtree: Vec::new(), shift: Vec::new() }
+        let limit = nodes[0].height;
+        Top { nodes, root: 0, limit, subtree: Vec::new(), shift: Vec::new() }
     }
 
     /// Reinserts treelet nodes while that lowers the sum of the inner nodes' areas; whether any
@@ -168,7 +177,7 @@ impl Top {
         self.replace(g, p, sibling);
         let gain = self.nodes[p as usize].area + self.refit(g);
         // Only places cheaper than putting x back count: that bound prunes most of the search.
-        let (_, y) = self.best_sibling(x, gain - tol);
+        let (_, y) = self.best_sibling(x, gain - tol, self.limit);
         let better = y != NONE;
         let (at, pair) = if better {
             (y, [y, x])
@@ -185,8 +194,9 @@ impl Top {
         self.nodes[x as usize].parent = p;
         // p's stored box is from its old place: set it, then grow its ancestors as needed.
         let bbox = self.nodes[at as usize].bbox.union(&self.nodes[x as usize].bbox);
-        self.nodes[p as usize].bbox = bbox;
-        self.nodes[p as usize].area = bbox.half_area();
+        let height = 1 + self.nodes[at as usize].height.max(self.nodes[x as usize].height);
+        let n = &mut self.nodes[p as usize];
+        (n.bbox, n.area, n.height) = (bbox, bbox.half_area(), height);
         self.refit(gy);
         better
     }
@@ -203,17 +213,20 @@ impl Top {
         self.nodes[new as usize].parent = parent;
     }
 
-    /// Recomputes the boxes from `from` up, after one of its children changed, until one comes
-    /// out as it was (the ones above it then hold already); returns how much their areas shrank.
+    /// Recomputes the boxes and heights from `from` up, after one of its children changed, until
+    /// one comes out as it was (the ones above it then hold already); returns how much their areas
+    /// shrank.
     fn refit(&mut self, mut from: u32) -> f64 {
         let mut shrunk = 0.0;
         while from != NONE {
             let [a, b] = self.nodes[from as usize].kids;
             let bbox = self.nodes[a as usize].bbox.union(&self.nodes[b as usize].bbox);
+            let height = 1 + self.nodes[a as usize].height.max(self.nodes[b as usize].height);
             let n = &mut self.nodes[from as usize];
-            if bbox == n.bbox {
+            if bbox == n.bbox && height == n.height {
                 break;
             }
+            n.height = height;
             let area = bbox.half_area();
             shrunk += n.area - area;
             n.bbox = bbox;
@@ -225,22 +238,24 @@ impl Top {
 
     /// The node whose new sibling `x` (out of the tree) adds the least area, the new parent's area
     /// plus the growth of every ancestor, and that area (branch and bound from the root); `NONE`
-    /// if no place adds less than `bound`.
-    fn best_sibling(&self, x: u32, bound: f64) -> (f64, u32) {
+    /// if no place adds less than `bound`. Places where the tree would grow deeper than `limit`
+    /// are not taken.
+    fn best_sibling(&self, x: u32, bound: f64, limit: u32) -> (f64, u32) {
         let xb = self.nodes[x as usize].bbox;
-        let x_area = self.nodes[x as usize].area;
+        let (x_area, x_height) = (self.nodes[x as usize].area, self.nodes[x as usize].height);
         let mut best = (bound, NONE);
-        let mut stack = vec![(self.root, 0.0f64)];
-        while let Some((y, above)) = stack.pop() {
+        let mut stack = vec![(self.root, 0.0f64, 0u32)];
+        while let Some((y, above, depth)) = stack.pop() {
             let n = &self.nodes[y as usize];
             let joined = n.bbox.union(&xb).half_area();
-            if above + joined < best.0 {
+            // The new parent takes y's place: y and x go one level down.
+            if above + joined < best.0 && depth + 1 + n.height.max(x_height) <= limit {
                 best = (above + joined, y);
             }
             let below = above + joined - n.area;
             if !n.is_unit() && below + x_area < best.0 {
-                stack.push((n.kids[1], below));
-                stack.push((n.kids[0], below));
+                stack.push((n.kids[1], below, depth + 1));
+                stack.push((n.kids[0], below, depth + 1));
             }
         }
         best
@@ -306,7 +321,18 @@ mod tests {
             let size = if i % 7 == 0 { 8.0 } else { 0.5 };
             let e = Vec3A::new(rng.unit(), rng.unit(), rng.unit()) * size;
             let bbox = Aabb { min: c - e, max: c + e };
-            let n = TNode { bbox, area: bbox.half_area(), parent: NONE, kids: [NONE; 2], slot: 0, first: 0, count: 1 };
+            // Units of different heights, so that the depth limit binds somewhere.
+            let height = (rng.unit() * 4.0) as u32;
+            let n = TNode {
+                bbox,
+                area: bbox.half_area(),
+                parent: NONE,
+                kids: [NONE; 2],
+                slot: 0,
+                first: 0,
+                count: 1,
+                height,
+            };
             nodes.push(n);
             free.push(i as u32);
         }
@@ -315,37 +341,56 @@ mod tests {
             let b = free.swap_remove((rng.unit() * free.len() as f32) as usize % free.len());
             let bbox = nodes[a as usize].bbox.union(&nodes[b as usize].bbox);
             let k = nodes.len() as u32;
-            nodes.push(TNode { bbox, area: bbox.half_area(), parent: NONE, kids: [a, b], slot: 0, first: 0, count: 0 });
+            let height = 1 + nodes[a as usize].height.max(nodes[b as usize].height);
+            nodes.push(TNode {
+                bbox,
+                area: bbox.half_area(),
+                parent: NONE,
+                kids: [a, b],
+                slot: 0,
+                first: 0,
+                count: 0,
+                height,
+            });
             nodes[a as usize].parent = k;
             nodes[b as usize].parent = k;
             free.push(k);
         }
-        Top { root: free[0], nodes, subtree: Vec::new(), shift: Vec::new() }
+        let limit = nodes[free[0] as usize].height;
+        Top { root: free[0], nodes, limit, subtree: Vec::new(), shift: Vec::new() }
     }
 
     /// The sum of the inner nodes' areas, recomputed from the units' boxes; checks the links and
-    /// that the stored boxes are the unions; returns the units reached too.
-    fn cost(t: &Top) -> (f64, Vec<u32>) {
+    /// that the stored boxes and heights are those of the children; returns the units reached
+    /// and the tree's height too.
+    fn cost(t: &Top) -> (f64, Vec<u32>, u32) {
         let mut units = Vec::new();
         let mut sum = 0.0;
-        fn walk(t: &Top, at: u32, sum: &mut f64, units: &mut Vec<u32>) -> Aabb {
+        fn walk(t: &Top, at: u32, sum: &mut f64, units: &mut Vec<u32>) -> (Aabb, u32) {
             let n = &t.nodes[at as usize];
             if n.is_unit() {
                 units.push(at);
-                return n.bbox;
+                return (n.bbox, n.height);
             }
             for k in n.kids {
                 assert_eq!(t.nodes[k as usize].parent, at, "child {k} of {at} points back");
             }
-            let b = walk(t, n.kids[0], sum, units).union(&walk(t, n.kids[1], sum, units));
+            let (a, ah) = walk(t, n.kids[0], sum, units);
+            let (b, bh) = walk(t, n.kids[1], sum, units);
+            let (b, h) = (a.union(&b), 1 + ah.max(bh));
             assert_eq!(b, n.bbox, "node {at} holds the union of its children");
+            assert_eq!(h, n.height, "node {at} holds its height");
             *sum += b.half_area();
-            b
+            (b, h)
         }
         assert_eq!(t.nodes[t.root as usize].parent, NONE);
-        walk(t, t.root, &mut sum, &mut units);
+        let (_, height) = walk(t, t.root, &mut sum, &mut units);
         units.sort_unstable();
-        (sum, units)
+        (sum, units, height)
+    }
+
+    fn copy(t: &Top) -> Top {
+        Top { nodes: t.nodes.clone(), root: t.root, limit: t.limit, subtree: Vec::new(), shift: Vec::new() }
     }
 
     #[test]
@@ -358,15 +403,14 @@ mod tests {
                     continue;
                 }
                 // Take x out as `reinsert` does.
-                let mut out = Top { nodes: top.nodes.clone(), root: top.root, subtree: Vec::new(), shift: Vec::new() };
+                let mut out = copy(&top);
                 let p = out.nodes[x as usize].parent;
                 let kids = out.nodes[p as usize].kids;
                 let sibling = if kids[0] == x { kids[1] } else { kids[0] };
                 let g = out.nodes[p as usize].parent;
                 out.replace(g, p, sibling);
                 out.refit(g);
-                let (without, _) = cost(&out);
-                let (found, _) = out.best_sibling(x, f64::INFINITY);
+                let (without, ..) = cost(&out);
                 // Brute force: every place, the whole cost recomputed.
                 let mut places = Vec::new();
                 let mut stack = vec![out.root];
@@ -376,11 +420,10 @@ mod tests {
                         stack.extend(out.nodes[y as usize].kids);
                     }
                 }
-                let brute = places
+                let tried: Vec<(f64, u32)> = places
                     .iter()
                     .map(|&y| {
-                        let mut t =
-                            Top { nodes: out.nodes.clone(), root: out.root, subtree: Vec::new(), shift: Vec::new() };
+                        let mut t = copy(&out);
                         let gy = t.nodes[y as usize].parent;
                         t.replace(gy, y, p);
                         t.nodes[p as usize].kids = [y, x];
@@ -389,10 +432,12 @@ mod tests {
                         let bbox = t.nodes[y as usize].bbox.union(&t.nodes[x as usize].bbox);
                         t.nodes[p as usize].bbox = bbox;
                         t.nodes[p as usize].area = bbox.half_area();
+                        t.nodes[p as usize].height = 1 + t.nodes[y as usize].height.max(t.nodes[x as usize].height);
                         t.refit(gy);
-                        cost(&t).0
+                        let (c, _, h) = cost(&t);
+                        (c, h)
                     })
-                    .fold(f64::INFINITY, f64::min);
+                    .collect();
                 // The brute force counts x's own inner nodes, which stay as they are.
                 let inside = {
                     let mut sum = 0.0;
@@ -407,11 +452,17 @@ mod tests {
                     sum
                 };
                 let scale = cost(&top).0;
-                assert!(
-                    (without + inside + found - brute).abs() <= 1e-9 * scale,
-                    "trial {trial}, node {x}: found {} against {brute}",
-                    without + inside + found
-                );
+                // With the tree's depth as the limit (putting x back always meets it) and without.
+                for limit in [top.limit, u32::MAX] {
+                    let (found, y) = out.best_sibling(x, f64::INFINITY, limit);
+                    assert_ne!(y, NONE);
+                    let brute = tried.iter().filter(|t| t.1 <= limit).map(|t| t.0).fold(f64::INFINITY, f64::min);
+                    assert!(
+                        (without + inside + found - brute).abs() <= 1e-9 * scale,
+                        "trial {trial}, node {x}, limit {limit}: found {} against {brute}",
+                        without + inside + found
+                    );
+                }
             }
         }
     }
@@ -422,10 +473,11 @@ mod tests {
         let mut lowered = 0;
         for trial in 0..60 {
             let mut top = random_top(&mut rng, 2 + trial % 50);
-            let (before, units) = cost(&top);
+            let (before, units, height) = cost(&top);
             let moved = top.optimise();
-            let (after, units_after) = cost(&top);
+            let (after, units_after, height_after) = cost(&top);
             assert_eq!(units, units_after, "trial {trial}");
+            assert!(height_after <= height, "trial {trial}: the tree grew from {height} to {height_after} levels");
             assert!(after <= before * (1.0 + 1e-12), "trial {trial}: {after} > {before}");
             assert_eq!(moved, after < before, "trial {trial}: moved {moved}, {before} -> {after}");
             lowered += usize::from(moved);
