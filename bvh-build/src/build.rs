@@ -2,7 +2,7 @@
 //! degenerate input, rayon parallelism, and the final child-pair layout. A [`Splitter`] (binned or
 //! sweep) only decides where to split one node.
 
-use crate::top::{Top, TopChild, top_units};
+use crate::top::{At, Top, top_units};
 use bvh_format::Node;
 use glam::Vec3A;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -377,23 +377,6 @@ pub fn median_split(refs: &mut [PrimRef], bounds: &NodeBounds) -> Split {
 /// Subtrees of more nodes than this are written out in parallel.
 const PARALLEL_EMIT: u32 = 1 << 14;
 
-/// A node of the finished tree while the layouts are written: a slot, with the shift of its
-/// leaves' triangle ranges (nonzero below a reshaped top), or an inner node of the reshaped top.
-#[derive(Clone, Copy)]
-enum At {
-    Slot(u32, u32),
-    Top(u32),
-}
-
-impl From<TopChild> for At {
-    fn from(c: TopChild) -> At {
-        match c {
-            TopChild::Slot(s, shift) => At::Slot(s, shift),
-            TopChild::Inner(t) => At::Top(t),
-        }
-    }
-}
-
 /// The finished tree: the slots, below the reshaped top when there is one.
 struct Shape<'a> {
     slots: &'a [Slot],
@@ -402,7 +385,7 @@ struct Shape<'a> {
 
 impl Shape<'_> {
     fn root(&self) -> At {
-        self.top.map_or(At::Slot(0, 0), |t| t.root().into())
+        self.top.map_or(At::Slot(0, 0), Top::root)
     }
 
     /// The node at `at` (`children`: where an inner node's pair lies, child-pair layout, or its
@@ -423,7 +406,7 @@ impl Shape<'_> {
             At::Top(t) => {
                 let (bbox, nodes, l, r) = self.top.expect("a top node comes from a top").inner(t);
                 let node = Node { min: bbox.min.into(), count: 0, max: bbox.max.into(), index: children as u32 };
-                (node, nodes, Some((l.into(), r.into())))
+                (node, nodes, Some((l, r)))
             }
         }
     }

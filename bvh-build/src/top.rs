@@ -90,12 +90,12 @@ impl Ord for Open {
     }
 }
 
-/// Where a treelet node leads while the layouts are written: a unit's slot, with the shift of its
-/// leaves' triangle ranges, or an inner node of the treelet.
+/// A node of the finished tree while the layouts are written: a slot, with the shift of its
+/// leaves' triangle ranges (nonzero below a reshaped top), or an inner node of the reshaped top.
 #[derive(Clone, Copy)]
-pub(crate) enum TopChild {
+pub(crate) enum At {
     Slot(u32, u32),
-    Inner(u32),
+    Top(u32),
 }
 
 impl Top {
@@ -290,17 +290,17 @@ impl Top {
         new_order
     }
 
-    pub(crate) fn root(&self) -> TopChild {
+    pub(crate) fn root(&self) -> At {
         self.child(self.root)
     }
 
-    fn child(&self, t: u32) -> TopChild {
+    fn child(&self, t: u32) -> At {
         let n = &self.nodes[t as usize];
-        if n.is_unit() { TopChild::Slot(n.slot, self.shift[t as usize]) } else { TopChild::Inner(t) }
+        if n.is_unit() { At::Slot(n.slot, self.shift[t as usize]) } else { At::Top(t) }
     }
 
     /// An inner treelet node's box, subtree size (after [`Top::prepare`]) and children.
-    pub(crate) fn inner(&self, t: u32) -> (Aabb, u32, TopChild, TopChild) {
+    pub(crate) fn inner(&self, t: u32) -> (Aabb, u32, At, At) {
         let n = &self.nodes[t as usize];
         (n.bbox, self.subtree[t as usize], self.child(n.kids[0]), self.child(n.kids[1]))
     }
