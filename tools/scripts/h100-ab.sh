@@ -6,10 +6,11 @@
 #
 # Expects .bin/trace-vk-before, .bin/trace-vk-after and .bin/bvhc, release builds. Writes $OUT:
 # summary.md (median Mrays/s per binary and after/before per row), the CSVs.
-# Env: SCENES, RES, MODES, METHODS (default lst), REPEATS, FRAMES.
+# Env: SCENES, RES, MODES, METHODS (default lst), PERSISTENT (default auto), REPEATS, FRAMES.
 set -uo pipefail
 OUT=${OUT:-out/h100-ab}
 METHODS=${METHODS:-lst}
+PERSISTENT=${PERSISTENT:-auto}
 REPEATS=${REPEATS:-2}
 FRAMES=${FRAMES:-15}
 SCENES=${SCENES:-dragon forest bunny}
@@ -32,7 +33,7 @@ for i in $(seq 1 "$REPEATS"); do
   for b in before after; do
     echo "== $b $i"
     ".bin/trace-vk-$b" bench "${FILES[@]}" --cameras medium --res "$RES" --modes "$MODES" --methods "$METHODS" \
-      --persistent off,on --frames "$FRAMES" --csv "$OUT/$b-$i.csv" >"$OUT/$b-$i.out" 2>&1 || { echo "$b $i FAILED"; tail -5 "$OUT/$b-$i.out"; }
+      --persistent "$PERSISTENT" --frames "$FRAMES" --csv "$OUT/$b-$i.csv" >"$OUT/$b-$i.out" 2>&1 || { echo "$b $i FAILED"; tail -5 "$OUT/$b-$i.out"; }
   done
 done
 # Columns: 1 scene, 4 width, 6 mode, 8 method, 16 mrays_per_s.
