@@ -340,21 +340,28 @@ fn accuracy_settings_equal_the_cpu_bit_for_bit() {
 fn nodes_and_triangles_split_over_bindings_match_the_cpu() {
     let gpu = gpu();
     let scene = compile_with("room.toml", Layouts::ALL);
-    // Whitted only: its primary rays are Cast's, and its shadow and secondary rays start anywhere
-    // in the tree, so every chunk is read.
-    let settings = Settings {
-        width: 64,
-        height: 48,
-        camera: CameraSpec::from(scene.camera("medium").expect("the camera exists")),
-        mode: Mode::Whitted,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
-        aovs: true,
-        accuracy: Accuracy::default(),
-    };
-    let cpu = tracer_cpu::render(&Tracer::new(&scene), &settings, Method::Ordered).expect("the CPU renders");
-    let tri_bytes = scene.triangles.len() as u64 * 48;
-    for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup, VkMethod::Cwbvh] {
+    // The wide layout holds about one node per 4 triangles of 48 bytes and 80 bytes a node, so
+    // with leaves of 8 its array can be under a quarter of the triangles' and the two cannot both
+    // split into at most MAX_CHUNKS bindings; leaves of 2 give it nodes enough.
+    let params = bvh_format::BuildParams { max_leaf_size: 2, ..Default::default() };
+    let fine = common::compile_params("room.toml", &params, Layouts::ALL);
+    let methods = [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup, VkMethod::Cwbvh];
+    for method in methods {
+        let scene = if method == VkMethod::Cwbvh { &fine } else { &scene };
+        // Whitted only: its primary rays are Cast's, and its shadow and secondary rays start
+        // anywhere in the tree, so every chunk is read.
+        let settings = Settings {
+            width: 64,
+            height: 48,
+            camera: CameraSpec::from(scene.camera("medium").expect("the camera exists")),
+            mode: Mode::Whitted,
+            lights: scene.lights.clone(),
+            max_indirections: scene.settings.max_indirections,
+            aovs: true,
+            accuracy: Accuracy::default(),
+        };
+        let cpu = tracer_cpu::render(&Tracer::new(scene), &settings, Method::Ordered).expect("the CPU renders");
+        let tri_bytes = scene.triangles.len() as u64 * 48;
         let node_bytes = match method {
             VkMethod::Stackless => scene.escape.as_ref().expect("every layout").len() as u64 * 32,
             VkMethod::Cwbvh => scene.wide.as_ref().expect("every layout").len() as u64 * 80,
@@ -363,7 +370,7 @@ fn nodes_and_triangles_split_over_bindings_match_the_cpu() {
         // Above a quarter of the larger array (so at most 4 bindings each), below the smaller.
         let limit = node_bytes.max(tri_bytes) / 4 + 64;
         assert!(limit < node_bytes.min(tri_bytes), "{node_bytes} and {tri_bytes} bytes cannot both be split");
-        let mut r = Renderer::with_binding_limit(&gpu, &scene, method, (8, 8), limit).expect("the scene uploads");
+        let mut r = Renderer::with_binding_limit(&gpu, scene, method, (8, 8), limit).expect("the scene uploads");
         let split = r.specialisation().split;
         assert!(split.node_chunks >= 2 && split.tri_chunks >= 2, "{split:?}");
         let out = r.render(&settings).expect("the GPU renders").image;

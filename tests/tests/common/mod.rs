@@ -16,12 +16,17 @@ pub fn compile(name: &str) -> SceneFile {
 
 /// [`compile`] with the given node layouts (`Layouts::ALL` for the tests of `cwbvh`).
 pub fn compile_with(name: &str, layouts: bvh_build::Layouts) -> SceneFile {
+    compile_params(name, &Default::default(), layouts)
+}
+
+/// [`compile_with`] with the given build parameters.
+pub fn compile_params(name: &str, params: &bvh_format::BuildParams, layouts: bvh_build::Layouts) -> SceneFile {
     let dir = std::env::var_os("SCENES_DIR")
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes"));
     let p = dir.join(name);
     let scene = bvh_build::import::load(&p, &Default::default()).expect("the scene imports");
-    bvh_build::compile(&scene, &Default::default(), layouts).expect("the scene compiles")
+    bvh_build::compile(&scene, params, layouts).expect("the scene compiles")
 }
 
 /// The first Vulkan device, with the validation layer on. Fails, never skips, without one.
