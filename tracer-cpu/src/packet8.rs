@@ -20,6 +20,14 @@ use render_spec::Intersect;
 /// Live lanes at or below which a subtree is traced one ray at a time.
 pub const SPARSE: u32 = 4;
 
+#[doc(hidden)]
+pub static KNOB: [std::sync::atomic::AtomicU32; 4] = [
+    std::sync::atomic::AtomicU32::new(SPARSE),
+    std::sync::atomic::AtomicU32::new(0),
+    std::sync::atomic::AtomicU32::new(0),
+    std::sync::atomic::AtomicU32::new(0),
+];
+
 /// Whether this CPU runs wide packets (AVX2, as [`crate::packet`]).
 pub fn available() -> bool {
     crate::packet::available()
@@ -81,17 +89,15 @@ impl TraceLanes for Lanes<'_> {
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::SPARSE;
+
     use crate::bvh8::{Bvh8, LEAF, Simd, TriBlock, WIDTH};
-    use crate::geometry::plane_normal;
     use crate::geometry::{Cost, TriangleTest};
     use crate::geometry;
     use crate::packet::avx2::{
-        Best, Packet, add, any, count, keep, may_hold, mul, packet_of, splat, sub, test, to_array, to_array_i,
+        Best, Packet, add, any, count, keep, may_hold, mul, packet_of, splat, sub, test,
     };
     use crate::packet::{Entry, LANES, Rays, Results};
     use crate::traverse::Stack;
-    use bvh_format::Triangle;
     use render_spec::Intersect;
     use std::arch::x86_64::*;
 
@@ -133,25 +139,62 @@ mod avx2 {
         add(add(mul(d[0], splat(c[0])), mul(d[1], splat(c[1]))), mul(d[2], splat(c[2])))
     }
 
-    /// The edge-consistent test ([`crate::geometry::intersect`]) of `tri` for lanes that all start
-    /// at `o`: everything but the direction is the same in every lane (the vertices relative to
-    /// the origin, the edge functions' cross products, the plane's distance), so it is computed
-    /// once, in scalar, with the same operations; the lanes compute only the dot products with
-    /// their directions and the division. Returns what `packet`'s test returns.
+    /// What the edge-consistent test ([`crate::geometry::intersect`]) computes of the triangles
+    /// of a leaf block for rays that all start at `o`, everything but the direction: the edge
+    /// functions' cross products (`geometry::edge_function`'s, of the vertices relative to the
+    /// origin), the plane normal ([`crate::geometry::plane_normal`]) and the plane's distance, each an array over
+    /// the block's triangles, computed 8-wide with the scalar test's operations in its order.
+    struct SharedOrigin {
+        /// `cross[k][axis]`: the cross product of edge function `w_k`.
+        cross: [[[f32; WIDTH]; 3]; 3],
+        n: [[f32; WIDTH]; 3],
+        dist: [f32; WIDTH],
+    }
+
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn intersect_shared_origin(tri: &Triangle, o: [f32; 3], d: &[__m256; 3], t_max: __m256) -> [__m256; 5] {
-        let rel = |p: [f32; 3]| [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
-        let (a0, a1, a2) = (rel(tri.p0), rel(tri.p1), rel(tri.p2));
-        // The cross product of geometry::edge_function, operation by operation.
-        let cross = |a: [f32; 3], b: [f32; 3]| {
-            let e = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-            let s = [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
-            [e[1] * s[2] - e[2] * s[1], e[2] * s[0] - e[0] * s[2], e[0] * s[1] - e[1] * s[0]]
+    fn shared_origin(block: &TriBlock, o: [f32; 3]) -> SharedOrigin {
+        let p = &block.p;
+        let ld = |r: &[f32; WIDTH]| {
+            // SAFETY: `r` holds 8 floats.
+            unsafe { _mm256_loadu_ps(r.as_ptr()) }
         };
-        let w2 = dot(d, cross(a0, a1));
-        let w0 = dot(d, cross(a1, a2));
-        let w1 = dot(d, cross(a2, a0));
+        let rel = |k: usize| [0, 1, 2].map(|a| sub(ld(&p[k][a]), splat(o[a])));
+        let (a0, a1, a2) = (rel(0), rel(1), rel(2));
+        let cross = |a: [__m256; 3], b: [__m256; 3]| {
+            let e = [sub(a[0], b[0]), sub(a[1], b[1]), sub(a[2], b[2])];
+            let s = [add(a[0], b[0]), add(a[1], b[1]), add(a[2], b[2])];
+            [
+                sub(mul(e[1], s[2]), mul(e[2], s[1])),
+                sub(mul(e[2], s[0]), mul(e[0], s[2])),
+                sub(mul(e[0], s[1]), mul(e[1], s[0])),
+            ]
+        };
+        let e1 = [0, 1, 2].map(|a| sub(ld(&p[1][a]), ld(&p[0][a])));
+        let e2 = [0, 1, 2].map(|a| sub(ld(&p[2][a]), ld(&p[0][a])));
+        let n = [
+            sub(mul(e1[1], e2[2]), mul(e1[2], e2[1])),
+            sub(mul(e1[2], e2[0]), mul(e1[0], e2[2])),
+            sub(mul(e1[0], e2[1]), mul(e1[1], e2[0])),
+        ];
+        let dist = add(add(mul(n[0], a0[0]), mul(n[1], a0[1])), mul(n[2], a0[2]));
+        SharedOrigin {
+            cross: [cross(a1, a2), cross(a2, a0), cross(a0, a1)].map(|c| c.map(store)),
+            n: n.map(store),
+            dist: store(dist),
+        }
+    }
+
+    /// The edge-consistent test of triangle `l` of the block `s` was made from, for lanes that
+    /// all start at its origin: only the dot products with the lanes' directions and the
+    /// division run per lane. Returns what `packet`'s test returns.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn intersect_shared_origin(s: &SharedOrigin, l: usize, d: &[__m256; 3], t_max: __m256) -> [__m256; 5] {
+        let c = |k: usize| [s.cross[k][0][l], s.cross[k][1][l], s.cross[k][2][l]];
+        let w0 = dot(d, c(0));
+        let w1 = dot(d, c(1));
+        let w2 = dot(d, c(2));
         let zero = _mm256_setzero_ps();
         let positive = _mm256_and_ps(
             _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_GE_OQ>(w1, zero)),
@@ -162,9 +205,9 @@ mod avx2 {
             _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
         );
         let sum = add(add(w0, w1), w2);
-        let n = plane_normal(tri);
+        let n = [s.n[0][l], s.n[1][l], s.n[2][l]];
         let den = add(add(mul(splat(n[0]), d[0]), mul(splat(n[1]), d[1])), mul(splat(n[2]), d[2]));
-        let t = _mm256_div_ps(splat(n[0] * a0[0] + n[1] * a0[1] + n[2] * a0[2]), den);
+        let t = _mm256_div_ps(splat(s.dist[l]), den);
         let mut m = _mm256_or_ps(positive, negative);
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(sum, zero));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(den, zero));
@@ -193,6 +236,11 @@ mod avx2 {
         let far = _mm256_min_ps(mul(splat(b[fp[1]][slot] - o[1]), inv[1]), far);
         let far = _mm256_min_ps(mul(splat(b[fp[2]][slot] - o[2]), inv[2]), far);
         (may_hold(near, far), near)
+    }
+
+    #[inline(always)]
+    fn sparse() -> u32 {
+        super::KNOB[0].load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// A deferred subtree: node, the lanes that go into it (bits), and the packet's lower bound
@@ -254,6 +302,24 @@ mod avx2 {
     fn mask_of(m: u32) -> __m256 {
         let bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
         _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(m as i32), bit), bit))
+    }
+
+    /// `v`'s lanes (inlined everywhere, unlike `packet`'s `to_array`).
+    #[inline(always)]
+    fn store(v: __m256) -> [f32; LANES] {
+        let mut a = [0f32; LANES];
+        // SAFETY: `a` has room for 8 floats; AVX is enabled in every caller.
+        unsafe { _mm256_storeu_ps(a.as_mut_ptr(), v) };
+        a
+    }
+
+    /// `v`'s lanes, as [`store`].
+    #[inline(always)]
+    fn store_i(v: __m256i) -> [i32; LANES] {
+        let mut a = [0i32; LANES];
+        // SAFETY: `a` has room for 8 ints; AVX is enabled in every caller.
+        unsafe { _mm256_storeu_si256(a.as_mut_ptr().cast(), v) };
+        a
     }
 
     /// The smallest of `v`'s lanes.
@@ -395,10 +461,10 @@ mod avx2 {
             unsafe { _mm256_loadu_ps(a.as_ptr()) }
         };
         let best = &st.best;
-        let (mut t, mut tri) = (to_array(best.t), to_array_i(best.tri));
+        let (mut t, mut tri) = (store(best.t), store_i(best.tri));
         let (mut w1, mut w2, mut sum, mut hit) =
-            (to_array(best.w1), to_array(best.w2), to_array(best.sum), to_array(st.hit_any));
-        let mut alive = to_array(st.alive);
+            (store(best.w1), store(best.w2), store(best.sum), store(st.hit_any));
+        let mut alive = store(st.alive);
         let mut m = lanes;
         while m != 0 {
             let i = m.trailing_zeros() as usize;
@@ -439,18 +505,19 @@ mod avx2 {
     ) -> __m256 {
         let mut mv = mask_of(lanes);
         let mut won = _mm256_setzero_ps();
+        let pre = match (T::KIND, shared) {
+            (Intersect::Watertight, Some(o)) => Some(shared_origin(block, o)),
+            _ => None,
+        };
         for l in 0..WIDTH {
             let i = block.index[l];
             if i == u32::MAX {
                 continue;
             }
             st.n_tris = count(st.n_tris, mv);
-            let tri = block.triangle(l);
-            let win = match (T::KIND, shared) {
-                (Intersect::Watertight, Some(o)) => {
-                    keep(intersect_shared_origin(&tri, o, &pk.d, st.best.t), i, mv, &mut st.best)
-                }
-                _ => test::<T>(&tri, i, pk, mv, &mut st.best),
+            let win = match &pre {
+                Some(s) => keep(intersect_shared_origin(s, l, &pk.d, st.best.t), i, mv, &mut st.best),
+                None => test::<T>(&block.triangle(l), i, pk, mv, &mut st.best),
             };
             won = _mm256_or_ps(won, win);
             if ANY {
@@ -492,7 +559,7 @@ mod avx2 {
         let mut cur_mask = group & _mm256_movemask_ps(st.alive) as u32;
         'walk: loop {
             if cur & LEAF == 0 {
-                if cur_mask.count_ones() <= SPARSE {
+                if cur_mask.count_ones() <= sparse() {
                     finish_alone::<ANY, T>(bvh, rays, cur, cur_mask, st, single);
                     if !ANY {
                         t_far = largest(st.best.t, _mm256_and_ps(group_v, st.alive));
@@ -530,7 +597,7 @@ mod avx2 {
                             }
                         }
                         if hit != 0 {
-                            let near = to_array(near);
+                            let near = store(near);
                             let first = hit.trailing_zeros() as usize;
                             let mut rest = hit & (hit - 1);
                             if rest == 0 {
@@ -644,11 +711,11 @@ mod avx2 {
             finish_alone::<ANY, T>(bvh, rays, bvh.root, infinite, &mut st, single);
         }
 
-        let (hit, tri) = (to_array(st.hit_any), to_array_i(st.best.tri));
-        let (nn, nt) = (to_array_i(st.n_nodes), to_array_i(st.n_tris));
+        let (hit, tri) = (store(st.hit_any), store_i(st.best.tri));
+        let (nn, nt) = (store_i(st.n_nodes), store_i(st.n_tris));
         let inv = _mm256_div_ps(splat(1.0), st.best.sum);
         let (u, v) = (_mm256_mul_ps(st.best.w1, inv), _mm256_mul_ps(st.best.w2, inv));
-        let mut out = Results { t: to_array(st.best.t), u: to_array(u), v: to_array(v), ..Results::default() };
+        let mut out = Results { t: store(st.best.t), u: store(u), v: store(v), ..Results::default() };
         // A loop, not `array::from_fn`: its closure would not be compiled for AVX2 nor inlined.
         for i in 0..LANES {
             out.hit[i] = hit[i].to_bits() != 0;
