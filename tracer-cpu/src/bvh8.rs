@@ -729,7 +729,7 @@ pub(crate) mod avx2 {
 
     /// Asks for the cache lines of the node or leaf block `r`.
     #[inline(always)]
-    pub(super) fn prefetch(bvh: &Bvh8, r: u32) {
+    pub(crate) fn prefetch(bvh: &Bvh8, r: u32) {
         let (ptr, lines) = if r & LEAF == 0 {
             (bvh.nodes.as_ptr().wrapping_add(r as usize).cast::<i8>(), size_of::<super::WideNode>() / 64)
         } else {

@@ -90,11 +90,12 @@ impl TraceLanes for Lanes<'_> {
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
 
+    use crate::bvh8::avx2::prefetch;
     use crate::bvh8::{Bvh8, LEAF, Simd, TriBlock, WIDTH};
     use crate::geometry::{Cost, TriangleTest};
     use crate::geometry;
     use crate::packet::avx2::{
-        Best, Packet, add, any, count, keep, may_hold, mul, packet_of, splat, sub, test,
+        Best, Packet, add, any, count, keep, may_hold, mul, packet_of, splat, sub, test, intersect_with_normal,
     };
     use crate::packet::{Entry, LANES, Rays, Results};
     use crate::traverse::Stack;
@@ -151,6 +152,25 @@ mod avx2 {
         dist: [f32; WIDTH],
     }
 
+    /// The plane normals ([`crate::geometry::plane_normal`]) of a block's triangles, 8-wide with
+    /// the scalar operations.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn normals(block: &TriBlock) -> [__m256; 3] {
+        let p = &block.p;
+        let ld = |r: &[f32; WIDTH]| {
+            // SAFETY: `r` holds 8 floats.
+            unsafe { _mm256_loadu_ps(r.as_ptr()) }
+        };
+        let e1 = [0, 1, 2].map(|a| sub(ld(&p[1][a]), ld(&p[0][a])));
+        let e2 = [0, 1, 2].map(|a| sub(ld(&p[2][a]), ld(&p[0][a])));
+        [
+            sub(mul(e1[1], e2[2]), mul(e1[2], e2[1])),
+            sub(mul(e1[2], e2[0]), mul(e1[0], e2[2])),
+            sub(mul(e1[0], e2[1]), mul(e1[1], e2[0])),
+        ]
+    }
+
     #[target_feature(enable = "avx2")]
     #[inline]
     fn shared_origin(block: &TriBlock, o: [f32; 3]) -> SharedOrigin {
@@ -170,13 +190,7 @@ mod avx2 {
                 sub(mul(e[0], s[1]), mul(e[1], s[0])),
             ]
         };
-        let e1 = [0, 1, 2].map(|a| sub(ld(&p[1][a]), ld(&p[0][a])));
-        let e2 = [0, 1, 2].map(|a| sub(ld(&p[2][a]), ld(&p[0][a])));
-        let n = [
-            sub(mul(e1[1], e2[2]), mul(e1[2], e2[1])),
-            sub(mul(e1[2], e2[0]), mul(e1[0], e2[2])),
-            sub(mul(e1[0], e2[1]), mul(e1[1], e2[0])),
-        ];
+        let n = normals(block);
         let dist = add(add(mul(n[0], a0[0]), mul(n[1], a0[1])), mul(n[2], a0[2]));
         SharedOrigin {
             cross: [cross(a1, a2), cross(a2, a0), cross(a0, a1)].map(|c| c.map(store)),
@@ -505,9 +519,11 @@ mod avx2 {
     ) -> __m256 {
         let mut mv = mask_of(lanes);
         let mut won = _mm256_setzero_ps();
-        let pre = match (T::KIND, shared) {
-            (Intersect::Watertight, Some(o)) => Some(shared_origin(block, o)),
-            _ => None,
+        // What every lane's test of a triangle shares, for the whole block at once.
+        let (pre, n) = match (T::KIND, shared) {
+            (Intersect::Watertight, Some(o)) => (Some(shared_origin(block, o)), [[0.0; WIDTH]; 3]),
+            (Intersect::Watertight, None) => (None, normals(block).map(store)),
+            _ => (None, [[0.0; WIDTH]; 3]),
         };
         for l in 0..WIDTH {
             let i = block.index[l];
@@ -517,6 +533,11 @@ mod avx2 {
             st.n_tris = count(st.n_tris, mv);
             let win = match &pre {
                 Some(s) => keep(intersect_shared_origin(s, l, &pk.d, st.best.t), i, mv, &mut st.best),
+                None if T::KIND == Intersect::Watertight => {
+                    let n = [n[0][l], n[1][l], n[2][l]];
+                    let found = intersect_with_normal(&block.triangle(l), n, pk, _mm256_setzero_ps(), st.best.t);
+                    keep(found, i, mv, &mut st.best)
+                }
                 None => test::<T>(&block.triangle(l), i, pk, mv, &mut st.best),
             };
             won = _mm256_or_ps(won, win);
@@ -582,7 +603,12 @@ mod avx2 {
                         while m != 0 {
                             let slot = m.trailing_zeros() as usize;
                             m &= m - 1;
-                            if first >> slot & 1 != 0 && node.child[slot] & LEAF == 0 {
+                            // The children some lane may enter start loading now, together.
+                            prefetch(bvh, node.child[slot]);
+                            if super::KNOB[1].load(std::sync::atomic::Ordering::Relaxed) == 0
+                                && first >> slot & 1 != 0
+                                && node.child[slot] & LEAF == 0
+                            {
                                 masks[slot] = cur_mask;
                                 continue;
                             }
