@@ -18,15 +18,7 @@ use crate::traverse::Stack;
 use render_spec::Intersect;
 
 /// Live lanes at or below which a subtree is traced one ray at a time.
-pub const SPARSE: u32 = 4;
-
-#[doc(hidden)]
-pub static KNOB: [std::sync::atomic::AtomicU32; 4] = [
-    std::sync::atomic::AtomicU32::new(SPARSE),
-    std::sync::atomic::AtomicU32::new(0),
-    std::sync::atomic::AtomicU32::new(0),
-    std::sync::atomic::AtomicU32::new(0),
-];
+pub const SPARSE: u32 = 2;
 
 /// Whether this CPU runs wide packets (AVX2, as [`crate::packet`]).
 pub fn available() -> bool {
@@ -89,6 +81,7 @@ impl TraceLanes for Lanes<'_> {
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
+    use super::SPARSE;
 
     use crate::bvh8::avx2::prefetch;
     use crate::bvh8::{Bvh8, LEAF, Simd, TriBlock, WIDTH};
@@ -252,11 +245,6 @@ mod avx2 {
         (may_hold(near, far), near)
     }
 
-    #[inline(always)]
-    fn sparse() -> u32 {
-        super::KNOB[0].load(std::sync::atomic::Ordering::Relaxed)
-    }
-
     /// A deferred subtree: node, the lanes that go into it (bits), and the packet's lower bound
     /// on their entry distance (the frustum's).
     #[derive(Clone, Copy)]
@@ -336,17 +324,20 @@ mod avx2 {
         a
     }
 
-    /// The smallest of `v`'s lanes.
+    /// The smallest lane of each of 4 vectors at once: that of `v[k]` in lane `SMALLEST4[k]`.
     #[inline(always)]
-    fn smallest(v: __m256) -> f32 {
+    fn smallest4(v: [__m256; 4]) -> __m256 {
         // SAFETY: register arithmetic under the callers' AVX2.
         unsafe {
-            let v = _mm256_min_ps(v, _mm256_permute2f128_ps::<1>(v, v));
-            let v = _mm256_min_ps(v, _mm256_permute_ps::<0b01_00_11_10>(v));
-            let v = _mm256_min_ps(v, _mm256_permute_ps::<0b10_11_00_01>(v));
-            _mm256_cvtss_f32(v)
+            // Halves: lanes 0-3 hold v[0]'s 4 partial minima and 4-7 v[1]'s; likewise v[2], v[3].
+            let x = _mm256_min_ps(_mm256_permute2f128_ps::<0x20>(v[0], v[1]), _mm256_permute2f128_ps::<0x31>(v[0], v[1]));
+            let y = _mm256_min_ps(_mm256_permute2f128_ps::<0x20>(v[2], v[3]), _mm256_permute2f128_ps::<0x31>(v[2], v[3]));
+            // Per half: two partials of x's vector, then two of y's.
+            let z = _mm256_min_ps(_mm256_shuffle_ps::<0b01_00_01_00>(x, y), _mm256_shuffle_ps::<0b11_10_11_10>(x, y));
+            _mm256_min_ps(z, _mm256_permute_ps::<0b10_11_00_01>(z))
         }
     }
+    const SMALLEST4: [i32; 4] = [0, 4, 2, 6];
 
     /// The largest of `v`'s lanes in `mask` (-inf where none).
     #[target_feature(enable = "avx2")]
@@ -381,29 +372,32 @@ mod avx2 {
         #[inline]
         fn new(pk: &Packet, shared: Option<[f32; 3]>, group: u32) -> Self {
             let m = mask_of(group);
-            let (inf, ninf) = (splat(f32::INFINITY), splat(f32::NEG_INFINITY));
-            let lo = |v: __m256| smallest(_mm256_blendv_ps(inf, v, m));
-            let hi = |v: __m256| -smallest(_mm256_xor_ps(_mm256_blendv_ps(ninf, v, m), splat(-0.0)));
-            let up: [bool; 3] = std::array::from_fn(|a| _mm256_movemask_ps(_mm256_and_ps(pk.inv[a], m)) == 0);
-            let mut f = Frustum {
+            let (inf, neg) = (splat(f32::INFINITY), splat(-0.0));
+            // The smallest of each vector's lanes in the group; the largest as the smallest
+            // negated (negation is exact).
+            let lo = |v: __m256| _mm256_blendv_ps(inf, v, m);
+            let hi = |v: __m256| _mm256_blendv_ps(inf, _mm256_xor_ps(v, neg), m);
+            let (o, inv) = (&pk.o, &pk.inv);
+            let a = smallest4([lo(o[0]), lo(o[1]), lo(o[2]), lo(inv[0])]);
+            let b = smallest4([hi(o[0]), hi(o[1]), hi(o[2]), hi(inv[0])]);
+            let c = smallest4([lo(inv[1]), lo(inv[2]), hi(inv[1]), hi(inv[2])]);
+            let lane = |v: __m256, i: i32| _mm256_permutevar8x32_ps(v, _mm256_set1_epi32(i));
+            let neg_lane = |v: __m256, i: i32| _mm256_xor_ps(lane(v, i), neg);
+            let (olo, ohi) = match shared {
+                Some(o) => (o.map(splat), o.map(splat)),
+                None => ([0, 1, 2].map(|k| lane(a, SMALLEST4[k])), [0, 1, 2].map(|k| neg_lane(b, SMALLEST4[k]))),
+            };
+            let inv_lo = [lane(a, SMALLEST4[3]), lane(c, SMALLEST4[0]), lane(c, SMALLEST4[1])];
+            let inv_hi = [neg_lane(b, SMALLEST4[3]), neg_lane(c, SMALLEST4[2]), neg_lane(c, SMALLEST4[3])];
+            let up: [bool; 3] = std::array::from_fn(|a| _mm256_movemask_ps(_mm256_and_ps(inv[a], m)) == 0);
+            Frustum {
                 near_plane: std::array::from_fn(|a| if up[a] { a } else { 3 + a }),
                 far_plane: std::array::from_fn(|a| if up[a] { 3 + a } else { a }),
-                o_near: [splat(0.0); 3],
-                o_far: [splat(0.0); 3],
-                inv_lo: [splat(0.0); 3],
-                inv_hi: [splat(0.0); 3],
-            };
-            for a in 0..3 {
-                let (olo, ohi) = match shared {
-                    Some(o) => (o[a], o[a]),
-                    None => (lo(pk.o[a]), hi(pk.o[a])),
-                };
-                f.o_near[a] = splat(if up[a] { ohi } else { olo });
-                f.o_far[a] = splat(if up[a] { olo } else { ohi });
-                f.inv_lo[a] = splat(lo(pk.inv[a]));
-                f.inv_hi[a] = splat(hi(pk.inv[a]));
+                o_near: std::array::from_fn(|a| if up[a] { ohi[a] } else { olo[a] }),
+                o_far: std::array::from_fn(|a| if up[a] { olo[a] } else { ohi[a] }),
+                inv_lo,
+                inv_hi,
             }
-            f
         }
 
         /// Children of `b` that some lane may enter before `t_far` (the largest distance a lane
@@ -580,7 +574,7 @@ mod avx2 {
         let mut cur_mask = group & _mm256_movemask_ps(st.alive) as u32;
         'walk: loop {
             if cur & LEAF == 0 {
-                if cur_mask.count_ones() <= sparse() {
+                if cur_mask.count_ones() <= SPARSE {
                     finish_alone::<ANY, T>(bvh, rays, cur, cur_mask, st, single);
                     if !ANY {
                         t_far = largest(st.best.t, _mm256_and_ps(group_v, st.alive));
@@ -605,10 +599,7 @@ mod avx2 {
                             m &= m - 1;
                             // The children some lane may enter start loading now, together.
                             prefetch(bvh, node.child[slot]);
-                            if super::KNOB[1].load(std::sync::atomic::Ordering::Relaxed) == 0
-                                && first >> slot & 1 != 0
-                                && node.child[slot] & LEAF == 0
-                            {
+                            if first >> slot & 1 != 0 && node.child[slot] & LEAF == 0 {
                                 masks[slot] = cur_mask;
                                 continue;
                             }
@@ -710,11 +701,13 @@ mod avx2 {
         };
         let valid = _mm256_movemask_ps(alive) as u32;
         // The origin, where every valid lane starts at the same point (primary rays).
-        let first = rays.valid.iter().position(|&v| v).unwrap_or(0);
-        let o0 = [rays.origin[0][first], rays.origin[1][first], rays.origin[2][first]];
-        let shared = (0..LANES)
-            .all(|i| !rays.valid[i] || (0..3).all(|a| rays.origin[a][i].to_bits() == o0[a].to_bits()))
-            .then_some(o0);
+        let first = _mm256_set1_epi32(valid.trailing_zeros() as i32 & 7);
+        let same = (0..3).fold(valid, |m, a| {
+            let o = _mm256_castps_si256(pk.o[a]);
+            let o0 = _mm256_permutevar8x32_epi32(o, first);
+            m & _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(o, o0))) as u32
+        });
+        let shared = (same == valid).then(|| [0, 1, 2].map(|a| _mm256_cvtss_f32(_mm256_permutevar8x32_ps(pk.o[a], first))));
         // Lanes with an infinite reciprocal (a direction along a coordinate plane) go alone; the
         // others walk in groups of one octant, as Embree splits its packets.
         let abs = |v: __m256| _mm256_andnot_ps(splat(-0.0), v);
