@@ -543,7 +543,7 @@ pub(crate) mod avx2 {
     use std::arch::x86_64::*;
 
     /// The ray, splatted.
-    pub(super) struct Lanes {
+    pub(crate) struct Lanes {
         pub o: [__m256; 3],
         pub d: [__m256; 3],
         pub inv: [__m256; 3],
@@ -603,7 +603,7 @@ pub(crate) mod avx2 {
     /// (hit mask, t, w1, w2, sum) (`u = w1 * (1 / sum)`, computed for the closest hit only).
     #[target_feature(enable = "avx2")]
     #[inline]
-    pub(super) fn watertight(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+    pub(crate) fn watertight(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
         let (o, d) = (&r.o, &r.d);
         // Written out, not in closures: a closure does not inherit AVX2 (see crate::wide).
         let (a0, a1, a2) = (sub3(&b.p[0], o), sub3(&b.p[1], o), sub3(&b.p[2], o));
@@ -650,7 +650,7 @@ pub(crate) mod avx2 {
     /// operation; returns (hit mask, t, u, v, 1).
     #[target_feature(enable = "avx2")]
     #[inline]
-    pub(super) fn moller_trumbore(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+    pub(crate) fn moller_trumbore(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
         let (o, d) = (&r.o, &r.d);
         let v0 = [load(&b.p[0][0]), load(&b.p[0][1]), load(&b.p[0][2])];
         let e1 = [

@@ -83,7 +83,8 @@ impl TraceLanes for Lanes<'_> {
 mod avx2 {
     use super::SPARSE;
 
-    use crate::bvh8::avx2::prefetch;
+    use crate::bvh8::avx2::{Lanes, moller_trumbore, prefetch, watertight};
+    use crate::geometry::Hit;
     use crate::bvh8::{Bvh8, LEAF, Simd, TriBlock, WIDTH};
     use crate::geometry::{Cost, TriangleTest};
     use crate::geometry;
@@ -511,6 +512,12 @@ mod avx2 {
         lanes: u32,
         st: &mut State,
     ) -> __m256 {
+        // SAFETY: a load of 8 ints.
+        let index = unsafe { _mm256_loadu_si256(block.index.as_ptr().cast()) };
+        let full = !_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(index, _mm256_set1_epi32(-1)))) as u32 & 0xff;
+        if shared.is_none() && lanes.count_ones() < full.count_ones() {
+            return leaf_by_lane::<ANY, T>(block, full, pk, lanes, st);
+        }
         let mut mv = mask_of(lanes);
         let mut won = _mm256_setzero_ps();
         // What every lane's test of a triangle shares, for the whole block at once.
@@ -542,6 +549,75 @@ mod avx2 {
                     break;
                 }
             }
+        }
+        st.hit_any = _mm256_or_ps(st.hit_any, won);
+        won
+    }
+
+    /// [`leaf`] one lane at a time, each against all of the block's triangles (`full`, bits) at
+    /// once, as the single-ray traversal tests a block: cheaper than one test per triangle where
+    /// fewer lanes than triangles reach the block.
+    #[target_feature(enable = "avx2")]
+    fn leaf_by_lane<const ANY: bool, T: TriangleTest>(
+        block: &TriBlock,
+        full: u32,
+        pk: &Packet,
+        lanes: u32,
+        st: &mut State,
+    ) -> __m256 {
+        let mut won = 0u32;
+        let mut m = lanes;
+        let n = _mm256_set1_epi32(full.count_ones() as i32);
+        let (mut t_best, mut tri_best) = (store(st.best.t), store_i(st.best.tri));
+        while m != 0 {
+            let lane = m.trailing_zeros();
+            m &= m - 1;
+            let i = _mm256_set1_epi32(lane as i32);
+            let at = |v: __m256| _mm256_permutevar8x32_ps(v, i);
+            let r = Lanes { o: pk.o.map(at), d: pk.d.map(at), inv: pk.inv.map(at) };
+            let l = lane as usize;
+            let [hit, t, w1, w2, sum] = match T::KIND {
+                Intersect::Watertight => watertight(block, &r, _mm256_setzero_ps(), splat(t_best[l])),
+                Intersect::MollerTrumbore => moller_trumbore(block, &r, _mm256_setzero_ps(), splat(t_best[l])),
+            };
+            let mut hit = _mm256_movemask_ps(hit) as u32 & full;
+            let mut k_best = None;
+            // The block's hit that beats the lane's best: the nearest, ties to the lower index.
+            if hit != 0 {
+                let t = store(t);
+                while hit != 0 {
+                    let k = hit.trailing_zeros() as usize;
+                    hit &= hit - 1;
+                    if Hit::beats(t[k], block.index[k], t_best[l], tri_best[l] as u32) {
+                        (t_best[l], tri_best[l]) = (t[k], block.index[k] as i32);
+                        k_best = Some(k);
+                        if ANY {
+                            break;
+                        }
+                    }
+                }
+            }
+            if let Some(k) = k_best {
+                won |= 1 << lane;
+                let into = mask_of(1 << lane);
+                let from = _mm256_set1_epi32(k as i32);
+                let pick = |v: __m256| _mm256_permutevar8x32_ps(v, from);
+                let b = &mut st.best;
+                b.t = _mm256_blendv_ps(b.t, pick(t), into);
+                b.w1 = _mm256_blendv_ps(b.w1, pick(w1), into);
+                b.w2 = _mm256_blendv_ps(b.w2, pick(w2), into);
+                b.sum = _mm256_blendv_ps(b.sum, pick(sum), into);
+                b.tri = _mm256_castps_si256(_mm256_blendv_ps(
+                    _mm256_castsi256_ps(b.tri),
+                    _mm256_castsi256_ps(_mm256_set1_epi32(block.index[k] as i32)),
+                    into,
+                ));
+            }
+        }
+        st.n_tris = _mm256_add_epi32(st.n_tris, _mm256_and_si256(_mm256_castps_si256(mask_of(lanes)), n));
+        let won = mask_of(won);
+        if ANY {
+            st.alive = _mm256_andnot_ps(won, st.alive);
         }
         st.hit_any = _mm256_or_ps(st.hit_any, won);
         won
