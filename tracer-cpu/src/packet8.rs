@@ -515,6 +515,8 @@ mod avx2 {
         // SAFETY: a load of 8 ints.
         let index = unsafe { _mm256_loadu_si256(block.index.as_ptr().cast()) };
         let full = !_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(index, _mm256_set1_epi32(-1)))) as u32 & 0xff;
+        // Shared-origin lanes keep the per-triangle test, whose scalar part is done once per
+        // block (one lane at a time measured no faster for them).
         if shared.is_none() && lanes.count_ones() < full.count_ones() {
             return leaf_by_lane::<ANY, T>(block, full, pk, lanes, st);
         }
