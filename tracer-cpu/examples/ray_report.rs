@@ -46,7 +46,7 @@ use tracer_cpu::{Method, Tracer, packet, packet8};
 /// the AVX-512 path forced (`-` on a CPU without it); "ours bvh8 packet" is `--method
 /// bvh8-packet`, 8-ray packets on the wide BVH. "Embree 8 robust" is `rtcIntersect8` on the
 /// robust scene.
-const ENGINES: [&str; 12] = [
+const ENGINES: [&str; 11] = [
     "ours ordered",
     "ours packet",
     "ours bvh8",
@@ -58,7 +58,6 @@ const ENGINES: [&str; 12] = [
     "Embree 8 robust",
     "ours ordered MT",
     "ours bvh8 MT",
-    "ours bvh8 packet before",
 ];
 const PACKET: usize = 1;
 const BVH8: usize = 2;
@@ -148,10 +147,10 @@ fn parse_args() -> Result<Options, String> {
             "--engines" => {
                 o.engines = [false; ENGINES.len()];
                 for e in value()?.split(',') {
-                    let i = ENGINES.iter().position(|x| *x == e.trim()).ok_or(format!(
-                        "unknown tracer {e:?} (one of {})",
-                        ENGINES.join(", ")
-                    ))?;
+                    let i = ENGINES
+                        .iter()
+                        .position(|x| *x == e.trim())
+                        .ok_or(format!("unknown tracer {e:?} (one of {})", ENGINES.join(", ")))?;
                     o.engines[i] = true;
                 }
             }
@@ -242,7 +241,6 @@ fn main() {
             Some(Engine::Embree8(&em_robust)),
             tracer.walk(Method::Ordered).ok().map(|w| Engine::Scalar(w, Intersect::MollerTrumbore)),
             tracer.walk(Method::Bvh8).ok().map(|w| Engine::Scalar(w, Intersect::MollerTrumbore)),
-            (tracer.bvh8().is_some() && packet8::available()).then_some(Engine::WidePacketBefore(&tracer)),
         ];
         let engines: [Option<Engine>; ENGINES.len()] =
             std::array::from_fn(|i| engines[i].filter(|_| opts.engines[i] || i == EMBREE1));
