@@ -111,7 +111,7 @@ mod avx2 {
     /// The box test of slot `slot` of `b` (a wide node's bounds) for all lanes whose inverse
     /// directions have, per axis, the sign that chose `near_plane` and `far_plane`: the
     /// single-ray AVX2 test's operations ([`crate::bvh8`]), lane by lane the scalar slab test's
-    /// result, with fewer operations than [`slab`] (which must find each lane's entered plane).
+    /// result, with fewer operations than `packet`'s slab test (which finds each lane's entered plane).
     #[target_feature(enable = "avx2")]
     #[inline]
     fn slab_signed(
