@@ -2,6 +2,7 @@
 //! degenerate input, rayon parallelism, and the final child-pair layout. A [`Splitter`] (binned or
 //! sweep) only decides where to split one node.
 
+use crate::top::{At, Top, top_units};
 use bvh_format::Node;
 use glam::Vec3A;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -201,15 +202,17 @@ pub const PARALLEL_NODE: usize = 1 << 15;
 /// slots, its root first, its left subtree next, and its right subtree at `index`.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Zeroable)]
-struct Slot {
-    min: [f32; 3],
-    max: [f32; 3],
-    /// Triangle count for a leaf, 0 for an inner node.
-    count: u32,
+pub(crate) struct Slot {
+    pub(crate) min: [f32; 3],
+    pub(crate) max: [f32; 3],
+    /// Triangle count for a leaf; for an inner node the height of its subtree (a leaf's is 0),
+    /// which the reinsertion in the top needs to keep the tree's depth ([`crate::top`]). A leaf
+    /// is the slot whose subtree is one node.
+    pub(crate) count: u32,
     /// First primitive (leaf) or slot of the right child (inner node).
-    index: u32,
+    pub(crate) index: u32,
     /// Nodes in the subtree rooted here (1 for a leaf): where each layout puts the right child.
-    nodes: u32,
+    pub(crate) nodes: u32,
 }
 
 /// A finished tree: child-pair nodes, the escape-pointer layout when asked for, and for each
@@ -226,6 +229,9 @@ struct Ctx<'a, S: Splitter> {
     progress: Option<&'a AtomicUsize>,
     /// [`PARALLEL_NODE`] outside tests.
     parallel_node: usize,
+    /// Whether subtrees are reinserted in the top of the finished tree ([`crate::top`]); always
+    /// outside tests.
+    reshape_top: bool,
 }
 
 /// Builds a tree over `refs` (used as scratch space: their order afterwards means nothing) with
@@ -238,7 +244,7 @@ pub fn build<S: Splitter>(
     progress: Option<&AtomicUsize>,
     escape: bool,
 ) -> BuiltTree {
-    build_with(refs, Ctx { splitter, costs, progress, parallel_node: PARALLEL_NODE }, escape)
+    build_with(refs, Ctx { splitter, costs, progress, parallel_node: PARALLEL_NODE, reshape_top: true }, escape)
 }
 
 fn build_with<S: Splitter>(refs: &mut [PrimRef], ctx: Ctx<'_, S>, escape: bool) -> BuiltTree {
@@ -253,9 +259,18 @@ fn build_with<S: Splitter>(refs: &mut [PrimRef], ctx: Ctx<'_, S>, escape: bool) 
     // The second buffer that large nodes are partitioned into; small trees never need it.
     let mut spare: Vec<PrimRef> = if n > ctx.parallel_node { bytemuck::zeroed_vec(n) } else { Vec::new() };
     let root = bounds_parallel(refs);
-    build_node(&ctx, Prims { refs, spare: &mut spare, order: &mut order }, 0, &mut slots, 0, root, 0);
+    let _ = build_node(&ctx, Prims { refs, spare: &mut spare, order: &mut order }, 0, &mut slots, 0, root, 0);
     drop(spare);
-    let (nodes, escape) = rayon::join(|| child_pair(&slots), || escape.then(|| depth_first(&slots)));
+    let mut top = None;
+    if ctx.reshape_top {
+        let mut t = Top::extract(&slots, n, top_units(n));
+        if t.optimise() {
+            order = t.prepare(&slots, &order);
+            top = Some(t);
+        }
+    }
+    let shape = Shape { slots: &slots, top: top.as_ref() };
+    let (nodes, escape) = rayon::join(|| child_pair(&shape), || escape.then(|| depth_first(&shape)));
     debug_assert!(order.par_iter().all(|&i| (i as usize) < n));
     BuiltTree { nodes, escape, order }
 }
@@ -286,7 +301,8 @@ impl<'a> Prims<'a> {
 }
 
 /// Builds the subtree of `p.refs` into `slots` (its own part of the gapped array, starting at
-/// absolute slot `slot`); `first` is the index of its first primitive. Returns its node count.
+/// absolute slot `slot`); `first` is the index of its first primitive. Returns its node count and
+/// height.
 fn build_node<S: Splitter>(
     ctx: &Ctx<'_, S>,
     mut p: Prims<'_>,
@@ -295,7 +311,7 @@ fn build_node<S: Splitter>(
     slot: usize,
     bounds: NodeBounds,
     depth: u32,
-) -> u32 {
+) -> (u32, u32) {
     let n = p.refs.len();
     let may_leaf = n <= ctx.costs.max_leaf_size;
     let split = if n == 1 {
@@ -327,7 +343,7 @@ fn build_node<S: Splitter>(
         if let Some(pr) = ctx.progress {
             pr.fetch_add(n, Ordering::Relaxed);
         }
-        return 1;
+        return (1, 0);
     };
     let mid = split.mid;
     debug_assert!(mid > 0 && mid < n);
@@ -335,15 +351,15 @@ fn build_node<S: Splitter>(
         std::mem::swap(&mut p.refs, &mut p.spare);
     }
     let right_slot = slot + 2 * mid;
-    here.count = 0;
     here.index = right_slot as u32;
     let (left_p, right_p) = p.split_at(mid);
     let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
     let left = || build_node(ctx, left_p, first, left_slots, slot + 1, split.left, depth + 1);
     let right = || build_node(ctx, right_p, first + mid, right_slots, right_slot, split.right, depth + 1);
-    let (l, r) = if n > PARALLEL_SUBTREES { rayon::join(left, right) } else { (left(), right()) };
+    let ((l, lh), (r, rh)) = if n > PARALLEL_SUBTREES { rayon::join(left, right) } else { (left(), right()) };
     here.nodes = 1 + l + r;
-    here.nodes
+    here.count = 1 + lh.max(rh);
+    (here.nodes, here.count)
 }
 
 /// Splits at the object median along the widest centroid axis; with all centroids equal, simply
@@ -361,46 +377,84 @@ pub fn median_split(refs: &mut [PrimRef], bounds: &NodeBounds) -> Split {
 /// Subtrees of more nodes than this are written out in parallel.
 const PARALLEL_EMIT: u32 = 1 << 14;
 
-/// A slot as a node; `children` is where an inner node's pair (child-pair) or its escape index
-/// (escape-pointer) lies.
-fn node_of(s: &Slot, children: usize) -> Node {
-    Node { min: s.min, count: s.count, max: s.max, index: if s.count > 0 { s.index } else { children as u32 } }
+/// The finished tree: the slots, below the reshaped top when there is one.
+struct Shape<'a> {
+    slots: &'a [Slot],
+    top: Option<&'a Top>,
+}
+
+impl Shape<'_> {
+    fn root(&self) -> At {
+        self.top.map_or(At::Slot(0, 0), Top::root)
+    }
+
+    /// The node at `at` (`children`: where an inner node's pair lies, child-pair layout, or its
+    /// escape index, escape layout), its subtree's node count and its children.
+    #[inline(always)]
+    fn node(&self, at: At, children: usize) -> (Node, u32, Option<(At, At)>) {
+        match at {
+            At::Slot(s, shift) => {
+                let sl = &self.slots[s as usize];
+                if sl.nodes == 1 {
+                    let index = sl.index.wrapping_add(shift);
+                    (Node { min: sl.min, count: sl.count, max: sl.max, index }, 1, None)
+                } else {
+                    let node = Node { min: sl.min, count: 0, max: sl.max, index: children as u32 };
+                    (node, sl.nodes, Some((At::Slot(s + 1, shift), At::Slot(sl.index, shift))))
+                }
+            }
+            At::Top(t) => {
+                let (bbox, nodes, l, r) = self.top.expect("a top node comes from a top").inner(t);
+                let node = Node { min: bbox.min.into(), count: 0, max: bbox.max.into(), index: children as u32 };
+                (node, nodes, Some((l, r)))
+            }
+        }
+    }
+
+    fn nodes(&self, at: At) -> u32 {
+        self.node(at, 0).1
+    }
 }
 
 /// The child-pair layout: root at 0, the two children of each inner node side by side, pairs in
 /// the depth-first (left first) order of their parents. The pairs below a node are therefore
 /// contiguous, which lets subtrees be written in parallel into their own parts of the array.
-fn child_pair(slots: &[Slot]) -> Vec<Node> {
-    let mut nodes: Vec<Node> = bytemuck::zeroed_vec(slots[0].nodes as usize);
-    let (root, below) = nodes.split_first_mut().expect("a tree has a root");
-    *root = node_of(&slots[0], 1);
-    if slots[0].count == 0 {
-        pairs(slots, 0, below, 1);
+fn child_pair(shape: &Shape<'_>) -> Vec<Node> {
+    let root = shape.root();
+    let mut nodes: Vec<Node> = bytemuck::zeroed_vec(shape.nodes(root) as usize);
+    let (first, below) = nodes.split_first_mut().expect("a tree has a root");
+    let (node, _, kids) = shape.node(root, 1);
+    *first = node;
+    if let Some(kids) = kids {
+        pairs(shape, kids, shape.nodes(root), below, 1);
     }
     nodes
 }
 
-/// Writes the nodes below the inner node at slot `s` into `out`, which starts at node `base`:
-/// its pair, then everything below its left child, then everything below its right child.
-fn pairs(slots: &[Slot], s: usize, out: &mut [Node], base: usize) {
-    let (l, r) = (s + 1, slots[s].index as usize);
-    let left_below = slots[l].nodes as usize - 1;
+/// Writes the nodes below an inner node of `count` nodes whose children are `kids` into `out`,
+/// which starts at node `base`: its pair, then everything below its left child, then everything
+/// below its right child.
+fn pairs(shape: &Shape<'_>, (l, r): (At, At), count: u32, out: &mut [Node], base: usize) {
+    let left_count = shape.nodes(l);
+    let left_below = left_count as usize - 1;
     let (pair, below) = out.split_at_mut(2);
     let (left_out, right_out) = below.split_at_mut(left_below);
     let (left_base, right_base) = (base + 2, base + 2 + left_below);
-    pair[0] = node_of(&slots[l], left_base);
-    pair[1] = node_of(&slots[r], right_base);
+    let (ln, _, lk) = shape.node(l, left_base);
+    let (rn, right_count, rk) = shape.node(r, right_base);
+    pair[0] = ln;
+    pair[1] = rn;
     let mut left = || {
-        if slots[l].count == 0 {
-            pairs(slots, l, left_out, left_base)
+        if let Some(k) = lk {
+            pairs(shape, k, left_count, left_out, left_base)
         }
     };
     let mut right = || {
-        if slots[r].count == 0 {
-            pairs(slots, r, right_out, right_base)
+        if let Some(k) = rk {
+            pairs(shape, k, right_count, right_out, right_base)
         }
     };
-    if slots[s].nodes > PARALLEL_EMIT {
+    if count > PARALLEL_EMIT {
         rayon::join(left, right);
     } else {
         left();
@@ -410,24 +464,23 @@ fn pairs(slots: &[Slot], s: usize, out: &mut [Node], base: usize) {
 
 /// The escape-pointer layout: nodes in depth-first order (left first), an inner node pointing
 /// past its subtree.
-fn depth_first(slots: &[Slot]) -> Vec<Node> {
-    let mut nodes: Vec<Node> = bytemuck::zeroed_vec(slots[0].nodes as usize);
-    preorder(slots, 0, &mut nodes, 0);
+fn depth_first(shape: &Shape<'_>) -> Vec<Node> {
+    let root = shape.root();
+    let mut nodes: Vec<Node> = bytemuck::zeroed_vec(shape.nodes(root) as usize);
+    preorder(shape, root, &mut nodes, 0);
     nodes
 }
 
-fn preorder(slots: &[Slot], s: usize, out: &mut [Node], base: usize) {
-    let sl = &slots[s];
-    out[0] = node_of(sl, base + sl.nodes as usize);
-    if sl.count > 0 {
-        return;
-    }
-    let (l, r) = (s + 1, sl.index as usize);
-    let left_n = slots[l].nodes as usize;
+fn preorder(shape: &Shape<'_>, at: At, out: &mut [Node], base: usize) {
+    let count = shape.nodes(at);
+    let (node, _, kids) = shape.node(at, base + count as usize);
+    out[0] = node;
+    let Some((l, r)) = kids else { return };
+    let left_n = shape.nodes(l) as usize;
     let (left_out, right_out) = out[1..].split_at_mut(left_n);
-    let mut left = || preorder(slots, l, left_out, base + 1);
-    let mut right = || preorder(slots, r, right_out, base + 1 + left_n);
-    if sl.nodes > PARALLEL_EMIT {
+    let mut left = || preorder(shape, l, left_out, base + 1);
+    let mut right = || preorder(shape, r, right_out, base + 1 + left_n);
+    if count > PARALLEL_EMIT {
         rayon::join(left, right);
     } else {
         left();
@@ -552,12 +605,16 @@ mod tests {
     /// Builds with large nodes split in parallel from `parallel_node` primitives up, on a rayon
     /// pool of `threads`.
     fn build_parallel(tris: &[[Vec3; 3]], parallel_node: usize, threads: usize) -> super::BuiltTree {
+        build_ctx(tris, parallel_node, threads, true)
+    }
+
+    fn build_ctx(tris: &[[Vec3; 3]], parallel_node: usize, threads: usize, reshape_top: bool) -> super::BuiltTree {
         let costs =
             super::Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 8, depth_limit: super::DEPTH_LIMIT };
         let splitter = crate::binned::BinnedSah { bins: 16, costs };
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
         pool.install(|| {
-            let ctx = super::Ctx { splitter: &splitter, costs, progress: None, parallel_node };
+            let ctx = super::Ctx { splitter: &splitter, costs, progress: None, parallel_node, reshape_top };
             super::build_with(&mut super::prim_refs(tris), ctx, true)
         })
     }
@@ -628,6 +685,80 @@ mod tests {
         let escape = t.escape.expect("asked for");
         assert_eq!(escape, bvh_format::tree::escape_from_child_pair(&t.nodes));
         check_shape(Tree::escape(&escape), tris.len() as u32).expect("valid escape tree");
+    }
+
+    /// The leaves as (box, sorted triangles), sorted: what the reinsertion must keep.
+    fn leaves(t: &super::BuiltTree) -> Vec<([u32; 6], Vec<u32>)> {
+        let mut v: Vec<([u32; 6], Vec<u32>)> = t
+            .nodes
+            .iter()
+            .filter(|n| n.count > 0)
+            .map(|n| {
+                let mut tris = t.order[n.index as usize..(n.index + n.count) as usize].to_vec();
+                tris.sort_unstable();
+                let b = [n.min[0], n.min[1], n.min[2], n.max[0], n.max[1], n.max[2]].map(f32::to_bits);
+                (b, tris)
+            })
+            .collect();
+        v.sort_unstable();
+        v
+    }
+
+    /// A room of six two-triangle walls around a soup of small triangles, with a mirror-like quad
+    /// in front of one wall: the large-triangle candidate sends the walls one way and the rest the
+    /// other, which the reinsertion in the top then improves on (crate::top).
+    fn soup_in_a_room(n: usize) -> Vec<[Vec3; 3]> {
+        // The soup fills a tenth of the room's width, as the objects of scenes/room.toml do.
+        let mut tris: Vec<[Vec3; 3]> = soup(n).iter().map(|t| t.map(|v| v * 0.14 + Vec3::splat(2.0))).collect();
+        let quad = |c: [Vec3; 4]| [[c[0], c[1], c[2]], [c[0], c[2], c[3]]];
+        let (lo, hi) = (-2.0f32, 12.0f32);
+        let v = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+        for (axis, at) in [(0, lo), (0, hi), (1, lo), (1, hi), (2, lo), (2, hi)] {
+            let p = |a: f32, b: f32| match axis {
+                0 => v(at, a, b),
+                1 => v(a, at, b),
+                _ => v(a, b, at),
+            };
+            tris.extend(quad([p(lo, lo), p(hi, lo), p(hi, hi), p(lo, hi)]));
+        }
+        tris.extend(quad([
+            v(1.0, 4.0, lo + 0.05),
+            v(8.0, 4.0, lo + 0.05),
+            v(8.0, 9.0, lo + 0.05),
+            v(1.0, 9.0, lo + 0.05),
+        ]));
+        tris
+    }
+
+    #[test]
+    fn reinsertion_in_the_top_lowers_the_cost_and_keeps_every_leaf() {
+        for tris in [soup_in_a_room(20_000), soup_on_floor(20_000), soup(3000)] {
+            let plain = build_ctx(&tris, super::PARALLEL_NODE, 2, false);
+            let reshaped = build_ctx(&tris, super::PARALLEL_NODE, 2, true);
+            for t in [&plain, &reshaped] {
+                check_shape(Tree::child_pair(&t.nodes), tris.len() as u32).expect("valid tree");
+                let escape = t.escape.as_ref().expect("asked for");
+                assert_eq!(*escape, bvh_format::tree::escape_from_child_pair(&t.nodes));
+                let mut order = t.order.clone();
+                order.sort_unstable();
+                assert!(order.iter().enumerate().all(|(i, &o)| i as u32 == o), "leaf order is a permutation");
+            }
+            assert_eq!(leaves(&plain), leaves(&reshaped), "the same leaves, boxes and triangles");
+            let (a, b) =
+                (stats(Tree::child_pair(&plain.nodes), 1.0, 1.0), stats(Tree::child_pair(&reshaped.nodes), 1.0, 1.0));
+            assert!(b.sah_cost <= a.sah_cost, "SAH {} after reinsertion, {} before", b.sah_cost, a.sah_cost);
+            assert!(b.max_depth <= a.max_depth, "{} levels after reinsertion, {} before", b.max_depth, a.max_depth);
+            assert_eq!(a.node_count, b.node_count);
+        }
+        // In the room the top is far from the best: the reinsertion must find something.
+        let tris = soup_in_a_room(20_000);
+        let (a, b) =
+            (build_ctx(&tris, super::PARALLEL_NODE, 1, false), build_ctx(&tris, super::PARALLEL_NODE, 1, true));
+        let (a, b) = (
+            stats(Tree::child_pair(&a.nodes), 1.0, 1.0).sah_cost,
+            stats(Tree::child_pair(&b.nodes), 1.0, 1.0).sah_cost,
+        );
+        assert!(b < a * 0.99, "room: SAH {b} after reinsertion, {a} before");
     }
 
     #[test]

@@ -3,7 +3,8 @@
 //! - [`import`]: OBJ (tobj) and glTF/GLB (gltf) into a [`Scene`], and scene descriptions (TOML)
 //!   that place several meshes, generated shapes, cameras and lights.
 //! - [`build`]: the top-down builder shared by [`binned`] (Wald's binned SAH) and [`sweep`]
-//!   (full-sweep SAH, the quality reference).
+//!   (full-sweep SAH, the quality reference), and the reinsertion in the top of the finished
+//!   tree that both get (`top`).
 //! - [`compile()`]: a [`Scene`] into a validated [`bvh_format::SceneFile`].
 
 pub mod binned;
@@ -14,6 +15,7 @@ pub mod import;
 pub mod peers;
 pub mod scene;
 pub mod sweep;
+mod top;
 pub mod unit;
 mod weld;
 pub mod wide;

@@ -13,6 +13,7 @@ use render_spec::{Accuracy, Ao, CameraSpec, Intersect, Mode, Offset, Settings};
 use tracer_cpu::{Method, Tracer};
 use tracer_vk::Gpu;
 use tracer_vk::kernels::Method as VkMethod;
+use tracer_vk::kernels::{Persistent, Stage};
 use tracer_vk::render::Renderer;
 
 fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32, h: u32) {
@@ -547,10 +548,10 @@ fn persistent_kernels_render_the_plain_images_bit_for_bit() {
                     "{} {mode:?} {w}x{h} workgroup {workgroup:?} launch {invocations:?} refill {refill}",
                     method.name()
                 );
-                r.set_persistent(false, None).expect("the plain kernels");
+                r.set_persistent(Persistent::Off, None).expect("the plain kernels");
                 let plain = r.render(&s).expect("the GPU renders").image;
-                r.set_persistent_with(true, invocations, refill).expect("the persistent kernels");
-                assert!(r.specialisation().persistent && r.specialisation().refill == refill);
+                r.set_persistent_with(Persistent::On, invocations, Some(refill)).expect("the persistent kernels");
+                assert!(r.specialisation().persistent == Persistent::On && r.specialisation().refill_idle() == refill);
                 let persistent = r.render(&s).expect("the GPU renders persistently").image;
                 assert!(plain.rays.primary > 0, "{what}: rays were traced");
                 assert_eq!(plain.rgb, persistent.rgb, "{what}: the persistent image differs");
@@ -570,15 +571,86 @@ fn persistent_kernels_render_the_plain_images_bit_for_bit() {
             })
             .collect();
         let plain = r.cast_rays(&rays, Accuracy::default()).expect("the plain kernels cast");
-        r.set_persistent(true, Some(64)).expect("the persistent kernels");
+        r.set_persistent(Persistent::On, Some(64)).expect("the persistent kernels");
         let persistent = r.cast_rays(&rays, Accuracy::default()).expect("the persistent kernels cast");
         assert!(aov_bits(&plain) == aov_bits(&persistent), "{}: cast rays", method.name());
     }
     for method in [VkMethod::Sst, VkMethod::SstSubgroup] {
         let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the scene uploads");
-        let e = r.set_persistent(true, None).expect_err("only the walking traversals run persistently");
+        let e = r.set_persistent(Persistent::On, None).expect_err("only the walking traversals run persistently");
         assert!(e.to_string().contains(method.name()) && !e.to_string().contains('\n'), "{e}");
-        assert!(!r.specialisation().persistent);
+        assert!(r.specialisation().persistent == Persistent::Off);
+    }
+    let messages = gpu.validation_messages();
+    assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
+}
+
+/// `--persistent auto` (the default of `trace-vk render` and `bench`): the AO and diffuse stages
+/// run as persistent threads refilling at 16 idle lanes of 32 (or the refill given), every other
+/// stage plain, and every mode renders the plain kernels' images, AOVs and ray counts bit for bit
+/// (lavapipe runs what a GPU runs, with its cap of pixels per lane). The methods that cannot run
+/// persistently take auto without a word and keep their plain kernels.
+#[test]
+fn persistent_auto_renders_the_plain_images_bit_for_bit() {
+    let gpu = gpu();
+    let scene = compile_with("room.toml", Layouts::ALL);
+    let cam = CameraSpec::from(scene.camera("medium").expect("the camera exists"));
+    let aov_bits = |i: &render_spec::Image| {
+        let a = i.aov.as_ref().expect("AOVs were asked for");
+        let t: Vec<u32> = a.t.iter().map(|x| x.to_bits()).collect();
+        let n: Vec<[u32; 3]> = a.normal.iter().map(|n| n.map(f32::to_bits)).collect();
+        (t, n, a.prim.clone(), a.nodes.clone(), a.tris.clone())
+    };
+    let modes = [Mode::Cast, Mode::Whitted, Mode::Ao(Ao { samples: 4, length: 0.2 }), Mode::Diffuse];
+    let settings = |mode: Mode, width: u32, height: u32, spp: u32| Settings {
+        width,
+        height,
+        camera: cam,
+        mode,
+        lights: scene.lights.clone(),
+        max_indirections: scene.settings.max_indirections,
+        aovs: true,
+        accuracy: Accuracy { spp, ..Accuracy::default() },
+    };
+    let coherent = [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert];
+    for method in [VkMethod::Lst, VkMethod::Stackless] {
+        // (workgroup, invocations launched, refill given, size, samples)
+        type Case = ((u32, u32), Option<u32>, Option<u32>, (u32, u32), u32);
+        let cases: [Case; 2] = [((8, 8), None, None, (52, 39), 1), ((4, 4), Some(16), Some(2), (37, 23), 4)];
+        for (workgroup, invocations, refill, (w, h), spp) in cases {
+            let mut r = Renderer::new(&gpu, &scene, method, workgroup).expect("the scene uploads");
+            for mode in modes {
+                let s = settings(mode, w, h, spp);
+                let what = format!("{} {mode:?} {w}x{h} workgroup {workgroup:?} refill {refill:?}", method.name());
+                r.set_persistent(Persistent::Off, None).expect("the plain kernels");
+                let plain = r.render(&s).expect("the GPU renders").image;
+                r.set_persistent_with(Persistent::Auto, invocations, refill).expect("auto");
+                let spec = r.specialisation();
+                assert!(spec.persistent == Persistent::Auto, "{what}");
+                assert!(spec.persistent_stage(Stage::Ao) && spec.persistent_stage(Stage::Diffuse), "{what}");
+                assert!(coherent.iter().all(|&stage| !spec.persistent_stage(stage)), "{what}");
+                assert_eq!(spec.refill_idle(), refill.unwrap_or(16), "{what}");
+                let auto = r.render(&s).expect("the GPU renders with auto").image;
+                assert!(plain.rays.primary > 0, "{what}: rays were traced");
+                assert_eq!(plain.rgb, auto.rgb, "{what}: auto's image differs");
+                assert!(aov_bits(&plain) == aov_bits(&auto), "{what}: auto's AOVs differ");
+                assert_eq!(plain.rays, auto.rays, "{what}: rays");
+            }
+        }
+    }
+    let diffuse = settings(Mode::Diffuse, 24, 18, 1);
+    let mut others: Vec<Renderer> = [VkMethod::Sst, VkMethod::SstSubgroup, VkMethod::Cwbvh]
+        .into_iter()
+        .map(|m| Renderer::new(&gpu, &scene, m, (8, 8)).expect("the scene uploads"))
+        .collect();
+    others.push(Renderer::rt_stand_in(&gpu, &scene, (8, 8)).expect("the stand-in uploads"));
+    for mut r in others {
+        let plain = r.render(&diffuse).expect("the GPU renders").image;
+        r.set_persistent_with(Persistent::Auto, None, Some(16)).expect("auto is no request");
+        let name = r.specialisation().method.name();
+        assert!(r.specialisation().persistent == Persistent::Off, "{name}: plain kernels under auto");
+        let auto = r.render(&diffuse).expect("the GPU renders with auto").image;
+        assert_eq!(plain.rgb, auto.rgb, "{name}");
     }
     let messages = gpu.validation_messages();
     assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");

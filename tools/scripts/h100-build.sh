@@ -9,19 +9,24 @@
 # Run from the repository root on the device machine. The host has no Rust toolchain: build the
 # release binaries here and carry .bin/ (ignored; about 25 MiB in all):
 #   cargo build --release -p bvh-build --features compare --example build_report --example compile_profile
+#   cargo build --release -p bvh-build --example build_cpu
 #   cargo build --release -p tools --bin bvhc
 #   mkdir -p .bin && cp target/release/examples/build_report target/release/examples/compile_profile \
-#     target/release/bvhc .bin/ && strip .bin/*
+#     target/release/examples/build_cpu target/release/bvhc .bin/ && strip .bin/*
+# (.bin/build_cpu is optional: without it the thread-scaling section, scaling.txt, is skipped.)
 # Optionally the build to compare with (before.md, two-before.md), from a worktree of main before
 # the change: `cargo build --release -p bvh-build --features compare --example build_report` there,
 # and its binary copied to .bin/build_report_before.
 # The scenes are tracked files under scenes/ (million.toml places dragon.glb and two bunny.glb,
-# 17 MiB), so the working tree carries them; nothing is generated on the host.
+# 17 MiB), so the working tree carries them; the one generated on the host is room_big.toml, the
+# room with its glass sphere at 1024 x 512 segments (1,047,514 triangles), into $OUT.
 # Device tool: command `bash tools/scripts/h100-build.sh`, carry [".bin"]. Writes into $OUT
 # (default ./out/h100-build): two.md (2 threads: 16 bins and bvh), two-before.md (the same with
 # the earlier build), build.md (all threads, every builder), before.md (all threads, 16 bins and
-# bvh with the earlier build), others.md, profile.txt, phases.txt, compile.txt, host.txt, log.txt.
-# Expected run time: about 4 minutes with RUNS=7 (the full sweep of million and forest, a second
+# bvh with the earlier build), others.md (16 and 64 bins and the sweep on the other scenes),
+# others-before.md (the same with the earlier build: its sweep is the plain greedy one, without
+# the reinsertion in the top), scaling.txt, profile.txt, phases.txt, compile.txt, host.txt, log.txt.
+# Expected run time: about 5 minutes with RUNS=7 (the full sweep of million and forest, a second
 # or two per build, is a third of it); RUNS=5 for a shorter run.
 set -euo pipefail
 OUT=${OUT:-out/h100-build}
@@ -63,11 +68,30 @@ mkdir -p "$OUT/all"
 cp "$OUT/all/build-benchmark.md" "$OUT/build.md"
 
 log "== 16 and 64 bins against the sweep on the scenes beyond the benchmark (all threads) =="
+sed 's/segments = 48/segments = 1024/; s/rings = 24/rings = 512/' scenes/room.toml >"$OUT/room_big.toml"
+OTHERS=scenes/toycar.glb,scenes/car.toml,scenes/forest.toml,scenes/room.toml,$OUT/room_big.toml
 mkdir -p "$OUT/others"
-.bin/build_report --runs 3 --builders binned16,binned64,sweep \
-  --scenes scenes/toycar.glb,scenes/car.toml,scenes/forest.toml,scenes/room.toml --out "$OUT/others" 2>/dev/null |
+.bin/build_report --runs 3 --builders binned16,binned64,sweep --scenes "$OTHERS" --out "$OUT/others" 2>/dev/null |
   grep -E '^\||^- '
 cp "$OUT/others/build-benchmark.md" "$OUT/others.md"
+if [ -x .bin/build_report_before ]; then
+  log "== the same with the earlier build =="
+  mkdir -p "$OUT/others-before"
+  .bin/build_report_before --runs 3 --builders binned16,binned64,sweep --scenes "$OTHERS" --out "$OUT/others-before" \
+    2>/dev/null | grep -E '^\||^- '
+  cp "$OUT/others-before/build-benchmark.md" "$OUT/others-before.md"
+fi
+
+if [ -x .bin/build_cpu ]; then
+  log "== build time against threads: wall and CPU time of all threads (medians of 15 builds) =="
+  # Where the small scene stops scaling: CPU time far above the 1-thread figure means threads
+  # spinning or waiting (rayon, page faults), wall time flat while CPU time stays means serial parts.
+  for s in bunny.toml million.toml; do
+    for threads in 1 2 4 8 16 "$(nproc)"; do
+      RAYON_NUM_THREADS=$threads .bin/build_cpu "scenes/$s" 15
+    done
+  done | tee "$OUT/scaling.txt"
+fi
 
 log "== where the time of bvhc compile goes (medians of $RUNS) =="
 for s in million.toml dragon.toml bunny.toml; do

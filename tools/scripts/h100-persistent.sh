@@ -6,7 +6,7 @@
 # within 85% of 7680x4320's rays per second (was 58%).
 #
 #   main    one `trace-vk bench`: 1920x1440 and 7680x4320, cast and ao8, lst and stackless, each
-#           with `--persistent off,on` side by side (rows METHOD and METHOD+persistent); run
+#           with `--persistent off,on` side by side (rows METHOD+plain and METHOD+persistent); run
 #           REPEATS times, each table kept, the summary takes the median over the runs
 #   sweep   cast at 480x360, 960x720, 1920x1440, 3840x2880 and 7680x4320, lst and stackless, off
 #           and on: time per frame, and per variant the least-squares line t = a + b * pixels
@@ -109,7 +109,7 @@ done
   cat "$OUT"/main-*.csv 2>/dev/null | awk -F, -v small_w="${SMALL%x*}" '
     $2 == "triangles" { next }
     {
-      m = $8; p = (m ~ /\+persistent$/) ? "on" : "off"; sub(/\+persistent$/, "", m)
+      m = $8; p = (m ~ /\+persistent$/) ? "on" : "off"; sub(/\+persistent$/, "", m); sub(/\+plain$/, "", m)
       size = ($4 == small_w) ? "small" : "large"
       key = m SUBSEP $6 SUBSEP size SUBSEP p
       n[key]++; v[key, n[key]] = $16; t[key, n[key]] = $9; ao[key] = $14
@@ -185,7 +185,7 @@ done
   echo "| method | mode | 1 | 4 | 8 (default) | 16 | 32 (no replacement) |"
   echo "|---|---|--:|--:|--:|--:|--:|"
   for refill in 1 4 8 16 32; do
-    [ -f "$OUT/refill-$refill.csv" ] && awk -F, -v r="$refill" '$2 != "triangles" { print $8 "|" $6 "|" r "|" $16 }' "$OUT/refill-$refill.csv"
+    [ -f "$OUT/refill-$refill.csv" ] && awk -F, -v r="$refill" '$2 != "triangles" { m = $8; sub(/\+refill[0-9]+$/, "", m); print m "|" $6 "|" r "|" $16 }' "$OUT/refill-$refill.csv"
   done | awk -F'|' '
     { key = $1 " | " $2; v[key, $3] = $4; if (!(key in seen)) { seen[key] = 1; order[++k] = key } }
     END {

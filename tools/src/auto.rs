@@ -7,7 +7,8 @@
 //! change the pick: a hash of the compiled scene (so an edited scene, a re-compiled `.bvh` or a
 //! changed mesh under a description invalidates it), the device and its driver, the mode with its
 //! lights, indirections and AO settings, the size class (sizes within a power of four in pixels
-//! share a pick) and the kernel settings (workgroup, exact kernels, triangle test, fixed offset).
+//! share a pick) and the kernel settings (workgroup, exact kernels, triangle test, fixed offset,
+//! persistent threads).
 //! A damaged file is ignored with a warning and replaced; entries for another version of the scene
 //! are stale: they are dropped, with a warning, when the file is next written.
 
@@ -17,7 +18,7 @@ use render_spec::{Mode, Offset, Settings};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use tracer_vk::Gpu;
-use tracer_vk::kernels::Method;
+use tracer_vk::kernels::{Method, Persistent};
 use tracer_vk::render::Renderer;
 
 /// The first line of a cache file (its format's version).
@@ -54,14 +55,13 @@ pub struct Key {
     pub rest: String,
 }
 
-/// The key of a frame of `settings` on `gpu` with this workgroup and kernels, picked among
-/// `candidates`.
+/// The key of a frame of `settings` on `gpu` with this workgroup and kernels (`persistent`: the
+/// `--persistent` setting every candidate is timed with), picked among `candidates`.
 pub fn key(
     scene_hash: u64,
     gpu: &Gpu,
     settings: &Settings,
-    workgroup: (u32, u32),
-    exact: bool,
+    (workgroup, exact, persistent): ((u32, u32), bool, Persistent),
     candidates: &[Method],
 ) -> Key {
     let i = gpu.info();
@@ -73,7 +73,7 @@ pub fn key(
     };
     let a = &settings.accuracy;
     let rest = format!(
-        "device {} ({}, {:04x}:{:04x}); mode {mode}; pixels 4^{}; workgroup {}x{}; exact {exact}; intersect {:?}; offset {}; candidates {}",
+        "device {} ({}, {:04x}:{:04x}); mode {mode}; pixels 4^{}; workgroup {}x{}; exact {exact}; intersect {:?}; offset {}; persistent {}; candidates {}",
         i.name,
         i.driver,
         i.vendor_id,
@@ -86,6 +86,7 @@ pub fn key(
             Offset::ScaleAware => "scale-aware",
             Offset::Fixed(_) => "fixed",
         },
+        persistent.name(),
         candidates.iter().map(|m| m.name()).collect::<Vec<_>>().join(",")
     );
     Key { scene: format!("{scene_hash:016x}"), rest: rest.replace(['\t', '\n', '\r'], " ") }
@@ -210,6 +211,9 @@ pub struct Picker<'a> {
     pub recalibrate: bool,
     /// The methods to pick among (`--candidates`): all the device supports, or these of them.
     pub candidates: Vec<Method>,
+    /// The `--persistent` setting each candidate is timed with, and the pick renders with: the
+    /// default auto times LST and stackless with persistent AO and diffuse stages.
+    pub persistent: Persistent,
     /// The scene's hash, computed at the first pick.
     hash: std::cell::OnceCell<u64>,
 }
@@ -224,7 +228,23 @@ impl<'a> Picker<'a> {
         recalibrate: bool,
     ) -> Self {
         let candidates = Method::ALL.to_vec();
-        Picker { gpu, scene, path, workgroup, exact, recalibrate, candidates, hash: std::cell::OnceCell::new() }
+        let persistent = Persistent::Auto;
+        Picker {
+            gpu,
+            scene,
+            path,
+            workgroup,
+            exact,
+            recalibrate,
+            candidates,
+            persistent,
+            hash: std::cell::OnceCell::new(),
+        }
+    }
+
+    /// Times the candidates with persistent threads as `persistent` says (`--persistent`).
+    pub fn with_persistent(self, persistent: Persistent) -> Self {
+        Picker { persistent, ..self }
     }
 
     /// Picks among `methods` only (`--candidates`); none given: every method.
@@ -243,7 +263,8 @@ impl<'a> Picker<'a> {
     /// The method for frames of `settings`: the cached pick, else a calibration (cached).
     /// Warnings (a damaged or stale cache, one that cannot be written) go to standard error.
     pub fn pick(&self, settings: &Settings) -> Result<Pick, String> {
-        let key = key(self.hash()?, self.gpu, settings, self.workgroup, self.exact, &self.candidates);
+        let kernels = (self.workgroup, self.exact, self.persistent);
+        let key = key(self.hash()?, self.gpu, settings, kernels, &self.candidates);
         let file = self.path.map(cache_path);
         let mut entries = match &file {
             None => Vec::new(),
@@ -318,6 +339,7 @@ impl<'a> Picker<'a> {
     fn time(&self, method: Method, settings: &Settings) -> Result<f64, String> {
         let mut r = Renderer::new(self.gpu, self.scene, method, self.workgroup).map_err(|e| e.to_string())?;
         r.set_exact(self.exact);
+        r.set_persistent(self.persistent, None).map_err(|e| e.to_string())?;
         let s = Settings { aovs: false, ..settings.clone() };
         let mut times = Vec::with_capacity(CALIBRATION_FRAMES);
         for k in 0..CALIBRATION_WARMUP + CALIBRATION_FRAMES {

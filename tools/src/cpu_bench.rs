@@ -34,16 +34,11 @@ pub fn held_line(tracer: &Tracer<'_>, method: Method) -> String {
         bytes,
         bytes as f64 / tris.max(1) as f64,
         scene.vertices.len(),
-        match tracer.bvh8_if_made() {
-            Some(w) => format!("; the wide BVH {:.1} per triangle of it", w.bytes() as f64 / tris.max(1) as f64),
+        match tracer.wide_bytes() {
+            Some(w) => format!("; the wide BVH {:.1} per triangle of it", w as f64 / tris.max(1) as f64),
             None => String::new(),
         }
     )
-}
-
-/// Whether `method` on `scene` walks the wide BVH, which the tracer collapses at load.
-pub fn collapses(method: Method, scene: &SceneFile) -> bool {
-    matches!(method.resolve(scene), Method::Bvh8 | Method::Bvh8Packet | Method::Auto)
 }
 
 pub struct CpuBench {
@@ -78,9 +73,7 @@ impl Bench for CpuBench {
         }
         let tracer = Tracer::with_vertices(scene, form);
         // Collapsed here, before the warm-up frames, so that the bytes held include it.
-        if collapses(method, scene) {
-            tracer.bvh8();
-        }
+        tracer.collapse_for(method);
         if self.report_held {
             crate::say!("{}", held_line(&tracer, method));
         }

@@ -8,6 +8,7 @@ use clap::{Args, ValueEnum};
 use glam::{DVec3, Vec3};
 use render_spec::{Accuracy, Ao, CameraSpec, Image, Intersect, Mode, Offset, Settings, Vertices};
 use std::path::PathBuf;
+use tracer_vk::kernels::Persistent;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum ModeArg {
@@ -62,41 +63,57 @@ impl VerticesArg {
     }
 }
 
-/// Whether the Vulkan tracer's tracing stages run as persistent threads (`trace-vk render
-/// --persistent`, `trace-vk bench --persistent off,on`; `Renderer::set_persistent`): as many
+/// Which of the Vulkan tracer's tracing stages run as persistent threads (`trace-vk render
+/// --persistent`, `trace-vk bench --persistent off,on,auto`; `Renderer::set_persistent`): as many
 /// workgroups as the device holds at once, each subgroup taking pixels from a counter and giving
 /// lanes whose ray ended a new pixel (Aila and Laine 2009). LST and stackless; the images are the
-/// plain kernels'.
+/// plain kernels'. Which stage runs how is `tracer_vk::kernels::Specialisation::persistent_stage`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum PersistentArg {
     /// One invocation per pixel, as many workgroups as the tile has.
     Off,
-    /// Persistent threads.
+    /// Persistent threads in every tracing stage (refill at 8 idle lanes of 32).
     On,
+    /// Persistent threads where they win on the H100: the AO and diffuse stages (incoherent rays,
+    /// refill at 16 idle lanes), plain kernels for primary, shadow and mirror rays; plain
+    /// everywhere for the methods that cannot run persistently.
+    Auto,
 }
 
 impl PersistentArg {
-    pub fn on(self) -> bool {
-        self == PersistentArg::On
+    pub fn persistent(self) -> Persistent {
+        match self {
+            PersistentArg::Off => Persistent::Off,
+            PersistentArg::On => Persistent::On,
+            PersistentArg::Auto => Persistent::Auto,
+        }
     }
 }
 
-/// How persistent kernels run (`trace-vk render` and `bench`, with `--persistent on`).
-#[derive(Args, Debug, Clone, Copy, PartialEq, Eq)]
+/// How persistent kernels run (`trace-vk render`, with `--persistent on` or `auto`).
+#[derive(Args, Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct PersistentTuning {
     /// Invocations a persistent kernel launches [default: 270336, an H100 SXM full].
     #[arg(long, value_parser = parse_persistent_invocations)]
     pub persistent_invocations: Option<u32>,
     /// Lanes of every 32 that must be idle before a persistent subgroup gives them new pixels (1:
-    /// as soon as one is; 32: only when all are, no replacement).
-    #[arg(long, value_parser = parse_persistent_refill, default_value = "8")]
-    pub persistent_refill: u32,
+    /// as soon as one is; 32: only when all are, no replacement) [default: 8 with --persistent on,
+    /// 16 in auto's AO and diffuse stages].
+    #[arg(long, value_parser = parse_persistent_refill)]
+    pub persistent_refill: Option<u32>,
 }
 
-impl Default for PersistentTuning {
-    fn default() -> Self {
-        PersistentTuning { persistent_invocations: None, persistent_refill: 8 }
-    }
+/// [`PersistentTuning`] of `trace-vk bench`: refill thresholds side by side.
+#[derive(Args, Debug, Clone, PartialEq, Eq, Default)]
+pub struct BenchPersistentTuning {
+    /// Invocations a persistent kernel launches [default: 270336, an H100 SXM full].
+    #[arg(long, value_parser = parse_persistent_invocations)]
+    pub persistent_invocations: Option<u32>,
+    /// Time the persistent rows (--persistent on, auto) with each of these refill thresholds, idle
+    /// lanes of 32 before a refill, side by side: rows named METHOD+refillN or
+    /// METHOD+persistent+refillN [default: each setting's own, 8 for on, 16 for auto].
+    #[arg(long, value_delimiter = ',', value_parser = parse_persistent_refill)]
+    pub persistent_refill: Vec<u32>,
 }
 
 fn parse_persistent_invocations(s: &str) -> Result<u32, String> {
@@ -203,7 +220,7 @@ pub struct RenderArgs {
     /// expanded (a copy of 48 bytes per triangle: trace-cpu holds it beside the file, trace-vk
     /// uploads it) or indexed (the file's own arrays: trace-cpu reads them in place, trace-vk
     /// uploads 16 bytes per triangle and per vertex; one read more per triangle). trace-cpu's
-    /// bvh8 and auto test the leaf blocks of their wide BVH, a copy of their own in either form.
+    /// bvh8, bvh4 and auto test the leaf blocks of their wide BVH, a copy of their own in either form.
     /// Given, the report says the bytes held (trace-cpu) or uploaded (trace-vk) per triangle
     /// [default: expanded].
     #[arg(long, value_enum)]

@@ -7,7 +7,7 @@ use bvh_format::SceneFile;
 use render_spec::{Image, Settings};
 use std::path::Path;
 use tracer_vk::Gpu;
-use tracer_vk::kernels::{Method, Vertices};
+use tracer_vk::kernels::{Method, Persistent, Vertices};
 use tracer_vk::render::Renderer;
 
 /// The method name that picks per setting ([`crate::auto`]).
@@ -20,15 +20,57 @@ pub const EXACT_SUFFIX: &str = "+exact";
 /// Marks a method name for the indexed vertex form (`trace-vk bench --vertices indexed`).
 pub use crate::bench::INDEXED_SUFFIX;
 
-/// Marks a method name for its persistent kernels (`trace-vk bench --persistent on`).
+/// Marks a method name for its persistent kernels in every tracing stage (`trace-vk bench
+/// --persistent on`).
 pub const PERSISTENT_SUFFIX: &str = "+persistent";
 
-/// The bench's name of `method` reading triangles in `form`, persistent or not: the method's own
-/// for the default expanded form and plain kernels, with [`INDEXED_SUFFIX`] for the indexed form
-/// and then [`PERSISTENT_SUFFIX`] for persistent threads (`lst+indexed+persistent`).
-pub fn method_name(method: Method, form: Vertices, persistent: bool) -> String {
+/// Marks a method name for its plain kernels (`trace-vk bench --persistent off`) where the
+/// default, `--persistent auto`, runs some stages persistently (LST and stackless).
+pub const PLAIN_SUFFIX: &str = "+plain";
+
+/// Marks a method name for persistent kernels refilling at this many idle lanes of 32 (`trace-vk
+/// bench --persistent-refill N`): `lst+refill16`, `lst+persistent+refill8`.
+pub const REFILL_SUFFIX: &str = "+refill";
+
+/// The bench's name of `method` reading triangles in `form` with persistent threads as
+/// `persistent` says, refilling at `refill` idle lanes (`None`: the setting's own). The method's
+/// own name is its default: the expanded form and `--persistent auto`; [`INDEXED_SUFFIX`] names
+/// the indexed form, then [`PLAIN_SUFFIX`] or [`PERSISTENT_SUFFIX`] the other settings, then
+/// [`REFILL_SUFFIX`] a refill given (`lst+indexed+persistent+refill16`). For a method that cannot
+/// run persistently, off and auto are the same plain kernels and share its own name.
+pub fn method_name(method: Method, form: Vertices, persistent: Persistent, refill: Option<u32>) -> String {
     let name = crate::bench::with_form(method.name(), form);
-    if persistent { name + PERSISTENT_SUFFIX } else { name }
+    if !method.walks_in_steps() {
+        return if persistent == Persistent::On { name + PERSISTENT_SUFFIX } else { name };
+    }
+    let name = match persistent {
+        Persistent::Off => return name + PLAIN_SUFFIX,
+        Persistent::On => name + PERSISTENT_SUFFIX,
+        Persistent::Auto => name,
+    };
+    match refill {
+        Some(r) => format!("{name}{REFILL_SUFFIX}{r}"),
+        None => name,
+    }
+}
+
+/// A bench method name ([`method_name`]) taken apart: the traversal's name with its form, the
+/// persistent setting and the refill given.
+pub fn split_persistent(name: &str) -> Result<(&str, Persistent, Option<u32>), String> {
+    let (name, refill) = match name.rsplit_once(REFILL_SUFFIX) {
+        Some((rest, n)) => {
+            let n = n.parse::<u32>().ok().filter(|n| (1..=32).contains(n));
+            (rest, Some(n.ok_or_else(|| format!("{name:?} names no refill threshold from 1 to 32"))?))
+        }
+        None => (name, None),
+    };
+    Ok(if let Some(rest) = name.strip_suffix(PERSISTENT_SUFFIX) {
+        (rest, Persistent::On, refill)
+    } else if let Some(rest) = name.strip_suffix(PLAIN_SUFFIX) {
+        (rest, Persistent::Off, None)
+    } else {
+        (name, Persistent::Auto, refill)
+    })
 }
 
 /// What `method` with triangles in `form` uploads of `scene` (nodes of its layout, triangles,
@@ -77,8 +119,10 @@ pub struct VkBench {
     pub tile_pixels: Option<u64>,
     /// Print each prepared method's bytes uploaded ([`upload_line`]; `trace-vk bench --vertices`).
     pub report_uploads: bool,
-    /// How the persistent kernels run (`--persistent-invocations`, `--persistent-refill`).
-    pub persistent: crate::render_args::PersistentTuning,
+    /// Invocations a persistent kernel launches (`--persistent-invocations`; `None`: the
+    /// renderer's default). The persistent setting and refill are the method name's
+    /// ([`split_persistent`]).
+    pub persistent_invocations: Option<u32>,
 }
 
 impl VkBench {
@@ -93,7 +137,7 @@ impl VkBench {
             in_flight: 1,
             tile_pixels: None,
             report_uploads: false,
-            persistent: Default::default(),
+            persistent_invocations: None,
         }
     }
 
@@ -103,15 +147,12 @@ impl VkBench {
         method: Method,
         exact: bool,
         form: Vertices,
-        persistent: bool,
+        (persistent, refill): (Persistent, Option<u32>),
     ) -> Result<Renderer<'a>, String> {
         let mut r = Renderer::new(&self.gpu, scene, method, self.workgroup).map_err(|e| e.to_string())?;
         r.set_exact(exact);
         r.set_vertices(form).map_err(|e| e.to_string())?;
-        if persistent {
-            let t = self.persistent;
-            r.set_persistent_with(true, t.persistent_invocations, t.persistent_refill).map_err(|e| e.to_string())?;
-        }
+        r.set_persistent_with(persistent, self.persistent_invocations, refill).map_err(|e| e.to_string())?;
         if self.report_uploads {
             crate::say!("{}", upload_line(scene, method, form));
         }
@@ -150,7 +191,13 @@ impl<'a> VkRenderer<'a> {
                     crate::say!("{}x{} {}: {}", s.width, s.height, s.mode.name(), pick.line());
                     let renderer = match current.take() {
                         Some((_, m, r)) if m == pick.method => r,
-                        _ => bench.renderer(picker.scene, pick.method, picker.exact, Vertices::Expanded, false)?,
+                        _ => bench.renderer(
+                            picker.scene,
+                            pick.method,
+                            picker.exact,
+                            Vertices::Expanded,
+                            (picker.persistent, None),
+                        )?,
                     };
                     *current = Some((s.clone(), pick.method, renderer));
                 }
@@ -184,13 +231,8 @@ impl Bench for VkBench {
                 String::new()
             },
             self.tile_pixels.map_or(String::new(), |p| format!(", tiles of at most {p} pixels")),
-            match (self.persistent.persistent_invocations, self.persistent.persistent_refill) {
-                (None, 8) => String::new(),
-                (n, refill) => format!(
-                    ", persistent kernels launch {} invocations and refill once {refill} of 32 lanes are idle",
-                    n.map_or("the default".to_owned(), |n| n.to_string())
-                ),
-            }
+            self.persistent_invocations
+                .map_or(String::new(), |n| format!(", persistent kernels launch {n} invocations"))
         )
     }
 
@@ -216,22 +258,16 @@ impl Bench for VkBench {
                 Picker::new(&self.gpu, scene, path, self.workgroup, exact, self.recalibrate).among(&self.candidates);
             return Ok(VkRenderer::Auto(Box::new(Auto { bench: self, picker, current: None })));
         }
-        let (name, persistent) = match name.strip_suffix(PERSISTENT_SUFFIX) {
-            Some(name) => (name, true),
-            None => (name, false),
-        };
+        let (name, persistent, refill) = split_persistent(name)?;
         let (name, form) = crate::bench::split_form(name);
-        Ok(VkRenderer::Fixed(Box::new(self.renderer(scene, method_of(name)?, exact, form, persistent)?)))
+        Ok(VkRenderer::Fixed(Box::new(self.renderer(scene, method_of(name)?, exact, form, (persistent, refill))?)))
     }
 
     fn unsupported(&self, method: &str) -> Option<String> {
         let name = method.strip_suffix(EXACT_SUFFIX).unwrap_or(method);
-        let (name, persistent) = match name.strip_suffix(PERSISTENT_SUFFIX) {
-            Some(name) => (name, true),
-            None => (name, false),
-        };
+        let (name, persistent, _) = split_persistent(name).ok()?;
         let m = method_of(name.strip_suffix(INDEXED_SUFFIX).unwrap_or(name)).ok()?;
-        if persistent && !m.walks_in_steps() {
+        if persistent == Persistent::On && !m.walks_in_steps() {
             return Some(format!("the {} traversal does not run as persistent threads", m.name()));
         }
         crate::auto::support(&self.gpu, m).err()
@@ -267,5 +303,49 @@ impl Bench for VkBench {
 
     fn finish(&self) -> Result<(), String> {
         check_validation(&self.gpu)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every bench name of a method, form, persistent setting and refill reads back as what made
+    /// it; auto with the expanded form is the method's own name, and the methods that cannot run
+    /// persistently share one name for off and auto.
+    #[test]
+    fn method_names_round_trip_and_the_default_is_the_bare_name() {
+        let settings = [Persistent::Off, Persistent::On, Persistent::Auto];
+        for method in Method::ALL {
+            for form in [Vertices::Expanded, Vertices::Indexed] {
+                for persistent in settings {
+                    for refill in [None, Some(1), Some(16), Some(32)] {
+                        let name = method_name(method, form, persistent, refill);
+                        let (rest, p, r) = split_persistent(&name).unwrap();
+                        let (base, f) = crate::bench::split_form(rest);
+                        assert_eq!((method_of(base).unwrap(), f), (method, form), "{name}");
+                        let walks = method.walks_in_steps();
+                        let want = match persistent {
+                            Persistent::Off if walks => (Persistent::Off, None),
+                            Persistent::On if walks => (Persistent::On, refill),
+                            Persistent::Auto if walks => (Persistent::Auto, refill),
+                            Persistent::On => (Persistent::On, None),
+                            _ => (Persistent::Auto, None),
+                        };
+                        assert_eq!((p, r), want, "{name}");
+                    }
+                }
+            }
+        }
+        assert_eq!(method_name(Method::Lst, Vertices::Expanded, Persistent::Auto, None), "lst");
+        assert_eq!(method_name(Method::Lst, Vertices::Expanded, Persistent::Off, Some(16)), "lst+plain");
+        assert_eq!(
+            method_name(Method::Stackless, Vertices::Indexed, Persistent::On, Some(8)),
+            "stackless+indexed+persistent+refill8"
+        );
+        assert_eq!(method_name(Method::RtPipeline, Vertices::Expanded, Persistent::Off, None), "rt-pipeline");
+        for bad in ["lst+refill0", "lst+refill33", "lst+refillx"] {
+            assert!(split_persistent(bad).unwrap_err().contains("refill threshold"), "{bad}");
+        }
     }
 }

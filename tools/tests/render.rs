@@ -343,6 +343,11 @@ fn the_cpu_timing_line_says_what_it_covers() {
         assert!(line.contains("trace and shade into the 8-bit image"), "{line}");
         let auto = method == tracer_cpu::Method::Auto;
         assert_eq!(line.contains("to measure auto's ways of tracing"), auto, "{line}");
+        // The wide BVHs (bvh8's for bvh8, bvh8-packet and auto, bvh4's for bvh4) are collapsed at
+        // load, apart from the render's time.
+        use tracer_cpu::Method::{Bvh4, Bvh8, Bvh8Packet};
+        let wide = matches!(method, Bvh4 | Bvh8 | Bvh8Packet) || auto;
+        assert_eq!(line.contains("to collapse the wide BVH at load"), wide, "{line}");
         if auto && tracer_cpu::packet::available() {
             for stage in ["primary: ", "shadow: ", "secondary: "] {
                 assert!(line.contains(stage), "auto names its pick for {stage}: {line}");

@@ -99,6 +99,10 @@ fn every_option_refuses_bad_values_in_one_sentence_and_touches_nothing() {
     let vk = ["render", "room.bvh", "--res", "8x8", "-o", "out.png"];
     add(c, "trace-vk", &vk, "--workgroup", &[BAD_SIZE, &["64x64"]].concat());
     add(c, "trace-vk", &vk, "--device", &["", "-1", "nan", "99999999999", "999"]);
+    add(c, "trace-vk", &vk, "--persistent", &["", "maybe", "off,on"]);
+    add(c, "trace-vk", &vk, "--persistent-refill", &["", "0", "33", "-1", "nan", "8,16"]);
+    add(c, "trace-vk", &vk, "--persistent-invocations", &["", "0", "-1", "99999999999"]);
+    add(c, "trace-vk", &[&vk[..], &["--method", "sst"]].concat(), "--persistent", &["on"]);
     let auto = ["render", "room.bvh", "--res", "8x8", "-o", "out.png", "--method", "auto"];
     add(c, "trace-vk", &auto, "--candidates", &["", "fastest", "auto"]);
     let bench =
@@ -122,6 +126,8 @@ fn every_option_refuses_bad_values_in_one_sentence_and_touches_nothing() {
     add(c, "trace-vk", &bench, "--in-flight", &["", "0", "-1", "65", "nan"]);
     add(c, "trace-vk", &bench, "--tile-pixels", &["", "0", "-1", "nan"]);
     add(c, "trace-vk", &bench, "--candidates", &["fastest", "auto"]);
+    add(c, "trace-vk", &bench, "--persistent", &["", "maybe", "off,maybe"]);
+    add(c, "trace-vk", &bench, "--persistent-refill", &["", "0", "8,33", "8,nan"]);
     add(c, "trace-vk", &["bench"], "", &["missing.bvh", "empty.bvh", "text.bvh", "folder.bvh"]);
 
     assert!(cases.len() > 250, "{} cases", cases.len());

@@ -98,15 +98,15 @@ fn both_vertex_forms_are_timed_side_by_side() {
     let room = repo().join("scenes/room.toml");
     let o = Command::new(env!("CARGO_BIN_EXE_trace-cpu"))
         .args(["bench", room.to_str().unwrap(), "--cameras", "medium", "--res", "24x16", "--modes", "whitted1"])
-        .args(["--methods", "ordered,bvh8", "--vertices", "expanded,indexed", "--frames", "1", "--warmup", "0"])
+        .args(["--methods", "ordered,bvh8,bvh4", "--vertices", "expanded,indexed", "--frames", "1", "--warmup", "0"])
         .args(["--threads", "2", "--csv", csv.to_str().unwrap()])
         .output()
         .expect("trace-cpu runs");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let rows = read_csv(&csv).unwrap();
     let methods: Vec<&str> = rows.iter().map(|r| r.method.as_str()).collect();
-    assert_eq!(methods, ["ordered", "ordered+indexed", "bvh8", "bvh8+indexed"]);
-    assert!(rows[0].rays == rows[1].rays && rows[2].rays == rows[3].rays, "the forms trace different rays");
+    assert_eq!(methods, ["ordered", "ordered+indexed", "bvh8", "bvh8+indexed", "bvh4", "bvh4+indexed"]);
+    assert!(rows.iter().all(|r| r.rays == rows[0].rays), "the forms or methods trace different rays");
     let out = String::from_utf8_lossy(&o.stdout);
     let held = |method: &str, form: &str| -> u64 {
         let says = format!("{method} with {form} vertices holds ");
@@ -118,5 +118,7 @@ fn both_vertex_forms_are_timed_side_by_side() {
     assert_eq!(held("ordered", "expanded") - held("ordered", "indexed"), copy);
     assert_eq!(held("bvh8", "expanded") - held("bvh8", "indexed"), copy);
     assert!(held("bvh8", "indexed") > held("ordered", "indexed"), "bvh8 holds its wide BVH besides");
+    assert_eq!(held("bvh4", "expanded") - held("bvh4", "indexed"), copy);
+    assert!(held("bvh4", "indexed") > held("ordered", "indexed"), "bvh4 holds its 4-wide BVH besides");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -18,8 +18,9 @@
 //!                       process's threads (rays per CPU-second: for a machine shared with other
 //!                       work, where waiting for a core would count as tracing)
 //!   --kinds LIST        ray kinds to time, e.g. primary,shadow (default all five)
-//!   --engines LIST      tracers to run, by column name, e.g. "ours bvh8 packet,Embree 8,Embree 8
-//!                       robust" (default all); the others read `-`
+//!   --engines LIST      only these tracers, by their column names, comma-separated, e.g.
+//!                       "ours bvh4,ours bvh8 packet,Embree 8,Embree 8 robust" [default: all];
+//!                       Embree 1 always runs (the hit agreement's reference); the others read `-`
 //! ```
 //!
 //! Built once, the binary runs anywhere with the Embree 3 shared library (libembree3-3 and its
@@ -33,7 +34,7 @@ use render_spec::Intersect;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use tracer_cpu::bvh8::Simd;
+use tracer_cpu::bvh8::{Simd, WideBvh};
 use tracer_cpu::embree::{self, Flags};
 use tracer_cpu::{Method, Tracer, packet, packet8};
 
@@ -44,9 +45,9 @@ use tracer_cpu::{Method, Tracer, packet, packet8};
 /// Möller-Trumbore.
 /// "ours bvh8" runs the path `trace-cpu` takes (AVX2 where the CPU has it), "ours bvh8 AVX-512"
 /// the AVX-512 path forced (`-` on a CPU without it); "ours bvh8 packet" is `--method
-/// bvh8-packet`, 8-ray packets on the wide BVH. "Embree 8 robust" is `rtcIntersect8` on the
-/// robust scene.
-const ENGINES: [&str; 11] = [
+/// bvh8-packet`, 8-ray packets on the wide BVH; "ours bvh4" the 4-wide BVH one ray at a time
+/// (`--method bvh4`). "Embree 8 robust" is `rtcIntersect8` on the robust scene.
+const ENGINES: [&str; 12] = [
     "ours ordered",
     "ours packet",
     "ours bvh8",
@@ -58,6 +59,7 @@ const ENGINES: [&str; 11] = [
     "Embree 8 robust",
     "ours ordered MT",
     "ours bvh8 MT",
+    "ours bvh4",
 ];
 const PACKET: usize = 1;
 const BVH8: usize = 2;
@@ -67,6 +69,7 @@ const EMBREE1: usize = 5;
 const ROBUST: usize = 6;
 const EMBREE8: usize = 7;
 const EMBREE8_ROBUST: usize = 8;
+const BVH4: usize = 11;
 /// Timed rounds go on at least this long per (ray set, thread count), so that the quick cases are
 /// not a handful of 30 ms samples on a shared machine ...
 const MIN_SECONDS: f64 = 2.0;
@@ -81,7 +84,8 @@ struct Options {
     sizes: Vec<(u32, u32)>,
     clock: rayset::Clock,
     kinds: Vec<Kind>,
-    engines: [bool; ENGINES.len()],
+    /// The tracers to run ([`ENGINES`] indices), all by default.
+    engines: Vec<usize>,
 }
 
 fn parse_args() -> Result<Options, String> {
@@ -95,7 +99,7 @@ fn parse_args() -> Result<Options, String> {
         sizes: vec![(640, 480), (1920, 1440)],
         clock: rayset::Clock::Wall,
         kinds: Kind::ALL.to_vec(),
-        engines: [true; ENGINES.len()],
+        engines: (0..ENGINES.len()).collect(),
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -145,14 +149,18 @@ fn parse_args() -> Result<Options, String> {
                     .collect::<Result<_, _>>()?
             }
             "--engines" => {
-                o.engines = [false; ENGINES.len()];
-                for e in value()?.split(',') {
-                    let i = ENGINES
-                        .iter()
-                        .position(|x| *x == e.trim())
-                        .ok_or(format!("unknown tracer {e:?} (one of {})", ENGINES.join(", ")))?;
-                    o.engines[i] = true;
-                }
+                o.engines = value()?
+                    .split(',')
+                    .map(|e| {
+                        ENGINES
+                            .iter()
+                            .position(|n| *n == e.trim())
+                            .ok_or_else(|| format!("unknown engine {e:?} (one of {})", ENGINES.join(", ")))
+                    })
+                    .collect::<Result<_, _>>()?;
+                o.engines.push(EMBREE1);
+                o.engines.sort_unstable();
+                o.engines.dedup();
             }
             "-h" | "--help" => {
                 eprintln!("see the top of tracer-cpu/examples/ray_report.rs for the options");
@@ -229,7 +237,7 @@ fn main() {
         let wide = collapse_cost(&scene, &tracer);
         eprintln!("{name}: {wide}");
         scene_lines.push(format!("{name} ({n_tris} triangles, {}; {wide})", path.display()));
-        let engines: [Option<Engine>; ENGINES.len()] = [
+        let mut engines: [Option<Engine>; ENGINES.len()] = [
             tracer.walk(Method::Ordered).ok().map(|w| Engine::Scalar(w, Intersect::Watertight)),
             packet::available().then_some(Engine::Packet(&tracer)),
             tracer.walk(Method::Bvh8).ok().map(|w| Engine::Scalar(w, Intersect::Watertight)),
@@ -241,9 +249,13 @@ fn main() {
             Some(Engine::Embree8(&em_robust)),
             tracer.walk(Method::Ordered).ok().map(|w| Engine::Scalar(w, Intersect::MollerTrumbore)),
             tracer.walk(Method::Bvh8).ok().map(|w| Engine::Scalar(w, Intersect::MollerTrumbore)),
+            tracer.walk(Method::Bvh4).ok().map(|w| Engine::Scalar(w, Intersect::Watertight)),
         ];
-        let engines: [Option<Engine>; ENGINES.len()] =
-            std::array::from_fn(|i| engines[i].filter(|_| opts.engines[i] || i == EMBREE1));
+        for (i, e) in engines.iter_mut().enumerate() {
+            if !opts.engines.contains(&i) {
+                *e = None;
+            }
+        }
 
         for &(w, h) in &opts.sizes {
             let t = Instant::now();
@@ -279,9 +291,6 @@ fn main() {
                     let mut passes: Vec<(usize, Box<dyn FnMut() + '_>)> = Vec::new();
                     for ((i, e), out) in engines.iter().enumerate().zip(outs.iter_mut()) {
                         let Some(e) = *e else { continue };
-                        if !opts.engines[i] {
-                            continue;
-                        }
                         passes.push((i, Box::new(move || pool.install(|| rayset::trace(e, set, out)))));
                     }
                     let mut refs: Vec<&mut dyn FnMut()> =
@@ -322,22 +331,27 @@ fn main() {
     }
 }
 
-/// What deriving the wide BVH at load costs: the median of 5 collapses on one thread, and its
-/// size. (`tracer.bvh8()` keeps one of its own, made here before any timing.)
+/// What deriving the wide BVHs at load costs: the median of 5 collapses on one thread, and their
+/// sizes. (`tracer.bvh8()` and `tracer.bvh4()` keep one of their own, made here before any timing.)
 fn collapse_cost(scene: &bvh_format::SceneFile, tracer: &Tracer<'_>) -> String {
-    let Some(nodes) = scene.child_pair.as_deref() else { return "no child-pair layout, no bvh8".into() };
+    let (Some(nodes), Some(bvh8), Some(bvh4)) = (scene.child_pair.as_deref(), tracer.bvh8(), tracer.bvh4()) else {
+        return "no child-pair layout, no wide BVH".into();
+    };
+    format!("{}; {}", collapse_line(nodes, tracer, bvh8), collapse_line(nodes, tracer, bvh4))
+}
+
+fn collapse_line<const W: usize>(nodes: &[bvh_format::Node], tracer: &Tracer<'_>, bvh: &WideBvh<W>) -> String {
     let mut times: Vec<f64> = (0..5)
         .map(|_| {
             let t = Instant::now();
-            std::hint::black_box(tracer_cpu::bvh8::Bvh8::from_source(nodes, &tracer.triangles()));
+            std::hint::black_box(WideBvh::<W>::from_source(nodes, &tracer.triangles()));
             t.elapsed().as_secs_f64()
         })
         .collect();
     times.sort_by(f64::total_cmp);
-    let bvh = tracer.bvh8().expect("the child-pair layout is there");
     let ((n, b), bytes) = (bvh.len(), bvh.bytes());
     format!(
-        "bvh8 collapsed at load in {:.1} ms on one thread (median of 5): {n} wide nodes, {b} leaf blocks, {:.1} MB",
+        "bvh{W} collapsed at load in {:.1} ms on one thread (median of 5): {n} wide nodes, {b} leaf blocks, {:.1} MB",
         times[2] * 1e3,
         bytes as f64 / 1e6
     )
@@ -370,7 +384,8 @@ file's triangles:
   at a time, all children's boxes or all of a leaf's triangles in one AVX2 sequence; ours bvh8
   AVX-512: the same with the AVX-512 path forced (`TRACER_CPU_SIMD=avx512`); ours bvh8 packet:
   `Method::Bvh8Packet` (`tracer-cpu/src/packet8.rs`), 8-ray AVX2 packets of the same 4 x 2 blocks
-  on the wide BVH;
+  on the wide BVH; ours bvh4: `Method::Bvh4`, the 4-wide BVH collapsed the same way (4 children
+  per node, up to 4 triangles per leaf) one ray at a time, one 128-bit sequence per node or leaf;
 - Embree 1 / Embree 1 robust: Embree 3's `rtcIntersect1`/`rtcOccluded1` on a BVH Embree builds
   (default medium quality) over the same triangles (`v0`, `v0 + e1`, `v0 + e2`), default scene
   flags / `RTC_SCENE_FLAG_ROBUST`; Embree 8 / Embree 8 robust: `rtcIntersect8`/`rtcOccluded8` on
@@ -417,7 +432,7 @@ fn markdown(
             rayset::Clock::Wall => "wall-clock time",
             rayset::Clock::Cpu => "CPU time of all threads (rays per CPU-second)",
         },
-        ENGINES.len(),
+        opts.engines.len(),
         opts.reps,
         big_reps(opts.reps)
     );
@@ -435,13 +450,13 @@ fn markdown(
         s,
         "| scene | size | kind | threads | bvh8 / Embree 1 | bvh8 / Embree 1 robust | bvh8 AVX-512 / Embree 1 | \
          bvh8 packet / Embree 8 | bvh8 packet / Embree 8 robust | packet / Embree 8 | bvh8 packet / Embree 1 | \
-         bvh8 AVX-512 / bvh8 |"
+         bvh8 AVX-512 / bvh8 | bvh4 / Embree 1 | bvh4 / Embree 1 robust | bvh4 / bvh8 |"
     );
-    let _ = writeln!(s, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let _ = writeln!(s, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {}x{} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {}x{} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.scene,
             r.size.0,
             r.size.1,
@@ -455,6 +470,9 @@ fn markdown(
             ratio(r.mrays[PACKET], r.mrays[EMBREE8]),
             ratio(r.mrays[WIDE_PACKET], r.mrays[EMBREE1]),
             ratio(r.mrays[AVX512], r.mrays[BVH8]),
+            ratio(r.mrays[BVH4], r.mrays[EMBREE1]),
+            ratio(r.mrays[BVH4], r.mrays[ROBUST]),
+            ratio(r.mrays[BVH4], r.mrays[BVH8]),
         );
     }
 

@@ -1,53 +1,56 @@
-//! The wide BVH for single rays, Embree's way: the file's binary SAH tree collapsed at load into
-//! nodes of up to 8 children whose boxes lie component by component (structure of arrays), so one
-//! AVX2 sequence tests a ray against all 8; leaves of up to 8 triangles, also structure of arrays,
-//! so one sequence tests the ray against all of a leaf's triangles with the frame's triangle test.
-//! Three paths ([`Simd`]): AVX2 (the default where the CPU has it), AVX-512 (on request) and a
-//! portable one; `crate::packet8` traces coherent packets of 8 rays through the same tree.
+//! The wide BVHs for single rays, Embree's way: the file's binary SAH tree collapsed at load into
+//! nodes of up to `W` children whose boxes lie component by component (structure of arrays), so
+//! one SIMD sequence tests a ray against all of them; leaves of up to `W` triangles, also
+//! structure of arrays, so one sequence tests the ray against all of a leaf's triangles with the
+//! frame's triangle test. Two widths share every line of it ([`WideBvh`]): [`Bvh8`] (8 children,
+//! one 256-bit AVX2 sequence per node or leaf) and [`Bvh4`] (4 children, one 128-bit sequence).
+//! Three paths ([`Simd`]): AVX2 (the default where the CPU has it), AVX-512 (on request; the
+//! 8-wide BVH only) and a portable one; `crate::packet8` traces coherent packets of 8 rays
+//! through the 8-wide tree.
 //!
-//! The collapse (after Embree's BVH8 builder and Wald et al., "Getting Rid of Packets", 2008):
-//! a wide node starts from the two children of a binary node and repeatedly opens the child with
-//! the largest surface area (replacing it by its two children) until it has 8 or no child is left
-//! to open. A subtree of at most 8 triangles is never opened: it becomes one leaf block, whatever
-//! its binary shape (testing 8 triangles costs one sequence, like testing one). The boxes are the
-//! file's own, so every box a wide traversal tests is one the ordered traversal tests too, and
-//! the triangle test is the scalar one, lane by lane, in the same operations: both find exactly
-//! the same hits (closest hit: the nearest, ties to the lower triangle index, whatever the order
-//! of the tests; `tests/hits.rs` holds every path to that).
+//! The collapse (after Embree's BVH4/BVH8 builders and Wald et al., "Getting Rid of Packets",
+//! 2008): a wide node starts from the two children of a binary node and repeatedly opens the child
+//! with the largest surface area (replacing it by its two children) until it has `W` or no child is
+//! left to open. A subtree of at most `W` triangles is never opened: it becomes one leaf block,
+//! whatever its binary shape (testing `W` triangles costs one sequence, like testing one). The
+//! boxes are the file's own, so every box a wide traversal tests is one the ordered traversal
+//! tests too, and the triangle test is the scalar one, lane by lane, in the same operations: both
+//! find exactly the same hits (closest hit: the nearest, ties to the lower triangle index,
+//! whatever the order of the tests; `tests/hits.rs` holds every path to that).
 //!
-//! Derived at load from the child-pair layout ([`Bvh8::new`], on one thread: 12 ms for the bunny,
-//! 0.3-0.5 s for the dragon and the million-triangle scene on the loaded 2-core VM;
-//! `examples/ray_report.rs` prints it per scene), not stored in the file.
+//! Derived at load from the child-pair layout ([`WideBvh::new`], on one thread: 12 ms for the
+//! bunny, 0.3-0.5 s for the dragon and the million-triangle scene on the loaded 2-core VM;
+//! `examples/ray_report.rs` prints it per scene and width), not stored in the file.
 
 use crate::geometry::{self, Cost, Hit, Ray, TriangleTest, may_hold};
 use crate::traverse::Stack;
 use crate::vertices::TriangleSource;
 use bvh_format::{Node, Triangle};
 
-/// Children of a wide node, and triangles of a leaf block.
+/// Children of a node of the 8-wide BVH, and triangles of its leaf blocks.
 pub const WIDTH: usize = 8;
 
 /// A child reference: a wide node's index, or with this bit a leaf block's index.
 pub(crate) const LEAF: u32 = 1 << 31;
 
-/// A wide node: the boxes of up to 8 children, component by component.
+/// A wide node: the boxes of up to `W` children, component by component.
 #[repr(C, align(64))]
 #[derive(Clone, Copy, Debug)]
-pub struct WideNode {
+pub struct WideNode<const W: usize = WIDTH> {
     /// Per child: min x, min y, min z, max x, max y, max z. Empty slots hold an inverted
     /// infinite box and are masked out by `valid` as well.
-    pub bounds: [[f32; WIDTH]; 6],
+    pub bounds: [[f32; W]; 6],
     /// Per child: a wide node's index, or [`LEAF`] | a leaf block's index.
-    pub child: [u32; WIDTH],
+    pub child: [u32; W],
     /// Bit `i` set where slot `i` holds a child.
     pub valid: u32,
 }
 
-impl WideNode {
+impl<const W: usize> WideNode<W> {
     fn empty() -> Self {
-        let mut bounds = [[f32::INFINITY; WIDTH]; 6];
-        bounds[3..].iter_mut().for_each(|b| *b = [f32::NEG_INFINITY; WIDTH]);
-        Self { bounds, child: [u32::MAX; WIDTH], valid: 0 }
+        let mut bounds = [[f32::INFINITY; W]; 6];
+        bounds[3..].iter_mut().for_each(|b| *b = [f32::NEG_INFINITY; W]);
+        Self { bounds, child: [u32::MAX; W], valid: 0 }
     }
 
     fn set(&mut self, slot: usize, min: [f32; 3], max: [f32; 3]) {
@@ -59,20 +62,20 @@ impl WideNode {
     }
 }
 
-/// Up to 8 triangles of a leaf, component by component: the vertices exactly as stored, the
+/// Up to `W` triangles of a leaf, component by component: the vertices exactly as stored, the
 /// plane normal [`geometry::plane_normal`] computes, and the triangle's index in leaf order.
 /// Empty lanes hold NaN vertices (which no test hits) and index `u32::MAX`.
 #[repr(C, align(64))]
 #[derive(Clone, Copy, Debug)]
-pub struct TriBlock {
+pub struct TriBlock<const W: usize = WIDTH> {
     /// `p[vertex][axis][lane]`.
-    pub p: [[[f32; WIDTH]; 3]; 3],
-    pub index: [u32; WIDTH],
+    pub p: [[[f32; W]; 3]; 3],
+    pub index: [u32; W],
 }
 
-impl TriBlock {
+impl<const W: usize> TriBlock<W> {
     fn new(tris: &(impl TriangleSource + ?Sized), indices: &[u32]) -> Self {
-        let mut b = Self { p: [[[f32::NAN; WIDTH]; 3]; 3], index: [u32::MAX; WIDTH] };
+        let mut b = Self { p: [[[f32::NAN; W]; 3]; 3], index: [u32::MAX; W] };
         for (lane, &i) in indices.iter().enumerate() {
             let t = tris.triangle(i);
             for a in 0..3 {
@@ -97,16 +100,25 @@ impl TriBlock {
     }
 }
 
-/// The wide BVH of a scene: nodes in depth-first order (a node's first child right after it),
-/// leaf blocks in the same order.
-pub struct Bvh8 {
-    pub(crate) nodes: Vec<WideNode>,
-    pub(crate) blocks: Vec<TriBlock>,
-    /// The root's reference (a leaf for a scene of at most 8 triangles).
+/// A wide BVH of a scene, `W` children per node and up to `W` triangles per leaf block: nodes in
+/// depth-first order (a node's first child right after it), leaf blocks in the same order.
+pub struct WideBvh<const W: usize> {
+    pub(crate) nodes: Vec<WideNode<W>>,
+    pub(crate) blocks: Vec<TriBlock<W>>,
+    /// The root's reference (a leaf for a scene of at most `W` triangles).
     pub(crate) root: u32,
     /// The instruction set the traversal runs with here ([`Simd::detect`]).
     simd: Simd,
 }
+
+/// The 8-wide BVH: one AVX2 sequence (256-bit) tests a ray against a node's 8 boxes or a leaf's
+/// 8 triangles; the one `--method bvh8`, `bvh8-packet` and auto's single rays walk.
+pub type Bvh8 = WideBvh<WIDTH>;
+
+/// The 4-wide BVH: one 128-bit sequence tests a ray against a node's 4 boxes or a leaf's 4
+/// triangles (`--method bvh4`): shallower than the binary tree, narrower than [`Bvh8`], fewer
+/// boxes and triangles tested per ray than the 8-wide BVH in exchange for more steps.
+pub type Bvh4 = WideBvh<4>;
 
 /// The instruction sets the single-ray traversal is written for. Every one finds bit for bit
 /// the same hits (the box and triangle tests are the scalar ones, operation by operation); they
@@ -115,11 +127,13 @@ pub struct Bvh8 {
 pub enum Simd {
     /// One lane at a time: any CPU.
     Portable,
-    /// 8 boxes or 8 triangles per sequence of 256-bit instructions.
+    /// A node's boxes or a leaf's triangles per sequence of AVX2-encoded instructions: 256-bit
+    /// for the 8-wide BVH, 128-bit for the 4-wide one.
     Avx2,
     /// AVX-512 (F, VL, DQ): the near and far planes of all 8 children in one 16-lane register,
     /// mask registers and compress instructions for the children hit; the leaf test is AVX2's.
-    /// Only on request ([`Simd::detect`] says why).
+    /// Only on request ([`Simd::detect`] says why). The 4-wide BVH, whose 4 children's near and
+    /// far planes fit one 256-bit register, runs its AVX2 path.
     Avx512,
 }
 
@@ -158,7 +172,7 @@ impl Simd {
         Simd::ALL.into_iter().filter(|s| s.supported()).collect()
     }
 
-    /// The path [`Bvh8::trace`] takes: AVX2 where the CPU has it, else the portable one; the
+    /// The path [`WideBvh::trace`] takes: AVX2 where the CPU has it, else the portable one; the
     /// environment variable `TRACER_CPU_SIMD` (`portable`, `avx2` or `avx512`) asks for another,
     /// taken where the CPU runs it (else the widest below it that it runs; a name it does not
     /// know is ignored). AVX-512 is not the default: on the 2-core AMD EPYC (Zen 4) VM it traces
@@ -213,7 +227,7 @@ fn half_area(n: &Node) -> f32 {
     d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
 }
 
-impl Bvh8 {
+impl<const W: usize> WideBvh<W> {
     /// Collapses the child-pair tree `nodes` over the triangles `tris` (leaf order, as
     /// [`bvh_format::SceneFile::leaf_triangles`] gives them).
     pub fn new(nodes: &[Node], tris: &[Triangle]) -> Self {
@@ -223,10 +237,12 @@ impl Bvh8 {
     /// [`Self::new`] over the triangles of either vertex form: the leaf blocks are this BVH's
     /// own copy of the vertices, in the layout its SIMD test loads, whatever form they came from.
     pub fn from_source(nodes: &[Node], tris: &(impl TriangleSource + ?Sized)) -> Self {
+        // `valid` holds a bit per slot; a binary node opens into at least 2.
+        const { assert!(W >= 2 && W <= 32) };
         let counts = subtree_counts(nodes);
         let mut out = Self {
-            nodes: Vec::with_capacity(nodes.len() / 6 + 1),
-            blocks: Vec::with_capacity(tris.len() / 4 + 1),
+            nodes: Vec::with_capacity(nodes.len() / (W - 2).max(1) + 1),
+            blocks: Vec::with_capacity(tris.len() / (W / 2) + 1),
             root: LEAF,
             simd: Simd::detect(),
         };
@@ -235,10 +251,10 @@ impl Bvh8 {
             return out;
         }
         let mut work: Vec<(Work, Option<(usize, usize)>)> = vec![(Work::Binary(0), None)];
-        let (mut indices, mut scratch) = (Vec::with_capacity(WIDTH), Vec::new());
+        let (mut indices, mut scratch) = (Vec::with_capacity(W), Vec::new());
         while let Some((w, parent)) = work.pop() {
             let r = match w {
-                Work::Binary(b) if counts[b as usize] <= WIDTH as u64 => {
+                Work::Binary(b) if counts[b as usize] <= W as u64 => {
                     indices.clear();
                     leaf_indices(nodes, b, &mut indices, &mut scratch);
                     indices.sort_unstable();
@@ -250,14 +266,14 @@ impl Bvh8 {
                 }
                 Work::Binary(b) => {
                     let n = &nodes[b as usize];
-                    let mut kids = [0u32; WIDTH];
+                    let mut kids = [0u32; W];
                     kids[..2].copy_from_slice(&[n.index, n.index + 1]);
                     let mut len = 2;
-                    while len < WIDTH {
+                    while len < W {
                         let open = (0..len)
                             .filter(|&k| {
                                 let c = kids[k] as usize;
-                                !nodes[c].is_leaf() && counts[c] > WIDTH as u64
+                                !nodes[c].is_leaf() && counts[c] > W as u64
                             })
                             .max_by(|&a, &b| {
                                 half_area(&nodes[kids[a] as usize]).total_cmp(&half_area(&nodes[kids[b] as usize]))
@@ -280,7 +296,7 @@ impl Bvh8 {
                     }
                     id as u32
                 }
-                Work::Range(start, count) if count as usize <= WIDTH => {
+                Work::Range(start, count) if count as usize <= W => {
                     indices.clear();
                     indices.extend(start..start + count);
                     out.leaf(tris, &indices)
@@ -300,7 +316,7 @@ impl Bvh8 {
         LEAF | (self.blocks.len() - 1) as u32
     }
 
-    /// A wide node over `count` (more than 8) triangles from `start`: up to 8 equal runs, each
+    /// A wide node over `count` (more than `W`) triangles from `start`: up to `W` equal runs, each
     /// boxed by its triangles' vertices.
     fn range_node(
         &mut self,
@@ -309,7 +325,7 @@ impl Bvh8 {
         count: u32,
         work: &mut Vec<(Work, Option<(usize, usize)>)>,
     ) -> u32 {
-        let per = count.div_ceil(WIDTH as u32).max(WIDTH as u32);
+        let per = count.div_ceil(W as u32).max(W as u32);
         let id = self.nodes.len();
         let mut node = WideNode::empty();
         let runs: Vec<(u32, u32)> =
@@ -338,7 +354,7 @@ impl Bvh8 {
         (self.nodes.len(), self.blocks.len())
     }
 
-    /// Whether the tree holds no node (a scene of at most 8 triangles is one leaf block).
+    /// Whether the tree holds no node (a scene of at most `W` triangles is one leaf block).
     pub fn is_empty(&self) -> bool {
         self.nodes.is_empty()
     }
@@ -384,6 +400,14 @@ impl Bvh8 {
         self.trace_from::<ANY, T>(simd, self.root, ray, t_min, (t_max, u32::MAX), stack, cost).map(Found::hit)
     }
 
+    /// This BVH as the 8-wide one, where it is (the AVX-512 traversal is written for 8 only).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn as_bvh8(&self) -> Option<&Bvh8> {
+        // SAFETY: with `W` = 8, `Self` is `Bvh8`.
+        (W == WIDTH).then(|| unsafe { &*(self as *const Self).cast::<Bvh8>() })
+    }
+
     /// The subtree `start`'s hits that beat `best` (distance, triangle; [`Hit::beats`]), the
     /// packets' way to finish a lane alone, on the path `simd`, which this CPU must support.
     #[inline]
@@ -400,13 +424,21 @@ impl Bvh8 {
     ) -> Option<Found> {
         #[cfg(target_arch = "x86_64")]
         {
-            if simd == Simd::Avx512 {
+            use std::arch::x86_64::{__m128, __m256};
+            if simd == Simd::Avx512
+                && let Some(bvh) = self.as_bvh8()
+            {
                 // SAFETY: the callers pass a supported path: AVX-512 F, VL and DQ and AVX2.
-                return unsafe { avx512::trace::<ANY, T>(self, start, ray, t_min, best, stack, cost) };
+                return unsafe { avx512::trace::<ANY, T>(bvh, start, ray, t_min, best, stack, cost) };
             }
-            if simd == Simd::Avx2 {
-                // SAFETY: the callers pass a supported path: AVX2.
-                return unsafe { avx2::trace::<ANY, T>(self, start, ray, t_min, best, stack, cost) };
+            if simd >= Simd::Avx2 {
+                // SAFETY (both): the callers pass a supported path: AVX2. The register holds `W` lanes.
+                if W == 8 {
+                    return unsafe { avx2::trace::<ANY, T, __m256, W>(self, start, ray, t_min, best, stack, cost) };
+                }
+                if W == 4 {
+                    return unsafe { avx2::trace::<ANY, T, __m128, W>(self, start, ray, t_min, best, stack, cost) };
+                }
             }
         }
         let _ = simd;
@@ -441,9 +473,9 @@ impl Bvh8 {
         loop {
             if cur & LEAF == 0 {
                 let node = &self.nodes[cur as usize];
-                let mut hits: [(f32, u32); WIDTH] = [(0.0, 0); WIDTH];
+                let mut hits: [(f32, u32); W] = [(0.0, 0); W];
                 let mut n = 0;
-                for slot in (0..WIDTH).filter(|&s| node.valid & (1 << s) != 0) {
+                for slot in (0..W).filter(|&s| node.valid & (1 << s) != 0) {
                     cost.nodes += 1;
                     let lane = |k: usize| [node.bounds[k][slot], node.bounds[k + 1][slot], node.bounds[k + 2][slot]];
                     let child = Node { min: lane(0), count: 0, max: lane(3), index: 0 };
@@ -463,7 +495,7 @@ impl Bvh8 {
             } else {
                 let block = &self.blocks[(cur & !LEAF) as usize];
                 cost.tris += block.count();
-                for lane in (0..WIDTH).filter(|&l| block.index[l] != u32::MAX) {
+                for lane in (0..W).filter(|&l| block.index[l] != u32::MAX) {
                     let i = block.index[lane];
                     if let Some((t, u, v)) = T::intersect(&block.triangle(lane), ray, t_min, best.t)
                         && Hit::beats(t, i, best.t, best.tri)
@@ -535,205 +567,296 @@ fn leaf_indices(nodes: &[Node], b: u32, out: &mut Vec<u32>, stack: &mut Vec<u32>
 
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod avx2 {
-    use super::{Bvh8, Found, LEAF, TriBlock, WIDTH};
+    use super::{Found, LEAF, TriBlock, WideBvh, WideNode};
     use crate::geometry::{Cost, Hit, Ray, TriangleTest, may_hold};
     use crate::traverse::Stack;
     use render_spec::Intersect;
     use render_spec::constants::T_SLACK;
     use std::arch::x86_64::*;
 
+    /// One register of lanes: `__m128` (4, the 4-wide BVH's nodes and blocks) or `__m256` (8, the
+    /// 8-wide BVH's), so that one traversal and one leaf test serve both widths. Each operation is
+    /// the one instruction of its name, lane by lane the `f32` operation. Only for code compiled
+    /// with AVX2 and entered where the CPU has it (the methods are inlined into it; as in
+    /// `crate::wide`, no lane operation is written inside a closure).
+    pub(crate) trait Vector: Copy {
+        /// Lanes.
+        const N: usize;
+        fn splat(v: f32) -> Self;
+        fn zero() -> Self;
+        /// The `W` floats of `a`; `W` must be [`Self::N`].
+        fn load<const W: usize>(a: &[f32; W]) -> Self;
+        fn store<const W: usize>(self) -> [f32; W];
+        /// Bit `i` set where lane `i` of `index` is `u32::MAX` (an empty lane of a leaf block).
+        fn unset<const W: usize>(index: &[u32; W]) -> u32;
+        fn add(self, o: Self) -> Self;
+        fn sub(self, o: Self) -> Self;
+        fn mul(self, o: Self) -> Self;
+        fn div(self, o: Self) -> Self;
+        /// `maxps`: `self > o ? self : o` (`o` where either is NaN).
+        fn max(self, o: Self) -> Self;
+        /// `minps`: `self < o ? self : o` (`o` where either is NaN).
+        fn min(self, o: Self) -> Self;
+        fn and(self, o: Self) -> Self;
+        fn or(self, o: Self) -> Self;
+        /// `!self & o`.
+        fn andnot(self, o: Self) -> Self;
+        fn cmp<const P: i32>(self, o: Self) -> Self;
+        /// The lanes' sign bits.
+        fn bits(self) -> u32;
+    }
+
+    // SAFETY (every `unsafe` block in the impls): AVX2 register arithmetic, which the callers
+    // guarantee (see `Vector`); loads and stores of `N` lanes, `W` = `N` asserted first (a
+    // constant comparison, which the compiler removes).
+    macro_rules! vector {
+        ($v:ty, $n:literal, $vi:ty, $set1:ident, $setzero:ident, $loadu:ident, $storeu:ident,
+         $loadu_si:ident, $set1_epi32:ident, $cmpeq_epi32:ident, $castsi_ps:ident,
+         $add:ident, $sub:ident, $mul:ident, $div:ident, $max:ident, $min:ident, $and:ident,
+         $or:ident, $andnot:ident, $cmp:ident, $movemask:ident) => {
+            impl Vector for $v {
+                const N: usize = $n;
+                #[inline(always)]
+                fn splat(v: f32) -> Self {
+                    unsafe { $set1(v) }
+                }
+                #[inline(always)]
+                fn zero() -> Self {
+                    unsafe { $setzero() }
+                }
+                #[inline(always)]
+                fn load<const W: usize>(a: &[f32; W]) -> Self {
+                    assert!(W == Self::N);
+                    unsafe { $loadu(a.as_ptr()) }
+                }
+                #[inline(always)]
+                fn store<const W: usize>(self) -> [f32; W] {
+                    assert!(W == Self::N);
+                    let mut a = [0f32; W];
+                    unsafe { $storeu(a.as_mut_ptr(), self) };
+                    a
+                }
+                #[inline(always)]
+                fn unset<const W: usize>(index: &[u32; W]) -> u32 {
+                    assert!(W == Self::N);
+                    unsafe {
+                        let i = $loadu_si(index.as_ptr().cast::<$vi>());
+                        $movemask($castsi_ps($cmpeq_epi32(i, $set1_epi32(-1)))) as u32
+                    }
+                }
+                #[inline(always)]
+                fn add(self, o: Self) -> Self {
+                    unsafe { $add(self, o) }
+                }
+                #[inline(always)]
+                fn sub(self, o: Self) -> Self {
+                    unsafe { $sub(self, o) }
+                }
+                #[inline(always)]
+                fn mul(self, o: Self) -> Self {
+                    unsafe { $mul(self, o) }
+                }
+                #[inline(always)]
+                fn div(self, o: Self) -> Self {
+                    unsafe { $div(self, o) }
+                }
+                #[inline(always)]
+                fn max(self, o: Self) -> Self {
+                    unsafe { $max(self, o) }
+                }
+                #[inline(always)]
+                fn min(self, o: Self) -> Self {
+                    unsafe { $min(self, o) }
+                }
+                #[inline(always)]
+                fn and(self, o: Self) -> Self {
+                    unsafe { $and(self, o) }
+                }
+                #[inline(always)]
+                fn or(self, o: Self) -> Self {
+                    unsafe { $or(self, o) }
+                }
+                #[inline(always)]
+                fn andnot(self, o: Self) -> Self {
+                    unsafe { $andnot(self, o) }
+                }
+                #[inline(always)]
+                fn cmp<const P: i32>(self, o: Self) -> Self {
+                    unsafe { $cmp::<P>(self, o) }
+                }
+                #[inline(always)]
+                fn bits(self) -> u32 {
+                    unsafe { $movemask(self) as u32 }
+                }
+            }
+        };
+    }
+    vector! {
+        __m128, 4, __m128i, _mm_set1_ps, _mm_setzero_ps, _mm_loadu_ps, _mm_storeu_ps, _mm_loadu_si128, _mm_set1_epi32,
+        _mm_cmpeq_epi32, _mm_castsi128_ps, _mm_add_ps, _mm_sub_ps, _mm_mul_ps, _mm_div_ps, _mm_max_ps, _mm_min_ps,
+        _mm_and_ps, _mm_or_ps, _mm_andnot_ps, _mm_cmp_ps, _mm_movemask_ps
+    }
+    vector! {
+        __m256, 8, __m256i, _mm256_set1_ps, _mm256_setzero_ps, _mm256_loadu_ps, _mm256_storeu_ps, _mm256_loadu_si256,
+        _mm256_set1_epi32, _mm256_cmpeq_epi32, _mm256_castsi256_ps, _mm256_add_ps, _mm256_sub_ps, _mm256_mul_ps,
+        _mm256_div_ps, _mm256_max_ps, _mm256_min_ps, _mm256_and_ps, _mm256_or_ps, _mm256_andnot_ps, _mm256_cmp_ps,
+        _mm256_movemask_ps
+    }
+
     /// The ray, splatted.
-    pub(crate) struct Lanes {
-        pub o: [__m256; 3],
-        pub d: [__m256; 3],
-        pub inv: [__m256; 3],
+    pub(crate) struct Lanes<V> {
+        pub o: [V; 3],
+        pub d: [V; 3],
+        pub inv: [V; 3],
     }
 
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) fn load(a: &[f32; WIDTH]) -> __m256 {
-        // SAFETY: `a` holds 8 floats.
-        unsafe { _mm256_loadu_ps(a.as_ptr()) }
-    }
-
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) fn store(v: __m256) -> [f32; WIDTH] {
-        let mut a = [0f32; WIDTH];
-        // SAFETY: `a` has room for 8 floats.
-        unsafe { _mm256_storeu_ps(a.as_mut_ptr(), v) };
-        a
+    impl<V: Vector> Lanes<V> {
+        #[inline(always)]
+        pub fn new(ray: &Ray) -> Self {
+            let s = |v: glam::Vec3| [V::splat(v.x), V::splat(v.y), V::splat(v.z)];
+            Self { o: s(ray.origin), d: s(ray.dir), inv: s(ray.inv_dir) }
+        }
     }
 
     /// `p - o` per axis.
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    fn sub3(p: &[[f32; WIDTH]; 3], o: &[__m256; 3]) -> [__m256; 3] {
-        [_mm256_sub_ps(load(&p[0]), o[0]), _mm256_sub_ps(load(&p[1]), o[1]), _mm256_sub_ps(load(&p[2]), o[2])]
+    #[inline(always)]
+    fn sub3<V: Vector, const W: usize>(p: &[[f32; W]; 3], o: &[V; 3]) -> [V; 3] {
+        [V::load(&p[0]).sub(o[0]), V::load(&p[1]).sub(o[1]), V::load(&p[2]).sub(o[2])]
     }
 
     /// The distances to the planes `b`, component `a` of the ray.
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    fn dist(b: &[f32; WIDTH], r: &Lanes, a: usize) -> __m256 {
-        _mm256_mul_ps(_mm256_sub_ps(load(b), r.o[a]), r.inv[a])
+    #[inline(always)]
+    fn dist<V: Vector, const W: usize>(b: &[f32; W], r: &Lanes<V>, a: usize) -> V {
+        V::load(b).sub(r.o[a]).mul(r.inv[a])
     }
 
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    fn edge_function(a: &[__m256; 3], b: &[__m256; 3], d: &[__m256; 3]) -> __m256 {
-        let e = [_mm256_sub_ps(a[0], b[0]), _mm256_sub_ps(a[1], b[1]), _mm256_sub_ps(a[2], b[2])];
-        let s = [_mm256_add_ps(a[0], b[0]), _mm256_add_ps(a[1], b[1]), _mm256_add_ps(a[2], b[2])];
-        let c = [
-            _mm256_sub_ps(_mm256_mul_ps(e[1], s[2]), _mm256_mul_ps(e[2], s[1])),
-            _mm256_sub_ps(_mm256_mul_ps(e[2], s[0]), _mm256_mul_ps(e[0], s[2])),
-            _mm256_sub_ps(_mm256_mul_ps(e[0], s[1]), _mm256_mul_ps(e[1], s[0])),
-        ];
-        dot(d, &c)
+    /// `y * z' - z * y'` and so on: the cross product, in the scalar tests' order.
+    #[inline(always)]
+    fn cross<V: Vector>(a: &[V; 3], b: &[V; 3]) -> [V; 3] {
+        [a[1].mul(b[2]).sub(a[2].mul(b[1])), a[2].mul(b[0]).sub(a[0].mul(b[2])), a[0].mul(b[1]).sub(a[1].mul(b[0]))]
+    }
+
+    #[inline(always)]
+    fn edge_function<V: Vector>(a: &[V; 3], b: &[V; 3], d: &[V; 3]) -> V {
+        let e = [a[0].sub(b[0]), a[1].sub(b[1]), a[2].sub(b[2])];
+        let s = [a[0].add(b[0]), a[1].add(b[1]), a[2].add(b[2])];
+        dot(d, &cross(&e, &s))
     }
 
     /// `x[0] * y[0] + x[1] * y[1] + x[2] * y[2]`, in that order.
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    fn dot(x: &[__m256; 3], y: &[__m256; 3]) -> __m256 {
-        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(x[0], y[0]), _mm256_mul_ps(x[1], y[1])), _mm256_mul_ps(x[2], y[2]))
+    #[inline(always)]
+    fn dot<V: Vector>(x: &[V; 3], y: &[V; 3]) -> V {
+        x[0].mul(y[0]).add(x[1].mul(y[1])).add(x[2].mul(y[2]))
     }
 
-    /// [`crate::geometry::intersect`] on the block's 8 triangles, operation by operation; returns
+    /// `p[k] - p[0]` per axis: a triangle edge from its first vertex.
+    #[inline(always)]
+    fn edge<V: Vector, const W: usize>(p: &[[[f32; W]; 3]; 3], k: usize) -> [V; 3] {
+        sub3(&p[k], &[V::load(&p[0][0]), V::load(&p[0][1]), V::load(&p[0][2])])
+    }
+
+    /// [`crate::geometry::intersect`] on the block's triangles, operation by operation; returns
     /// (hit mask, t, w1, w2, sum) (`u = w1 * (1 / sum)`, computed for the closest hit only).
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(crate) fn watertight(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+    #[inline(always)]
+    pub(crate) fn watertight<V: Vector, const W: usize>(b: &TriBlock<W>, r: &Lanes<V>, t_min: V, t_max: V) -> [V; 5] {
         let (o, d) = (&r.o, &r.d);
-        // Written out, not in closures: a closure does not inherit AVX2 (see crate::wide).
         let (a0, a1, a2) = (sub3(&b.p[0], o), sub3(&b.p[1], o), sub3(&b.p[2], o));
         let w2 = edge_function(&a0, &a1, d);
         let w0 = edge_function(&a1, &a2, d);
         let w1 = edge_function(&a2, &a0, d);
-        let zero = _mm256_setzero_ps();
-        let positive = _mm256_and_ps(
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_GE_OQ>(w1, zero)),
-            _mm256_cmp_ps::<_CMP_GE_OQ>(w2, zero),
-        );
-        let negative = _mm256_and_ps(
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(w1, zero)),
-            _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
-        );
-        let sum = _mm256_add_ps(_mm256_add_ps(w0, w1), w2);
+        let zero = V::zero();
+        let positive = w0.cmp::<_CMP_GE_OQ>(zero).and(w1.cmp::<_CMP_GE_OQ>(zero)).and(w2.cmp::<_CMP_GE_OQ>(zero));
+        let negative = w0.cmp::<_CMP_LE_OQ>(zero).and(w1.cmp::<_CMP_LE_OQ>(zero)).and(w2.cmp::<_CMP_LE_OQ>(zero));
+        let sum = w0.add(w1).add(w2);
         // The plane normal, as geometry::plane_normal computes it.
-        let e1 = [
-            _mm256_sub_ps(load(&b.p[1][0]), load(&b.p[0][0])),
-            _mm256_sub_ps(load(&b.p[1][1]), load(&b.p[0][1])),
-            _mm256_sub_ps(load(&b.p[1][2]), load(&b.p[0][2])),
-        ];
-        let e2 = [
-            _mm256_sub_ps(load(&b.p[2][0]), load(&b.p[0][0])),
-            _mm256_sub_ps(load(&b.p[2][1]), load(&b.p[0][1])),
-            _mm256_sub_ps(load(&b.p[2][2]), load(&b.p[0][2])),
-        ];
-        let n = [
-            _mm256_sub_ps(_mm256_mul_ps(e1[1], e2[2]), _mm256_mul_ps(e1[2], e2[1])),
-            _mm256_sub_ps(_mm256_mul_ps(e1[2], e2[0]), _mm256_mul_ps(e1[0], e2[2])),
-            _mm256_sub_ps(_mm256_mul_ps(e1[0], e2[1]), _mm256_mul_ps(e1[1], e2[0])),
-        ];
+        let n = cross(&edge(&b.p, 1), &edge(&b.p, 2));
         let den = dot(&n, d);
-        let t = _mm256_div_ps(dot(&n, &a0), den);
-        let mut m = _mm256_or_ps(positive, negative);
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(sum, zero));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(den, zero));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, t_min));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
+        let t = dot(&n, &a0).div(den);
+        let mut m = positive.or(negative);
+        m = m.and(sum.cmp::<_CMP_NEQ_OQ>(zero));
+        m = m.and(den.cmp::<_CMP_NEQ_OQ>(zero));
+        m = m.and(t.cmp::<_CMP_GT_OQ>(t_min));
+        m = m.and(t.cmp::<_CMP_LE_OQ>(t_max));
         [m, t, w1, w2, sum]
     }
 
-    /// [`crate::geometry::intersect_moller_trumbore`] on the block's 8 triangles, operation by
+    /// [`crate::geometry::intersect_moller_trumbore`] on the block's triangles, operation by
     /// operation; returns (hit mask, t, u, v, 1).
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(crate) fn moller_trumbore(b: &TriBlock, r: &Lanes, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+    #[inline(always)]
+    pub(crate) fn moller_trumbore<V: Vector, const W: usize>(
+        b: &TriBlock<W>,
+        r: &Lanes<V>,
+        t_min: V,
+        t_max: V,
+    ) -> [V; 5] {
         let (o, d) = (&r.o, &r.d);
-        let v0 = [load(&b.p[0][0]), load(&b.p[0][1]), load(&b.p[0][2])];
-        let e1 = [
-            _mm256_sub_ps(load(&b.p[1][0]), v0[0]),
-            _mm256_sub_ps(load(&b.p[1][1]), v0[1]),
-            _mm256_sub_ps(load(&b.p[1][2]), v0[2]),
-        ];
-        let e2 = [
-            _mm256_sub_ps(load(&b.p[2][0]), v0[0]),
-            _mm256_sub_ps(load(&b.p[2][1]), v0[1]),
-            _mm256_sub_ps(load(&b.p[2][2]), v0[2]),
-        ];
-        let p = [
-            _mm256_sub_ps(_mm256_mul_ps(d[1], e2[2]), _mm256_mul_ps(e2[1], d[2])),
-            _mm256_sub_ps(_mm256_mul_ps(d[2], e2[0]), _mm256_mul_ps(e2[2], d[0])),
-            _mm256_sub_ps(_mm256_mul_ps(d[0], e2[1]), _mm256_mul_ps(e2[0], d[1])),
-        ];
+        let v0 = [V::load(&b.p[0][0]), V::load(&b.p[0][1]), V::load(&b.p[0][2])];
+        let (e1, e2) = (edge(&b.p, 1), edge(&b.p, 2));
+        // The scalar test's cross products (a product's operand order changes no bit).
+        let p = cross(d, &e2);
         let det = dot(&e1, &p);
-        let one = _mm256_set1_ps(1.0);
-        let inv = _mm256_div_ps(one, det);
-        let s = [_mm256_sub_ps(o[0], v0[0]), _mm256_sub_ps(o[1], v0[1]), _mm256_sub_ps(o[2], v0[2])];
-        let u = _mm256_mul_ps(dot(&s, &p), inv);
-        let q = [
-            _mm256_sub_ps(_mm256_mul_ps(s[1], e1[2]), _mm256_mul_ps(e1[1], s[2])),
-            _mm256_sub_ps(_mm256_mul_ps(s[2], e1[0]), _mm256_mul_ps(e1[2], s[0])),
-            _mm256_sub_ps(_mm256_mul_ps(s[0], e1[1]), _mm256_mul_ps(e1[0], s[1])),
-        ];
-        let v = _mm256_mul_ps(dot(d, &q), inv);
-        let t = _mm256_mul_ps(dot(&e2, &q), inv);
-        let zero = _mm256_setzero_ps();
+        let one = V::splat(1.0);
+        let inv = one.div(det);
+        let s = [o[0].sub(v0[0]), o[1].sub(v0[1]), o[2].sub(v0[2])];
+        let u = dot(&s, &p).mul(inv);
+        let q = cross(&s, &e1);
+        let v = dot(d, &q).mul(inv);
+        let t = dot(&e2, &q).mul(inv);
+        let zero = V::zero();
         // The scalar conditions exactly, NaN included (see packet.rs).
-        let mut m = _mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero);
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GE_OQ>(u, zero));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(u, one));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NLT_UQ>(v, zero));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NGT_UQ>(_mm256_add_ps(u, v), one));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, t_min));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
+        let mut m = det.cmp::<_CMP_NEQ_UQ>(zero);
+        m = m.and(u.cmp::<_CMP_GE_OQ>(zero));
+        m = m.and(u.cmp::<_CMP_LE_OQ>(one));
+        m = m.and(v.cmp::<_CMP_NLT_UQ>(zero));
+        m = m.and(u.add(v).cmp::<_CMP_NGT_UQ>(one));
+        m = m.and(t.cmp::<_CMP_GT_OQ>(t_min));
+        m = m.and(t.cmp::<_CMP_LE_OQ>(t_max));
         [m, t, u, v, one]
     }
 
-    /// Tests the block's triangles against the ray, updating `best`; true where one beat it. A
-    /// macro, so that both traversals have it inline (a `#[target_feature]` function cannot be
-    /// `#[inline(always)]`, and LLVM kept it out of line, at a cost of 10%).
-    macro_rules! leaf {
-        ($any:expr, $t:ty, $block:expr, $r:expr, $t_min:expr, $best:expr, $cost:expr) => {{
-            let (block, best, cost): (&TriBlock, &mut Found, &mut Cost) = ($block, $best, $cost);
-            // SAFETY: a load of 8 ints.
-            let index = unsafe { _mm256_loadu_si256(block.index.as_ptr().cast()) };
-            let empty = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(index, _mm256_set1_epi32(-1))));
-            cost.tris += WIDTH as u32 - empty.count_ones();
-            let [m, t, w1, w2, sum] = match <$t as TriangleTest>::KIND {
-                Intersect::Watertight => watertight(block, $r, $t_min, _mm256_set1_ps(best.t)),
-                Intersect::MollerTrumbore => moller_trumbore(block, $r, $t_min, _mm256_set1_ps(best.t)),
-            };
-            let mut hit = _mm256_movemask_ps(m) as u32;
-            let mut found = false;
-            if hit != 0 {
-                let (t, w1, w2, sum) = (store(t), store(w1), store(w2), store(sum));
-                while hit != 0 {
-                    let i = hit.trailing_zeros() as usize;
-                    hit &= hit - 1;
-                    if Hit::beats(t[i], block.index[i], best.t, best.tri) {
-                        *best = Found { t: t[i], tri: block.index[i], w1: w1[i], w2: w2[i], sum: sum[i] };
-                        found = true;
-                        if $any {
-                            break;
-                        }
+    /// Tests the block's triangles against the ray, updating `best`; true where one beat it.
+    /// `#[inline(always)]` without target features, so that it is inlined into both traversals
+    /// (a `#[target_feature]` function cannot be `#[inline(always)]`, and LLVM kept one out of
+    /// line, at a cost of 10%).
+    #[inline(always)]
+    pub(super) fn leaf<const ANY: bool, T: TriangleTest, V: Vector, const W: usize>(
+        block: &TriBlock<W>,
+        r: &Lanes<V>,
+        t_min: V,
+        best: &mut Found,
+        cost: &mut Cost,
+    ) -> bool {
+        cost.tris += W as u32 - V::unset(&block.index).count_ones();
+        let [m, t, w1, w2, sum] = match T::KIND {
+            Intersect::Watertight => watertight(block, r, t_min, V::splat(best.t)),
+            Intersect::MollerTrumbore => moller_trumbore(block, r, t_min, V::splat(best.t)),
+        };
+        let mut hit = m.bits();
+        let mut found = false;
+        if hit != 0 {
+            let (t, w1, w2, sum) = (t.store::<W>(), w1.store::<W>(), w2.store::<W>(), sum.store::<W>());
+            while hit != 0 {
+                let i = hit.trailing_zeros() as usize;
+                hit &= hit - 1;
+                if Hit::beats(t[i], block.index[i], best.t, best.tri) {
+                    *best = Found { t: t[i], tri: block.index[i], w1: w1[i], w2: w2[i], sum: sum[i] };
+                    found = true;
+                    if ANY {
+                        break;
                     }
                 }
             }
-            found
-        }};
+        }
+        found
     }
-    pub(super) use leaf;
 
     /// Asks for the cache lines of the node or leaf block `r`.
     #[inline(always)]
-    pub(crate) fn prefetch(bvh: &Bvh8, r: u32) {
+    pub(crate) fn prefetch<const W: usize>(bvh: &WideBvh<W>, r: u32) {
         let (ptr, lines) = if r & LEAF == 0 {
-            (bvh.nodes.as_ptr().wrapping_add(r as usize).cast::<i8>(), size_of::<super::WideNode>() / 64)
+            (bvh.nodes.as_ptr().wrapping_add(r as usize).cast::<i8>(), size_of::<WideNode<W>>() / 64)
         } else {
-            (bvh.blocks.as_ptr().wrapping_add((r & !LEAF) as usize).cast::<i8>(), size_of::<TriBlock>() / 64)
+            (bvh.blocks.as_ptr().wrapping_add((r & !LEAF) as usize).cast::<i8>(), size_of::<TriBlock<W>>() / 64)
         };
         for l in 0..lines.min(PREFETCH_LINES) {
             // SAFETY: a prefetch never faults, whatever the address.
@@ -742,7 +865,8 @@ pub(crate) mod avx2 {
     }
     const PREFETCH_LINES: usize = 8;
 
-    /// [`Bvh8::trace`] with AVX2.
+    /// [`WideBvh::trace`] with AVX2: the `W` children's boxes or a leaf's `W` triangles in
+    /// registers `V` of `W` lanes (256-bit for the 8-wide BVH, 128-bit for the 4-wide one).
     ///
     /// The box test is the scalar slab test's: per axis the entry and exit distances are
     /// `(plane - origin) * inverse direction`; which plane is entered is known from the sign of
@@ -752,8 +876,8 @@ pub(crate) mod avx2 {
     /// the second: the axis is ignored, as the scalar test ignores it (its other distance is then
     /// infinite or NaN, and ignored alike).
     #[target_feature(enable = "avx2")]
-    pub fn trace<const ANY: bool, T: TriangleTest>(
-        bvh: &Bvh8,
+    pub fn trace<const ANY: bool, T: TriangleTest, V: Vector, const W: usize>(
+        bvh: &WideBvh<W>,
         start: u32,
         ray: &Ray,
         t_min: f32,
@@ -761,17 +885,13 @@ pub(crate) mod avx2 {
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Found> {
-        let r = Lanes {
-            o: [_mm256_set1_ps(ray.origin.x), _mm256_set1_ps(ray.origin.y), _mm256_set1_ps(ray.origin.z)],
-            d: [_mm256_set1_ps(ray.dir.x), _mm256_set1_ps(ray.dir.y), _mm256_set1_ps(ray.dir.z)],
-            inv: [_mm256_set1_ps(ray.inv_dir.x), _mm256_set1_ps(ray.inv_dir.y), _mm256_set1_ps(ray.inv_dir.z)],
-        };
+        let r = Lanes::<V>::new(ray);
         let near_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { 3 + a } else { a });
         let far_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { a } else { 3 + a });
-        let zero = _mm256_setzero_ps();
-        let slack = _mm256_set1_ps(T_SLACK);
-        let sign = _mm256_set1_ps(-0.0);
-        let t_min_v = _mm256_set1_ps(t_min);
+        let zero = V::zero();
+        let slack = V::splat(T_SLACK);
+        let sign = V::splat(-0.0);
+        let t_min_v = V::splat(t_min);
         let mut best = Found { t: t_max, tri, w1: 0.0, w2: 0.0, sum: 1.0 };
         let mut found = false;
         stack.clear();
@@ -780,19 +900,16 @@ pub(crate) mod avx2 {
             if cur & LEAF == 0 {
                 let node = &bvh.nodes[cur as usize];
                 let b = &node.bounds;
-                let t_best = _mm256_set1_ps(best.t);
-                let near = _mm256_max_ps(dist(&b[near_plane[0]], &r, 0), zero);
-                let near = _mm256_max_ps(dist(&b[near_plane[1]], &r, 1), near);
-                let near = _mm256_max_ps(dist(&b[near_plane[2]], &r, 2), near);
-                let far = _mm256_min_ps(dist(&b[far_plane[0]], &r, 0), t_best);
-                let far = _mm256_min_ps(dist(&b[far_plane[1]], &r, 1), far);
-                let far = _mm256_min_ps(dist(&b[far_plane[2]], &r, 2), far);
+                let t_best = V::splat(best.t);
+                let near = dist(&b[near_plane[0]], &r, 0).max(zero);
+                let near = dist(&b[near_plane[1]], &r, 1).max(near);
+                let near = dist(&b[near_plane[2]], &r, 2).max(near);
+                let far = dist(&b[far_plane[0]], &r, 0).min(t_best);
+                let far = dist(&b[far_plane[1]], &r, 1).min(far);
+                let far = dist(&b[far_plane[2]], &r, 2).min(far);
                 // `may_hold(near, far)`: near <= far + |far| * T_SLACK.
-                let ok = _mm256_cmp_ps::<_CMP_LE_OQ>(
-                    near,
-                    _mm256_add_ps(far, _mm256_mul_ps(_mm256_andnot_ps(sign, far), slack)),
-                );
-                let mut mask = _mm256_movemask_ps(ok) as u32 & node.valid;
+                let ok = near.cmp::<_CMP_LE_OQ>(far.add(sign.andnot(far).mul(slack)));
+                let mut mask = ok.bits() & node.valid;
                 cost.nodes += node.valid.count_ones();
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
@@ -801,7 +918,7 @@ pub(crate) mod avx2 {
                         cur = node.child[first];
                         continue;
                     }
-                    let near = store(near);
+                    let near = near.store::<W>();
                     // The children still to visit start loading now, together.
                     let mut all = mask | (1 << first);
                     while all != 0 {
@@ -820,7 +937,7 @@ pub(crate) mod avx2 {
                         continue;
                     }
                     // Nearest first: the others go on the stack farthest first.
-                    let mut hits = [(0f32, 0u32); WIDTH];
+                    let mut hits = [(0f32, 0u32); W];
                     hits[0] = (near[first], node.child[first]);
                     let mut n = 1;
                     while mask != 0 {
@@ -843,7 +960,7 @@ pub(crate) mod avx2 {
                 }
             } else {
                 let block = &bvh.blocks[(cur & !LEAF) as usize];
-                if leaf!(ANY, T, block, &r, t_min_v, &mut best, cost) {
+                if leaf::<ANY, T, V, W>(block, &r, t_min_v, &mut best, cost) {
                     found = true;
                     if ANY {
                         return Some(best);
@@ -866,11 +983,10 @@ pub(crate) mod avx2 {
 
 #[cfg(target_arch = "x86_64")]
 mod avx512 {
-    use super::avx2::{Lanes, leaf, moller_trumbore, prefetch, store, watertight};
-    use super::{Bvh8, Found, LEAF, TriBlock, WIDTH};
-    use crate::geometry::{Cost, Hit, Ray, TriangleTest, may_hold};
+    use super::avx2::{Lanes, Vector, leaf, prefetch};
+    use super::{Bvh8, Found, LEAF, WIDTH};
+    use crate::geometry::{Cost, Ray, TriangleTest, may_hold};
     use crate::traverse::Stack;
-    use render_spec::Intersect;
     use render_spec::constants::T_SLACK;
     use std::arch::x86_64::*;
 
@@ -902,11 +1018,7 @@ mod avx512 {
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Found> {
-        let r = Lanes {
-            o: [_mm256_set1_ps(ray.origin.x), _mm256_set1_ps(ray.origin.y), _mm256_set1_ps(ray.origin.z)],
-            d: [_mm256_set1_ps(ray.dir.x), _mm256_set1_ps(ray.dir.y), _mm256_set1_ps(ray.dir.z)],
-            inv: [_mm256_set1_ps(ray.inv_dir.x), _mm256_set1_ps(ray.inv_dir.y), _mm256_set1_ps(ray.inv_dir.z)],
-        };
+        let r = Lanes::<__m256>::new(ray);
         let o16: [__m512; 3] = std::array::from_fn(|a| _mm512_set1_ps(ray.origin[a]));
         let inv16: [__m512; 3] = std::array::from_fn(|a| {
             _mm512_insertf32x8::<1>(_mm512_set1_ps(ray.inv_dir[a]), _mm256_set1_ps(-ray.inv_dir[a]))
@@ -955,7 +1067,7 @@ mod avx512 {
                     let child = unsafe { _mm256_loadu_si256(node.child.as_ptr().cast()) };
                     let n = mask.count_ones() as usize;
                     // The register form: compress to memory is microcoded on some CPUs (AMD Zen 4).
-                    let dists = super::avx2::store(_mm256_maskz_compress_ps(mask as u8, near));
+                    let dists = _mm256_maskz_compress_ps(mask as u8, near).store::<WIDTH>();
                     let mut kids = [0u32; WIDTH];
                     // SAFETY: a store of 8 ints.
                     unsafe {
@@ -995,7 +1107,7 @@ mod avx512 {
                 }
             } else {
                 let block = &bvh.blocks[(cur & !LEAF) as usize];
-                if leaf!(ANY, T, block, &r, t_min_v, &mut best, cost) {
+                if leaf::<ANY, T, __m256, WIDTH>(block, &r, t_min_v, &mut best, cost) {
                     found = true;
                     if ANY {
                         return Some(best);
@@ -1067,13 +1179,13 @@ mod tests {
 
     /// Every triangle sits in exactly one leaf block, inside every box on its way from the root,
     /// and the blocks' empty lanes hit nothing.
-    fn check_structure(bvh: &Bvh8, tris: &[Triangle]) {
+    fn check_structure<const W: usize>(bvh: &WideBvh<W>, tris: &[Triangle]) {
         let mut seen = vec![0u32; tris.len()];
         let mut work = vec![(bvh.root, [f32::NEG_INFINITY; 3], [f32::INFINITY; 3])];
         while let Some((r, lo, hi)) = work.pop() {
             if r & LEAF != 0 {
                 let b = &bvh.blocks[(r & !LEAF) as usize];
-                for lane in 0..WIDTH {
+                for lane in 0..W {
                     let i = b.index[lane];
                     if i == u32::MAX {
                         assert!(b.p.iter().all(|v| v.iter().all(|a| a[lane].is_nan())), "empty lanes hold NaN");
@@ -1088,8 +1200,8 @@ mod tests {
                 continue;
             }
             let node = &bvh.nodes[r as usize];
-            assert!(node.valid.count_ones() >= 2 && node.valid < 1 << WIDTH, "a node has 2 to 8 children");
-            for slot in (0..WIDTH).filter(|&s| node.valid & (1 << s) != 0) {
+            assert!(node.valid.count_ones() >= 2 && node.valid < 1 << W, "a node has 2 to {W} children");
+            for slot in (0..W).filter(|&s| node.valid & (1 << s) != 0) {
                 let clo = [node.bounds[0][slot], node.bounds[1][slot], node.bounds[2][slot]];
                 let chi = [node.bounds[3][slot], node.bounds[4][slot], node.bounds[5][slot]];
                 work.push((node.child[slot], clo, chi));
@@ -1098,27 +1210,37 @@ mod tests {
         assert!(seen.iter().all(|&n| n == 1), "every triangle in exactly one block");
     }
 
-    #[test]
-    fn the_collapse_keeps_every_triangle_once_inside_its_boxes() {
-        for (n, leaf) in [(1, 1), (8, 2), (9, 1), (1000, 1), (1000, 3), (777, 8)] {
+    fn collapse_keeps_every_triangle_once<const W: usize>() {
+        for (n, leaf) in [(1, 1), (4, 2), (5, 1), (8, 2), (9, 1), (1000, 1), (1000, 3), (777, 8)] {
             let tris = scattered(n, n as u64);
-            let bvh = Bvh8::new(&halving_tree(&tris, leaf), &tris);
+            let bvh = WideBvh::<W>::new(&halving_tree(&tris, leaf), &tris);
             check_structure(&bvh, &tris);
-            assert_eq!(bvh.is_empty(), n <= WIDTH, "{n} triangles");
-            // Subtrees of at most 8 triangles are single blocks: at most twice the blocks needed.
-            assert!(bvh.len().1 <= 2 * n.div_ceil(WIDTH) + 1, "{n} triangles in {} blocks", bvh.len().1);
+            assert_eq!(bvh.is_empty(), n <= W, "{n} triangles, width {W}");
+            // Subtrees of at most W triangles are single blocks: at most twice the blocks needed.
+            assert!(bvh.len().1 <= 2 * n.div_ceil(W) + 1, "{n} triangles in {} blocks of {W}", bvh.len().1);
         }
     }
 
+    #[test]
+    fn the_collapse_keeps_every_triangle_once_inside_its_boxes() {
+        collapse_keeps_every_triangle_once::<8>();
+        collapse_keeps_every_triangle_once::<4>();
+    }
+
     /// A leaf of more triangles than a block (a file from another builder) becomes wide nodes
-    /// over runs of 8, boxed by their triangles, and the hits stay the scalar traversal's.
+    /// over runs of `W`, boxed by their triangles, and the hits stay the scalar traversal's.
     #[test]
     fn large_leaves_are_split_into_blocks_and_hit_the_same() {
-        for n in [9, 64, 65, 700] {
+        large_leaves_hit_the_same::<8>();
+        large_leaves_hit_the_same::<4>();
+    }
+
+    fn large_leaves_hit_the_same<const W: usize>() {
+        for n in [5, 9, 64, 65, 700] {
             let tris = scattered(n, 7 + n as u64);
             let nodes = halving_tree(&tris, n as u32);
             assert_eq!(nodes.len(), 1, "one leaf");
-            let bvh = Bvh8::new(&nodes, &tris);
+            let bvh = WideBvh::<W>::new(&nodes, &tris);
             check_structure(&bvh, &tris);
             let mut rng = ::tests::Rng(n as u64);
             let (mut stack, mut cost) = (Stack::default(), Cost::default());
@@ -1141,7 +1263,7 @@ mod tests {
                 );
                 for simd in Simd::available() {
                     let got = bvh.trace_on::<false, Watertight>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut cost);
-                    assert_eq!(got, want, "{simd:?}");
+                    assert_eq!(got, want, "{simd:?}, width {W}");
                 }
                 let mt = crate::traverse::child_pair::<false, MollerTrumbore>(
                     &nodes,
@@ -1155,7 +1277,7 @@ mod tests {
                 for simd in Simd::available() {
                     let got =
                         bvh.trace_on::<false, MollerTrumbore>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut cost);
-                    assert_eq!(got, mt, "{simd:?}");
+                    assert_eq!(got, mt, "{simd:?}, width {W}");
                 }
                 hits += usize::from(want.is_some());
             }
@@ -1167,8 +1289,13 @@ mod tests {
     /// occupied lane of each block tested.
     #[test]
     fn costs_count_boxes_and_triangles_tested() {
+        costs_count::<8>();
+        costs_count::<4>();
+    }
+
+    fn costs_count<const W: usize>() {
         let tris = scattered(300, 3);
-        let bvh = Bvh8::new(&halving_tree(&tris, 2), &tris);
+        let bvh = WideBvh::<W>::new(&halving_tree(&tris, 2), &tris);
         let mut stack = Stack::default();
         let ray = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z);
         let mut a = Cost::default();
@@ -1177,8 +1304,8 @@ mod tests {
         for simd in Simd::available() {
             let mut b = Cost::default();
             let same = bvh.trace_on::<false, Watertight>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut b);
-            assert_eq!(hit, same, "{simd:?}");
-            assert_eq!(a, b, "{simd:?} visits the nodes and blocks the portable traversal visits");
+            assert_eq!(hit, same, "{simd:?}, width {W}");
+            assert_eq!(a, b, "{simd:?}, width {W}, visits the nodes and blocks the portable traversal visits");
         }
     }
 
@@ -1187,8 +1314,13 @@ mod tests {
     /// slab test's NaN rules decide), any hits up to and short of the closest hit.
     #[test]
     fn every_simd_path_finds_the_portable_hits_at_the_same_cost() {
+        every_simd_path::<8>();
+        every_simd_path::<4>();
+    }
+
+    fn every_simd_path<const W: usize>() {
         let tris = scattered(2000, 11);
-        let bvh = Bvh8::new(&halving_tree(&tris, 3), &tris);
+        let bvh = WideBvh::<W>::new(&halving_tree(&tris, 3), &tris);
         let mut rng = ::tests::Rng(5);
         let mut stack = Stack::default();
         let paths = Simd::available();
@@ -1214,7 +1346,7 @@ mod tests {
         }
         assert!(hits > 5000, "only {hits} rays hit");
 
-        fn check(bvh: &Bvh8, ray: &Ray, paths: &[Simd], stack: &mut Stack, hits: &mut usize) {
+        fn check<const W: usize>(bvh: &WideBvh<W>, ray: &Ray, paths: &[Simd], stack: &mut Stack, hits: &mut usize) {
             let mut want_cost = Cost::default();
             let want = bvh.trace_portable::<false, Watertight>(ray, 0.0, f32::INFINITY, stack, &mut want_cost);
             let want_mt = bvh.trace_on::<false, MollerTrumbore>(
@@ -1229,15 +1361,15 @@ mod tests {
             for &simd in paths {
                 let mut cost = Cost::default();
                 let got = bvh.trace_on::<false, Watertight>(simd, ray, 0.0, f32::INFINITY, stack, &mut cost);
-                assert_eq!(got, want, "{simd:?} on {ray:?}");
-                assert_eq!(cost, want_cost, "{simd:?} on {ray:?}");
+                assert_eq!(got, want, "{simd:?}, width {W}, on {ray:?}");
+                assert_eq!(cost, want_cost, "{simd:?}, width {W}, on {ray:?}");
                 let mt = bvh.trace_on::<false, MollerTrumbore>(simd, ray, 0.0, f32::INFINITY, stack, &mut cost);
-                assert_eq!(mt, want_mt, "{simd:?} (Möller-Trumbore) on {ray:?}");
+                assert_eq!(mt, want_mt, "{simd:?}, width {W} (Möller-Trumbore) on {ray:?}");
                 let limits = want.map_or(vec![1.0, f32::INFINITY], |h| vec![h.t, h.t * (1.0 - 1e-3), f32::INFINITY]);
                 for t_max in limits {
                     let any = bvh.trace_on::<true, Watertight>(simd, ray, 0.0, t_max, stack, &mut cost).is_some();
                     let expected = want.is_some_and(|h| h.t <= t_max);
-                    assert_eq!(any, expected, "{simd:?}: any hit to {t_max} on {ray:?}");
+                    assert_eq!(any, expected, "{simd:?}, width {W}: any hit to {t_max} on {ray:?}");
                 }
             }
         }

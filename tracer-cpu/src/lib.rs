@@ -3,8 +3,9 @@
 //!
 //! - [`geometry`]: rays, the slab test, Möller-Trumbore, self-intersection offsets.
 //! - [`traverse`]: scalar ordered child-pair traversal and stackless escape-pointer traversal.
-//! - [`bvh8`]: the wide BVH (8 children per node, collapsed at load from the child-pair tree) and
-//!   its single-ray traversal, 8 boxes or 8 triangles per AVX2 sequence.
+//! - [`bvh8`]: the wide BVHs (8 or 4 children per node, collapsed at load from the child-pair
+//!   tree) and their single-ray traversal, 8 boxes or 8 triangles per AVX2 sequence, 4 per 128-bit
+//!   sequence.
 //! - [`packet`]: 8-wide AVX2 packets for coherent primary and shadow rays over the child-pair tree;
 //!   [`packet8`]: the same packets over the wide BVH.
 //! - [`reference`]: the exact f64 reference: brute-force and traversed closest hits, and images.
@@ -45,6 +46,9 @@ pub enum Method {
     /// all 8 children's boxes, or all of a leaf's triangles, tested in one AVX2 sequence (one
     /// lane at a time without AVX2).
     Bvh8,
+    /// The 4-wide BVH ([`bvh8::Bvh4`]), collapsed at load the same way, one ray at a time: all 4
+    /// children's boxes, or all of a leaf's up to 4 triangles, tested in one 128-bit sequence.
+    Bvh4,
     /// 8-wide SIMD packets (AVX2) for primary and shadow rays, ordered traversal for the rest.
     Packet,
     /// 8-wide SIMD packets (AVX2) over the wide BVH ([`packet8`]) for every stage of a block,
@@ -62,8 +66,15 @@ pub enum Method {
 impl Method {
     /// Every method, in the order `trace-cpu --help` lists them: the one list of CPU method names
     /// (the CLI, `trace-cpu bench`, the examples and the tests take it from here).
-    pub const ALL: [Method; 6] =
-        [Method::Auto, Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8, Method::Bvh8Packet];
+    pub const ALL: [Method; 7] = [
+        Method::Auto,
+        Method::Packet,
+        Method::Ordered,
+        Method::Stackless,
+        Method::Bvh8,
+        Method::Bvh4,
+        Method::Bvh8Packet,
+    ];
 
     /// The method `trace-cpu --method` calls `name`.
     pub fn named(name: &str) -> Option<Method> {
@@ -94,6 +105,7 @@ impl Method {
             Method::Ordered => "ordered",
             Method::Stackless => "stackless",
             Method::Bvh8 => "bvh8",
+            Method::Bvh4 => "bvh4",
             Method::Packet => "packet",
             Method::Bvh8Packet => "bvh8-packet",
             Method::Auto => "auto",

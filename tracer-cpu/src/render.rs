@@ -2,7 +2,7 @@
 //! driver and written straight into the 8-bit image and, when asked for, the AOVs.
 
 use crate::Method;
-use crate::bvh8::Bvh8;
+use crate::bvh8::{Bvh4, Bvh8};
 use crate::geometry::{Cost, Hit, MollerTrumbore, Ray, TriangleTest, Watertight};
 use crate::lanes::{Mixed, OneByOne, Packets, Stage, TraceLanes};
 use crate::packet::{LANES, Rays, Results};
@@ -28,6 +28,8 @@ pub struct Tracer<'a> {
     self_hits: bool,
     /// The wide BVH, collapsed from the child-pair layout on first use.
     wide: std::sync::OnceLock<Bvh8>,
+    /// The 4-wide BVH (`--method bvh4`), likewise.
+    wide4: std::sync::OnceLock<Bvh4>,
 }
 
 impl<'a> Tracer<'a> {
@@ -51,6 +53,7 @@ impl<'a> Tracer<'a> {
             escape: scene.escape.as_deref(),
             self_hits: false,
             wide: std::sync::OnceLock::new(),
+            wide4: std::sync::OnceLock::new(),
         }
     }
 
@@ -73,6 +76,30 @@ impl<'a> Tracer<'a> {
         self.wide.get()
     }
 
+    /// The 4-wide BVH of the child-pair layout, collapsed on the first call; None for a file
+    /// without that layout.
+    pub fn bvh4(&self) -> Option<&Bvh4> {
+        let nodes = self.child_pair?;
+        Some(self.wide4.get_or_init(|| Bvh4::from_source(nodes, &self.triangles())))
+    }
+
+    /// Collapses the wide BVH that `method` walks on this file, where it walks one ([`Self::bvh8`]
+    /// or [`Self::bvh4`]): what a render does on its first ray, done at load so that the render's
+    /// time leaves it out. Returns whether one was made (or was there already).
+    pub fn collapse_for(&self, method: Method) -> bool {
+        match method.resolve(self.scene) {
+            Method::Bvh8 | Method::Bvh8Packet | Method::Auto => self.bvh8().is_some(),
+            Method::Bvh4 => self.bvh4().is_some(),
+            Method::Ordered | Method::Stackless | Method::Packet => false,
+        }
+    }
+
+    /// Bytes of the wide BVHs collapsed so far.
+    pub fn wide_bytes(&self) -> Option<usize> {
+        let sizes = [self.wide.get().map(Bvh8::bytes), self.wide4.get().map(Bvh4::bytes)];
+        sizes.into_iter().flatten().reduce(|a, b| a + b)
+    }
+
     /// The triangles as every path intersects them, in leaf order, in the form this tracer
     /// was made with.
     pub fn triangles(&self) -> Triangles<'_> {
@@ -83,17 +110,18 @@ impl<'a> Tracer<'a> {
     }
 
     /// Bytes of scene data this tracer holds: the file as read ([`crate::file_bytes`]), the
-    /// expanded triangles where it made them, and the wide BVH where it was collapsed.
+    /// expanded triangles where it made them, and the wide BVHs where they were collapsed.
     pub fn held_bytes(&self) -> u64 {
         crate::file_bytes(self.scene)
             + std::mem::size_of_val(&self.tris[..]) as u64
-            + self.wide.get().map_or(0, |w| w.bytes() as u64)
+            + self.wide_bytes().unwrap_or(0) as u64
     }
 
     /// The scalar traversal `method` names, bound to the layout it reads: the child-pair layout
     /// for [`Method::Ordered`] and [`Method::Packet`], the escape-pointer layout for
     /// [`Method::Stackless`], the wide BVH collapsed from the child-pair layout for
-    /// [`Method::Bvh8`] and the single rays of [`Method::Auto`], and for [`Method::Auto`] on a
+    /// [`Method::Bvh8`] and the single rays of [`Method::Auto`], the 4-wide one for
+    /// [`Method::Bvh4`], and for [`Method::Auto`] on a
     /// file with only the escape-pointer layout, the stackless walk. A method
     /// whose layout the file lacks is refused here ([`RenderError::MissingLayout`]), never walked
     /// on the other layout: the caller decides, once, which traversal its rays take.
@@ -106,6 +134,7 @@ impl<'a> Tracer<'a> {
             Method::Bvh8 | Method::Bvh8Packet | Method::Auto => {
                 Layout::Wide(self.bvh8().ok_or_else(|| missing("child-pair"))?)
             }
+            Method::Bvh4 => Layout::Wide4(self.bvh4().ok_or_else(|| missing("child-pair"))?),
             Method::Ordered | Method::Packet => {
                 Layout::ChildPair(self.child_pair.ok_or_else(|| missing("child-pair"))?)
             }
@@ -120,6 +149,7 @@ enum Layout<'a> {
     ChildPair(&'a [Node]),
     Escape(&'a [Node]),
     Wide(&'a Bvh8),
+    Wide4(&'a Bvh4),
 }
 
 /// A scalar traversal bound to its tracer and to the layout it walks, made by [`Tracer::walk`]
@@ -136,12 +166,14 @@ impl<'t> Walk<'t> {
     }
 
     /// The traversal this walk runs: [`Method::Ordered`] on the child-pair layout,
-    /// [`Method::Stackless`] on the escape-pointer layout or [`Method::Bvh8`] on the wide BVH.
+    /// [`Method::Stackless`] on the escape-pointer layout, [`Method::Bvh8`] on the wide BVH or
+    /// [`Method::Bvh4`] on the 4-wide one.
     pub fn method(&self) -> Method {
         match self.layout {
             Layout::ChildPair(_) => Method::Ordered,
             Layout::Escape(_) => Method::Stackless,
             Layout::Wide(_) => Method::Bvh8,
+            Layout::Wide4(_) => Method::Bvh4,
         }
     }
 
@@ -149,7 +181,7 @@ impl<'t> Walk<'t> {
     pub(crate) fn child_pair(&self) -> Option<&'t [Node]> {
         match self.layout {
             Layout::ChildPair(nodes) => Some(nodes),
-            Layout::Escape(_) | Layout::Wide(_) => None,
+            Layout::Escape(_) | Layout::Wide(_) | Layout::Wide4(_) => None,
         }
     }
 
@@ -214,6 +246,7 @@ impl<'t> Walk<'t> {
             }
             // The wide BVH tests its own leaf blocks, whatever the form.
             (Layout::Wide(bvh), _) => bvh.trace::<ANY, T>(ray, t_min, t_max, stack, cost),
+            (Layout::Wide4(bvh), _) => bvh.trace::<ANY, T>(ray, t_min, t_max, stack, cost),
         }
     }
 }
@@ -331,6 +364,13 @@ impl Canvas {
             touch(&mut a.nodes);
             touch(&mut a.tris);
         }
+    }
+
+    /// The buffers of a frame rendered before, to render the next frame into without fresh
+    /// memory (a benchmark's repeated frames, as the ray report reuses its output): every pixel
+    /// of the image and of the AOVs is written again, so what they held does not show.
+    pub fn reuse(image: Image) -> Self {
+        Canvas { width: image.width, height: image.height, rgb: image.rgb, aov: image.aov }
     }
 
     /// Whether these buffers are a frame of `settings`.
@@ -839,14 +879,23 @@ fn block<L: Lanes, T: TraceLanes>(
     if samples.len() > 1 {
         colour = colour * (L::splat(1.0) / L::splat(samples.len() as f32));
     }
-    let rgb = shade::to_u8_lanes(colour);
+    let rgb = shade::to_rgb_rows(colour);
+    if band.aov.is_none() && bx + 4 <= w && dy + 2 <= rows {
+        // The whole block inside the image: two runs of 12 bytes.
+        for (r, row) in rgb.iter().enumerate() {
+            let p = (dy + r) * w + bx;
+            band.rgb[p..p + 4].as_flattened_mut().copy_from_slice(&row[..12]);
+        }
+        return out.rays;
+    }
     for i in 0..LANES {
         if !primary.valid[i] {
             continue;
         }
         let (x, y) = lane_xy(i);
         let p = y * w + x;
-        band.rgb[p] = rgb[i];
+        let at = 3 * (i % 4);
+        band.rgb[p] = [rgb[i / 4][at], rgb[i / 4][at + 1], rgb[i / 4][at + 2]];
         if let Some(a) = &mut band.aov {
             let n = out.normal;
             a.t[p] = out.t[i];

@@ -72,16 +72,25 @@ pub fn surface_of<R: Real>(
     v: R,
 ) -> SurfaceOf<R> {
     let zero = R::splat(0.0);
+    let flat = flat_surface_of(e1, e2, origin, dir, t);
+    let interp = n[0] * (R::splat(1.0) - u - v) + n[1] * u + n[2] * v;
+    let (s, ok) = interp.try_normalize();
+    let s = V3::select(s.dot(flat.geometric).lt(zero), -s, s);
+    SurfaceOf { shading: V3::select(ok, s, flat.geometric), ..flat }
+}
+
+/// [`surface_of`] of a flat triangle (zero vertex normals), which is shaded with its geometric
+/// normal: the interpolated normal is zero (or NaN), never normalisable, so `surface_of` ends in
+/// the same surface; without the interpolation, for scenes whose triangles are all flat.
+#[inline(always)]
+pub fn flat_surface_of<R: Real>(e1: V3<R>, e2: V3<R>, origin: V3<R>, dir: V3<R>, t: R) -> SurfaceOf<R> {
     let point = origin + dir * t;
     // A degenerate (zero-area) triangle has no normal of its own: face the ray.
     let (ng, ok) = e1.cross(e2).try_normalize();
     let ng = V3::select(ok, ng, -dir);
-    let front = dir.dot(ng).lt(zero);
+    let front = dir.dot(ng).lt(R::splat(0.0));
     let geometric = V3::select(front, ng, -ng);
-    let interp = n[0] * (R::splat(1.0) - u - v) + n[1] * u + n[2] * v;
-    let (s, ok) = interp.try_normalize();
-    let s = V3::select(s.dot(geometric).lt(zero), -s, s);
-    SurfaceOf { point, geometric, shading: V3::select(ok, s, geometric), front }
+    SurfaceOf { point, geometric, shading: geometric, front }
 }
 
 /// Ray casting: a white point light at the eye, Lambert only.
@@ -224,13 +233,26 @@ pub fn to_u8_lanes<L: Lanes>(c: V3<L>) -> [[u8; 3]; LANES] {
     std::array::from_fn(|i| [r[i] as u8, g[i] as u8, b[i] as u8])
 }
 
+/// [`to_u8_lanes`] laid out as the block's two rows of four pixels: RGB bytes 0..12 of each row
+/// ([`Lanes::rgb_rows`]), ready to be copied into the image.
+#[inline(always)]
+pub fn to_rgb_rows<L: Lanes>(c: V3<L>) -> [[u8; 16]; 2] {
+    L::rgb_rows(scaled(c.x), scaled(c.y), scaled(c.z))
+}
+
 #[inline(always)]
 fn quantize<L: Lanes>(x: L) -> [i32; LANES] {
+    scaled(x).trunc()
+}
+
+/// Clamped, scaled and offset into [0.5, 255.5], NaN to 0: what `as u8` truncates.
+#[inline(always)]
+fn scaled<L: Lanes>(x: L) -> L {
     let (zero, one) = (L::splat(0.0), L::splat(1.0));
     let x = L::select(x.lt(zero), zero, x);
     let x = L::select(x.gt(one), one, x);
     let x = x * L::splat(255.0) + L::splat(0.5);
-    L::select(x.eq(x), x, zero).trunc()
+    L::select(x.eq(x), x, zero)
 }
 
 #[cfg(test)]

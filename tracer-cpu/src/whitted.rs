@@ -15,7 +15,7 @@ use crate::render::Tracer;
 use crate::shade::{self, SurfaceOf};
 use crate::vertices::{TriangleSource, Triangles};
 use crate::wide::{Lanes, Mask, V3};
-use bvh_format::{Light, Material, SceneFile};
+use bvh_format::{Light, Material, SceneFile, Triangle};
 use glam::Vec3;
 use render_spec::{Ao, BounceStop, Intersect, Mode, NO_TRIANGLE, Offset, RayCounts, Settings, sequence};
 
@@ -43,6 +43,9 @@ pub struct Shading<'a> {
     aovs: bool,
     /// Whether to count the rays their own triangle meets ([`render_spec::SelfHits`]).
     self_hits: bool,
+    /// Whether every triangle is flat (the file has no vertex normals): surfaces are then
+    /// shaded with their geometric normals without reading or interpolating any.
+    flat: bool,
 }
 
 /// What a block produced per lane, and the rays it traced.
@@ -54,7 +57,7 @@ pub struct Block {
     pub t: [f32; LANES],
     pub normal: [[f32; LANES]; 3],
     pub prim: [u32; LANES],
-    /// Work over all of the lane's rays.
+    /// Work over all of the lane's rays (with AOVs only: the cost AOVs are its only reader).
     pub cost: [Cost; LANES],
     pub rays: RayCounts,
 }
@@ -72,27 +75,38 @@ impl Default for Block {
     }
 }
 
-/// The materials of the lanes that hit something (a default material elsewhere).
-struct Materials<L: Lanes> {
-    kd: V3<L>,
-    ks: V3<L>,
-    shininess: L,
-    kr: L,
-    kt: L,
-    ior: L,
+/// The materials of the lanes' hit triangles (triangle 0's in lanes without a hit), read as
+/// their three 16-byte rows: `kd, shininess`, `ks, kr`, `kt, ior` ([`Material`]'s layout), each
+/// row for eight lanes in one gather and only where the mode uses it.
+struct Materials<'a> {
+    rows: [&'a [[f32; 4]; 3]; LANES],
 }
 
-impl<L: Lanes> Materials<L> {
+impl<'a> Materials<'a> {
     #[inline(always)]
-    fn gather(m: &[&Material; LANES]) -> Self {
-        Self {
-            kd: V3::from_lanes(|i| Vec3::from(m[i].kd)),
-            ks: V3::from_lanes(|i| Vec3::from(m[i].ks)),
-            shininess: L::from_fn(|i| m[i].shininess),
-            kr: L::from_fn(|i| m[i].kr),
-            kt: L::from_fn(|i| m[i].kt),
-            ior: L::from_fn(|i| m[i].ior),
-        }
+    fn of(materials: &'a [Material], index: &[usize; LANES]) -> Self {
+        Self { rows: std::array::from_fn(|i| bytemuck::cast_ref(&materials[index[i]])) }
+    }
+
+    /// `kd` and the shininess.
+    #[inline(always)]
+    fn kd_shininess<L: Lanes>(&self) -> (V3<L>, L) {
+        let [x, y, z, shininess] = L::gather4(std::array::from_fn(|i| &self.rows[i][0]));
+        (V3::new(x, y, z), shininess)
+    }
+
+    /// `ks` and `kr`.
+    #[inline(always)]
+    fn ks_kr<L: Lanes>(&self) -> (V3<L>, L) {
+        let [x, y, z, kr] = L::gather4(std::array::from_fn(|i| &self.rows[i][1]));
+        (V3::new(x, y, z), kr)
+    }
+
+    /// `kt` and `ior`.
+    #[inline(always)]
+    fn kt_ior<L: Lanes>(&self) -> (L, L) {
+        let [kt, ior, ..] = L::gather4(std::array::from_fn(|i| &self.rows[i][2]));
+        (kt, ior)
     }
 }
 
@@ -119,6 +133,7 @@ impl<'a> Shading<'a> {
             offset: s.accuracy.offset,
             aovs: s.aovs,
             self_hits: false,
+            flat: scene.normal_indices.is_empty(),
         }
     }
 
@@ -164,7 +179,7 @@ impl<'a> Shading<'a> {
         for depth in 0u32.. {
             // The surfaces hit; a miss adds the background and ends the path.
             let valid = L::mask(rays.valid);
-            add_cost(&mut out.cost, &rays.valid, &hits);
+            self.keep_cost(&mut out.cost, &rays.valid, &hits);
             let found = L::mask(hits.hit);
             let hit = valid & found;
             let miss = valid & !found;
@@ -174,7 +189,7 @@ impl<'a> Shading<'a> {
                 break;
             }
             let hit_lanes = L::bools(hit);
-            let (s, tri) = self.surfaces::<L>(&rays, &hits, hit_lanes);
+            let (s, tri, material) = self.surfaces::<L>(&rays, &hits, hit_lanes);
             let dir = V3::<L>::from_arrays(&rays.dir);
             if depth == 0 && self.aovs {
                 out.t = L::select(hit, L::from_array(hits.t), L::from_array(out.t)).to_array();
@@ -185,12 +200,11 @@ impl<'a> Shading<'a> {
                     }
                 }
             }
-            let m = Materials::<L>::gather(&std::array::from_fn(|i| {
-                &scene.materials[self.triangles.triangle(tri[i] as u32).material as usize]
-            }));
+            let m = Materials::of(&scene.materials, &material);
+            let (kd, shininess) = m.kd_shininess::<L>();
             match self.mode {
                 Mode::Cast => {
-                    colour = V3::select(hit, shade::cast_of(m.kd, s.shading, dir), colour);
+                    colour = V3::select(hit, shade::cast_of(kd, s.shading, dir), colour);
                     break;
                 }
                 Mode::Ao(ao) => {
@@ -200,18 +214,19 @@ impl<'a> Shading<'a> {
                 }
                 Mode::Diffuse => {
                     let light = self.diffuse_light::<L, T>(&s, (hit_lanes, &tri), seeds, lanes, &mut out);
-                    colour = V3::select(hit, m.kd.mul_each(light), colour);
+                    colour = V3::select(hit, kd.mul_each(light), colour);
                     break;
                 }
                 Mode::Whitted => {}
             }
 
             // Phong per light, each light's shadow rays traced together.
-            let mut local = V3::select(hit, V3::splat(self.ambient).mul_each(m.kd), V3::zero());
+            let (ks, kr) = m.ks_kr::<L>();
+            let mut local = V3::select(hit, V3::splat(self.ambient).mul_each(kd), V3::zero());
             for light in self.lights {
                 let position = V3::<L>::splat(Vec3::from(light.position));
                 let l = (position - s.point).normalize_or_zero();
-                let term = shade::phong_of(m.kd, m.ks, m.shininess, s.shading, dir, l, hit);
+                let term = shade::phong_of(kd, ks, shininess, s.shading, dir, l, hit);
                 // A light behind the surface needs no shadow ray.
                 let asks = hit & !term.is_zero();
                 if !asks.any() {
@@ -229,7 +244,7 @@ impl<'a> Shading<'a> {
                 out.rays.shadow += L::count(asks) as u64;
                 out.rays.self_hits.shadow += self.count_self_hits(&shadow, &tri);
                 let blocked = lanes.occluded_in(Stage::Shadow, &shadow, self.intersect);
-                add_cost(&mut out.cost, &shadow.valid, &blocked);
+                self.keep_cost(&mut out.cost, &shadow.valid, &blocked);
                 let lit = asks & !L::mask(blocked.hit);
                 local = V3::select(lit, local + term.mul_each(V3::splat(Vec3::from(light.colour))), local);
             }
@@ -240,7 +255,8 @@ impl<'a> Shading<'a> {
             if remaining == 0 {
                 break;
             }
-            let sec = shade::secondary_of(m.kr, m.kt, m.ior, s.shading, s.front, dir);
+            let (kt, ior) = m.kt_ior::<L>();
+            let sec = shade::secondary_of(kr, kt, ior, s.shading, s.front, dir);
             let go = hit & sec.exists & shade::worth_of(weight * sec.factor, &self.stop, self.stop.chain(remaining));
             if !go.any() {
                 break;
@@ -273,24 +289,42 @@ pub struct Seeds {
 
 impl Shading<'_> {
     /// The surfaces at the lanes' hits (`hit`: lanes that found one; the others hold whatever
-    /// triangle 0 gives) and the hit triangles.
+    /// triangle 0 gives), the hit triangles and their materials' indices.
     #[inline(always)]
-    fn surfaces<L: Lanes>(&self, rays: &Rays, hits: &Results, hit: [bool; LANES]) -> (SurfaceOf<L>, [usize; LANES]) {
-        let scene = self.scene;
+    fn surfaces<L: Lanes>(
+        &self,
+        rays: &Rays,
+        hits: &Results,
+        hit: [bool; LANES],
+    ) -> (SurfaceOf<L>, [usize; LANES], [usize; LANES]) {
         let tri: [usize; LANES] = std::array::from_fn(|i| if hit[i] { hits.tri[i] as usize } else { 0 });
         let (origin, dir) = (V3::<L>::from_arrays(&rays.origin), V3::<L>::from_arrays(&rays.dir));
-        // Edges and vertex normals (zero for a flat triangle) padded to 16 bytes per lane, for
-        // the 4-float gathers.
-        let pad = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
-        let edges: [[[f32; 4]; 2]; LANES] = tri.map(|k| {
-            let (e1, e2) = shade::edges(&self.triangles.triangle(k as u32));
-            [pad(e1), pad(e2)]
-        });
-        let normals: [[[f32; 4]; 3]; LANES] =
-            tri.map(|k| shade::shading_normals(scene.vertex_normals(k)).map(|n| pad(n.into())));
+        // The corners as stored, eight lanes per gather; the edges as `shade::edges` takes them.
+        let ([p0, p1, p2], material) = match self.triangles {
+            Triangles::Expanded(t) => corners::<L>(std::array::from_fn(|i| &t[tri[i]])),
+            Triangles::Indexed(t) => {
+                let local: [Triangle; LANES] = std::array::from_fn(|i| t.triangle(tri[i] as u32));
+                corners::<L>(std::array::from_fn(|i| &local[i]))
+            }
+        };
+        let (e1, e2) = (p1 - p0, p2 - p0);
+        let t = L::from_array(hits.t);
+        if self.flat {
+            return (shade::flat_surface_of(e1, e2, origin, dir, t), tri, material);
+        }
+        // Vertex normals (zero for a flat triangle) padded to 16 bytes per lane.
+        let scene = self.scene;
+        let mut normals = [[[0.0f32; 4]; 3]; LANES];
+        for i in 0..LANES {
+            if let Some(n) = scene.vertex_normals(tri[i]) {
+                for (pad, n) in normals[i].iter_mut().zip(n) {
+                    *pad = [n[0], n[1], n[2], 0.0];
+                }
+            }
+        }
         let s = shade::surface_of(
-            L::gather3(std::array::from_fn(|i| &edges[i][0])),
-            L::gather3(std::array::from_fn(|i| &edges[i][1])),
+            e1,
+            e2,
             [
                 L::gather3(std::array::from_fn(|i| &normals[i][0])),
                 L::gather3(std::array::from_fn(|i| &normals[i][1])),
@@ -298,11 +332,20 @@ impl Shading<'_> {
             ],
             origin,
             dir,
-            L::from_array(hits.t),
+            t,
             L::from_array(hits.u),
             L::from_array(hits.v),
         );
-        (s, tri)
+        (s, tri, material)
+    }
+
+    /// Adds the work of the `m` lanes of `r` to `cost`, where the frame keeps it (for the cost
+    /// AOVs, its only reader).
+    #[inline(always)]
+    fn keep_cost(&self, cost: &mut [Cost; LANES], m: &[bool; LANES], r: &Results) {
+        if self.aovs {
+            add_cost(cost, m, r);
+        }
     }
 
     /// The rays of the incoherent modes from the surfaces `s` of the `hit` lanes: origins moved
@@ -353,7 +396,7 @@ impl Shading<'_> {
             out.rays.ao += rays.count() as u64;
             out.rays.self_hits.ao += self.count_self_hits(&rays, tri);
             let blocked = lanes.occluded_in(Stage::Ao, &rays, self.intersect);
-            add_cost(&mut out.cost, &rays.valid, &blocked);
+            self.keep_cost(&mut out.cost, &rays.valid, &blocked);
             for i in 0..LANES {
                 open[i] += u32::from(hit[i] && !blocked.hit[i]);
             }
@@ -378,16 +421,14 @@ impl Shading<'_> {
         out.rays.diffuse += rays.count() as u64;
         out.rays.self_hits.diffuse += self.count_self_hits(&rays, tri);
         let hits = lanes.closest_in(Stage::Diffuse, &rays, self.intersect);
-        add_cost(&mut out.cost, &rays.valid, &hits);
+        self.keep_cost(&mut out.cost, &rays.valid, &hits);
         let found: [bool; LANES] = std::array::from_fn(|i| hit[i] && hits.hit[i]);
         let background = V3::<L>::splat(self.background);
         if !found.iter().any(|&f| f) {
             return background;
         }
-        let (b, bounce_tri) = self.surfaces::<L>(&rays, &hits, found);
-        let kd = V3::from_lanes(|i| {
-            Vec3::from(self.scene.materials[self.triangles.triangle(bounce_tri[i] as u32).material as usize].kd)
-        });
+        let (b, _, material) = self.surfaces::<L>(&rays, &hits, found);
+        let (kd, _) = Materials::of(&self.scene.materials, &material).kd_shininess::<L>();
         let lit = shade::cast_of(kd, b.shading, V3::from_arrays(&rays.dir));
         V3::select(L::mask(found), lit, background)
     }
@@ -401,6 +442,17 @@ impl Shading<'_> {
             Offset::Fixed(d) => p + n * L::splat(d),
         }
     }
+}
+
+/// The corners of eight triangles as stored (each padded to 16 bytes), eight lanes per gather,
+/// and their materials' indices.
+#[inline(always)]
+fn corners<L: Lanes>(t: [&Triangle; LANES]) -> ([V3<L>; 3], [usize; LANES]) {
+    let rows: [&[[f32; 4]; 3]; LANES] = std::array::from_fn(|i| bytemuck::cast_ref(t[i]));
+    let p0 = L::gather3(std::array::from_fn(|i| &rows[i][0]));
+    let p1 = L::gather3(std::array::from_fn(|i| &rows[i][1]));
+    let p2 = L::gather3(std::array::from_fn(|i| &rows[i][2]));
+    ([p0, p1, p2], std::array::from_fn(|i| t[i].material as usize))
 }
 
 #[inline(always)]

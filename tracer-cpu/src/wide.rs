@@ -35,7 +35,7 @@ pub trait Real:
     /// `if self > o { self } else { o }`: `f32::max`, except that a tie of +0 and -0 gives `o`
     /// and a NaN `o` is kept.
     fn max(self, o: Self) -> Self;
-    /// `render_spec::phong_pow` in the lanes of `m`, 1 elsewhere (idle lanes skip it).
+    /// `render_spec::phong_pow` in the lanes of `m`, 1 elsewhere (none computed when no lane is live).
     fn powf_in(self, e: Self, m: Self::Mask) -> Self;
     fn lt(self, o: Self) -> Self::Mask;
     fn le(self, o: Self) -> Self::Mask;
@@ -130,6 +130,31 @@ pub trait Lanes: Real {
             (o[0][i], o[1][i], o[2][i]) = (r.x, r.y, r.z);
         }
         V3::from_arrays(&o)
+    }
+    /// The four components of a 16-byte row per lane (a triangle's corner with its padding word,
+    /// a material's row).
+    #[inline(always)]
+    fn gather4(v: [&[f32; 4]; LANES]) -> [Self; 4] {
+        let mut a = [[0.0; LANES]; 4];
+        for i in 0..LANES {
+            for (c, a) in a.iter_mut().enumerate() {
+                a[i] = v[i][c];
+            }
+        }
+        [Self::from_array(a[0]), Self::from_array(a[1]), Self::from_array(a[2]), Self::from_array(a[3])]
+    }
+    /// The 8-bit colours of the lanes, from red, green and blue already in `[0, 256)`: each
+    /// truncated (`as u8`), laid out as the block's two rows of four pixels (lanes 0-3 and 4-7),
+    /// three bytes per pixel in bytes 0..12 of each row.
+    #[inline(always)]
+    fn rgb_rows(r: Self, g: Self, b: Self) -> [[u8; 16]; 2] {
+        let (r, g, b) = (r.trunc(), g.trunc(), b.trunc());
+        let mut rows = [[0u8; 16]; 2];
+        for i in 0..LANES {
+            let row = &mut rows[i / 4][3 * (i % 4)..3 * (i % 4) + 3];
+            row.copy_from_slice(&[r[i] as u8, g[i] as u8, b[i] as u8]);
+        }
+        rows
     }
     /// The first three components of a 16-byte vector per lane (triangle edges, vertex normals).
     #[inline(always)]
@@ -527,10 +552,14 @@ mod avx {
         fn max(self, o: Self) -> Self {
             Avx8(unsafe { _mm256_max_ps(self.0, o.0) })
         }
+        /// `render_spec::phong_pow` eight lanes at a time: the same operations in the same order,
+        /// its branches as selects (each IEEE operation rounds alike in a lane and in a scalar).
         #[inline(always)]
         fn powf_in(self, e: Self, m: AvxMask) -> Self {
-            let (b, e, m) = (self.to_array(), e.to_array(), Self::bools(m));
-            Self::from_fn(|i| if m[i] { render_spec::phong_pow(b[i], e[i]) } else { 1.0 })
+            if !m.any() {
+                return Self::splat(1.0);
+            }
+            Self::select(m, pow(self, e), Self::splat(1.0))
         }
         // Ordered, quiet comparisons: false where either side is NaN, as Rust's are.
         #[inline(always)]
@@ -561,6 +590,63 @@ mod avx {
         #[inline(always)]
         fn select(m: AvxMask, a: Self, b: Self) -> Self {
             Avx8(unsafe { _mm256_blendv_ps(b.0, a.0, m.0) })
+        }
+    }
+
+    /// [`render_spec::phong_pow`] in every lane.
+    #[inline(always)]
+    fn pow(x: Avx8, n: Avx8) -> Avx8 {
+        use render_spec::constants::{POW_EXP2, POW_LOG2};
+        #[inline(always)]
+        fn int(v: i32) -> __m256i {
+            unsafe { _mm256_set1_epi32(v) }
+        }
+        #[inline(always)]
+        fn as_f32(v: __m256i) -> Avx8 {
+            Avx8(unsafe { _mm256_castsi256_ps(v) })
+        }
+        /// `2^v` for integers `v` of the normal range, as the bits of a float.
+        #[inline(always)]
+        fn scale(v: __m256i) -> Avx8 {
+            as_f32(unsafe { _mm256_slli_epi32::<23>(_mm256_add_epi32(v, int(127))) })
+        }
+        unsafe {
+            // x NaN or <= 0: 0.
+            let none = !x.gt(Avx8::splat(0.0));
+            // log2(x): a subnormal is scaled into the normal range first (exact).
+            let sub = x.lt(Avx8::splat(f32::MIN_POSITIVE));
+            let xs = Avx8::select(sub, x * Avx8::splat(18446744073709551616.0), x);
+            let e = _mm256_and_si256(int(-64), _mm256_castps_si256(sub.0));
+            let bits = _mm256_castps_si256(xs.0);
+            let e = _mm256_add_epi32(e, _mm256_sub_epi32(_mm256_srli_epi32::<23>(bits), int(127)));
+            let m = as_f32(_mm256_or_si256(_mm256_and_si256(bits, int(0x007f_ffff)), int(0x3f80_0000)));
+            let big = m.gt(Avx8::splat(std::f32::consts::SQRT_2));
+            let m = Avx8::select(big, m * Avx8::splat(0.5), m);
+            // `big` is all ones (-1) where it holds: subtracting it adds 1.
+            let e = _mm256_sub_epi32(e, _mm256_castps_si256(big.0));
+            let t = m - Avx8::splat(1.0);
+            let mut p = Avx8::splat(POW_LOG2[8]);
+            for k in (0..8).rev() {
+                p = p * t + Avx8::splat(POW_LOG2[k]);
+            }
+            let y = n * (t * p + Avx8(_mm256_cvtepi32_ps(e)));
+            // exp2(y).
+            let i = Avx8(_mm256_floor_ps((y + Avx8::splat(0.5)).0));
+            let f = y - i;
+            let mut q = Avx8::splat(POW_EXP2[6]);
+            for k in (0..6).rev() {
+                q = q * f + Avx8::splat(POW_EXP2[k]);
+            }
+            // 2^i in two factors, so that results below the normal range come out subnormal.
+            let i = _mm256_cvttps_epi32(i.0);
+            let small = _mm256_cmpgt_epi32(int(-126), i);
+            let a = _mm256_add_epi32(i, _mm256_and_si256(small, int(64)));
+            let b = _mm256_and_si256(small, int(-64));
+            let r = q * scale(a) * scale(b);
+            let r = Avx8::select(y.gt(Avx8::splat(128.0)), Avx8::splat(f32::INFINITY), r);
+            let r = Avx8::select(y.lt(Avx8::splat(-150.0)), Avx8::splat(0.0), r);
+            let r = Avx8::select(y.eq(Avx8::splat(0.0)), Avx8::splat(1.0), r);
+            Avx8::select(none, Avx8::splat(0.0), r)
         }
     }
 
@@ -647,6 +733,48 @@ mod avx {
                     Avx8(_mm256_shuffle_ps::<0xEE>(xy01, xy23)),
                     Avx8(_mm256_shuffle_ps::<0x44>(zw01, zw23)),
                 )
+            }
+        }
+        /// Eight 4-float loads and a transpose instead of 32 single-float inserts.
+        #[inline(always)]
+        fn gather4(v: [&[f32; 4]; LANES]) -> [Self; 4] {
+            #[inline(always)]
+            fn pair(lo: &[f32; 4], hi: &[f32; 4]) -> __m256 {
+                unsafe {
+                    _mm256_insertf128_ps::<1>(
+                        _mm256_castps128_ps256(_mm_loadu_ps(lo.as_ptr())),
+                        _mm_loadu_ps(hi.as_ptr()),
+                    )
+                }
+            }
+            unsafe {
+                let (t0, t1, t2, t3) = (pair(v[0], v[4]), pair(v[1], v[5]), pair(v[2], v[6]), pair(v[3], v[7]));
+                let xy01 = _mm256_unpacklo_ps(t0, t1);
+                let zw01 = _mm256_unpackhi_ps(t0, t1);
+                let xy23 = _mm256_unpacklo_ps(t2, t3);
+                let zw23 = _mm256_unpackhi_ps(t2, t3);
+                [
+                    Avx8(_mm256_shuffle_ps::<0x44>(xy01, xy23)),
+                    Avx8(_mm256_shuffle_ps::<0xEE>(xy01, xy23)),
+                    Avx8(_mm256_shuffle_ps::<0x44>(zw01, zw23)),
+                    Avx8(_mm256_shuffle_ps::<0xEE>(zw01, zw23)),
+                ]
+            }
+        }
+        /// Truncation, the three channels merged into one 32-bit word per lane (`r | g << 8 |
+        /// b << 16`) and each 128-bit half (one row of the block) shuffled into 12 bytes.
+        #[inline(always)]
+        fn rgb_rows(r: Self, g: Self, b: Self) -> [[u8; 16]; 2] {
+            unsafe {
+                let (r, g, b) = (_mm256_cvttps_epi32(r.0), _mm256_cvttps_epi32(g.0), _mm256_cvttps_epi32(b.0));
+                let word = _mm256_or_si256(r, _mm256_or_si256(_mm256_slli_epi32::<8>(g), _mm256_slli_epi32::<16>(b)));
+                let pick = _mm256_setr_epi8(
+                    0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1, 0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1,
+                    -1, -1, -1,
+                );
+                let mut rows = [[0u8; 16]; 2];
+                _mm256_storeu_si256(rows.as_mut_ptr().cast(), _mm256_shuffle_epi8(word, pick));
+                rows
             }
         }
         #[inline(always)]
@@ -747,6 +875,20 @@ mod tests {
                 (flat(&[s.point, s.geometric, s.shading]), vec![s.front])
             },
         );
+        // A flat triangle's surface without the interpolation is the surface with zero normals.
+        let zero = V3::splat(Vec3::ZERO);
+        check::<L>(
+            "flat surface",
+            &inputs,
+            |a| {
+                let s = shade::surface_of(a[0], a[1], [zero; 3], a[5], a[6], a[7].x, a[7].y, a[7].z);
+                (flat(&[s.point, s.geometric, s.shading]), vec![s.front])
+            },
+            |a| {
+                let s = shade::flat_surface_of(a[0], a[1], a[5], a[6], a[7].x);
+                (flat(&[s.point, s.geometric, s.shading]), vec![s.front])
+            },
+        );
         // Inputs: 0 kd, 1 ks, 2 shading normal, 3 dir, 4 to light, 5 (shininess, kr, kt), 6 ior.
         check::<L>(
             "cast, phong, secondary",
@@ -794,8 +936,31 @@ mod tests {
         for chunk in values.chunks(LANES).filter(|c| c.len() == LANES) {
             let v = V3::<L>::new(L::from_fn(|i| chunk[i]), L::from_fn(|i| chunk[(i + 3) % LANES]), L::splat(0.25));
             let got = shade::to_u8_lanes(v);
+            let rows = shade::to_rgb_rows(v);
             for i in 0..LANES {
                 assert_eq!(got[i], shade::to_u8(Vec3::new(chunk[i], chunk[(i + 3) % LANES], 0.25)), "{}", chunk[i]);
+                let at = 3 * (i % 4);
+                assert_eq!(rows[i / 4][at..at + 3], got[i], "{}: the row layout", chunk[i]);
+            }
+        }
+    }
+
+    /// The Phong power on lanes against `render_spec::phong_pow`: every 1021st positive float
+    /// (zero, subnormals, the normal range, infinity, NaN) and their negatives, at exponents from
+    /// below 1 to far past the dragon's 60, in lanes that take the power and lanes that must give 1.
+    fn power_like_one_ray<L: Lanes>() {
+        let mut x: Vec<f32> = (0..=0x7fc0_0000u32).step_by(1021).map(f32::from_bits).collect();
+        x.extend([1.0, f32::MIN_POSITIVE, std::f32::consts::SQRT_2, 0.5, 0.999_999_9, f32::NAN, f32::INFINITY]);
+        let negatives: Vec<f32> = x.iter().step_by(97).map(|v| -v).collect();
+        x.extend(negatives);
+        let live = L::mask([true, true, false, true, true, true, true, false]);
+        for n in [0.5f32, 1.0, 2.0, 7.5, 40.0, 60.0, 128.0, 1000.0] {
+            for chunk in x.chunks(LANES).filter(|c| c.len() == LANES) {
+                let got = L::from_fn(|i| chunk[i]).powf_in(L::splat(n), live).to_array();
+                for i in 0..LANES {
+                    let want = if L::bools(live)[i] { render_spec::phong_pow(chunk[i], n) } else { 1.0 };
+                    assert_eq!(bits1(got[i]), bits1(want), "{}^{n}", chunk[i]);
+                }
             }
         }
     }
@@ -817,6 +982,7 @@ mod tests {
     fn portable_lanes_match_one_ray_bit_for_bit() {
         all_formulas::<F8>();
         quantize_like_one_ray::<F8>();
+        power_like_one_ray::<F8>();
         offsets_like_one_ray::<F8>();
     }
 
@@ -826,6 +992,7 @@ mod tests {
         assert!(crate::packet::available(), "this test needs a CPU with AVX2");
         all_formulas::<Avx8>();
         quantize_like_one_ray::<Avx8>();
+        power_like_one_ray::<Avx8>();
         offsets_like_one_ray::<Avx8>();
     }
 

@@ -7,7 +7,7 @@ use bvh_format::SceneFile;
 use glam::Vec3;
 use rayon::prelude::*;
 use render_spec::Intersect;
-use tracer_cpu::bvh8::Simd;
+use tracer_cpu::bvh8::{Simd, WideBvh};
 use tracer_cpu::geometry::{MollerTrumbore, TriangleTest, Watertight};
 use tracer_cpu::reference::{self, RefHit};
 use tracer_cpu::traverse::Stack;
@@ -78,25 +78,8 @@ fn fast_hits<T: TriangleTest>(
         let a = tracer.walk(Method::Ordered).unwrap().closest_with(T::KIND, &ray, 0.0, f32::INFINITY, stack, &mut c);
         let b = tracer.walk(Method::Stackless).unwrap().closest_with(T::KIND, &ray, 0.0, f32::INFINITY, stack, &mut c);
         assert_eq!(a, b, "{name}: ordered and stackless disagree on origin {o:?} dir {d:?}");
-        let w = tracer.walk(Method::Bvh8).unwrap().closest_with(T::KIND, &ray, 0.0, f32::INFINITY, stack, &mut c);
-        assert_eq!(a, w, "{name}: ordered and bvh8 disagree on origin {o:?} dir {d:?}");
-        let bvh8 = tracer.bvh8().unwrap();
-        // Every instruction set this CPU has (portable, AVX2, AVX-512), each forced.
-        for &simd in &simds {
-            let p = bvh8.trace_on::<false, T>(simd, &ray, 0.0, f32::INFINITY, stack, &mut c);
-            assert_eq!(a, p, "{name}: ordered and {simd:?} bvh8 disagree on origin {o:?} dir {d:?}");
-        }
-        // Any hit, up to the closest hit's distance and just short of it (where nothing is).
-        for t_max in a.map_or(vec![f32::INFINITY, 1.0], |h| vec![h.t, f32::INFINITY, h.t * (1.0 - 1e-3)]) {
-            let walk = tracer.walk(Method::Ordered).unwrap();
-            let want = walk.occluded_with(T::KIND, &ray, t_max, stack, &mut c);
-            let got = tracer.walk(Method::Bvh8).unwrap().occluded_with(T::KIND, &ray, t_max, stack, &mut c);
-            assert_eq!(got, want, "{name}: bvh8 any hit to {t_max} on origin {o:?} dir {d:?}");
-            for &simd in &simds {
-                let got = bvh8.trace_on::<true, T>(simd, &ray, 0.0, t_max, stack, &mut c).is_some();
-                assert_eq!(got, want, "{name}: {simd:?} bvh8 any hit to {t_max} on origin {o:?} dir {d:?}");
-            }
-        }
+        wide::<8, T>(name, tracer, Method::Bvh8, tracer.bvh8().unwrap(), &ray, a, &simds, stack);
+        wide::<4, T>(name, tracer, Method::Bvh4, tracer.bvh4().unwrap(), &ray, a, &simds, stack);
         ordered.push(a);
     }
     if packet::available() {
@@ -125,6 +108,40 @@ fn fast_hits<T: TriangleTest>(
         }
     }
     ordered
+}
+
+/// The wide BVH `bvh` that `method` walks, against the ordered traversal's closest hit `a` on
+/// `ray`: its walk and every instruction set this CPU has (portable, AVX2, AVX-512), each forced,
+/// find `a` bit for bit, and any hit up to the closest hit's distance and just short of it (where
+/// nothing is) as the ordered traversal finds it.
+#[allow(clippy::too_many_arguments)]
+fn wide<const W: usize, T: TriangleTest>(
+    name: &str,
+    tracer: &Tracer<'_>,
+    method: Method,
+    bvh: &WideBvh<W>,
+    ray: &Ray,
+    a: Option<Hit>,
+    simds: &[Simd],
+    stack: &mut Stack,
+) {
+    let (o, d, m) = (ray.origin, ray.dir, method.name());
+    let mut c = Cost::default();
+    let w = tracer.walk(method).unwrap().closest_with(T::KIND, ray, 0.0, f32::INFINITY, stack, &mut c);
+    assert_eq!(a, w, "{name}: ordered and {m} disagree on origin {o:?} dir {d:?}");
+    for &simd in simds {
+        let p = bvh.trace_on::<false, T>(simd, ray, 0.0, f32::INFINITY, stack, &mut c);
+        assert_eq!(a, p, "{name}: ordered and {simd:?} {m} disagree on origin {o:?} dir {d:?}");
+    }
+    for t_max in a.map_or(vec![f32::INFINITY, 1.0], |h| vec![h.t, f32::INFINITY, h.t * (1.0 - 1e-3)]) {
+        let want = tracer.walk(Method::Ordered).unwrap().occluded_with(T::KIND, ray, t_max, stack, &mut c);
+        let got = tracer.walk(method).unwrap().occluded_with(T::KIND, ray, t_max, stack, &mut c);
+        assert_eq!(got, want, "{name}: {m} any hit to {t_max} on origin {o:?} dir {d:?}");
+        for &simd in simds {
+            let got = bvh.trace_on::<true, T>(simd, ray, 0.0, t_max, stack, &mut c).is_some();
+            assert_eq!(got, want, "{name}: {simd:?} {m} any hit to {t_max} on origin {o:?} dir {d:?}");
+        }
+    }
 }
 
 /// Wide packets ([`packet8`]) on up to 8 rays against the ordered traversal one ray at a time:
@@ -202,7 +219,10 @@ fn check_scene(name: &str, scene: &SceneFile, n: usize, seed: u64) {
             total.edges += c.edges;
             total.unexplained.extend(c.unexplained.iter().cloned());
         }
-        let paths: Vec<String> = Simd::available().iter().map(|s| format!("bvh8 {}", s.name())).collect();
+        let paths: Vec<String> = ["bvh8", "bvh4"]
+            .iter()
+            .flat_map(|w| Simd::available().into_iter().map(move |s| format!("{w} {}", s.name())))
+            .collect();
         println!(
             "{name}: {} rays, {} agree with the f64 reference, {} exact ties, {} within {EDGE} of an edge, {} unexplained \
              (ordered, stackless, {}, AVX2 packets and wide packets{} identical)",
@@ -259,24 +279,17 @@ fn rays_through_shared_vertices_break_ties_the_same_way_on_every_path() {
         let a = tracer.walk(Method::Ordered).unwrap().closest(&ray, 0.0, f32::INFINITY, &mut stack, &mut c);
         let b = tracer.walk(Method::Stackless).unwrap().closest(&ray, 0.0, f32::INFINITY, &mut stack, &mut c);
         assert_eq!(a, b, "ray {i}");
-        for test in [Intersect::Watertight, Intersect::MollerTrumbore] {
-            let a =
-                tracer.walk(Method::Ordered).unwrap().closest_with(test, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
-            let w = tracer.walk(Method::Bvh8).unwrap().closest_with(test, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
-            assert_eq!(a, w, "ray {i}, {test:?}: bvh8");
-            let bvh8 = tracer.bvh8().unwrap();
-            for simd in Simd::available() {
-                let w = match test {
-                    Intersect::Watertight => {
-                        bvh8.trace_on::<false, Watertight>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut c)
-                    }
-                    Intersect::MollerTrumbore => {
-                        bvh8.trace_on::<false, MollerTrumbore>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut c)
-                    }
-                };
-                assert_eq!(a, w, "ray {i}, {test:?}: bvh8 {simd:?}");
-            }
-        }
+        let simds = Simd::available();
+        let (bvh8, bvh4) = (tracer.bvh8().unwrap(), tracer.bvh4().unwrap());
+        let name = format!("vertex ray {i}");
+        let walk = tracer.walk(Method::Ordered).unwrap();
+        let wt = walk.closest_with(Intersect::Watertight, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
+        assert_eq!(a, wt, "ray {i}: the default test is the edge-consistent one");
+        wide::<8, Watertight>(&name, &tracer, Method::Bvh8, bvh8, &ray, wt, &simds, &mut stack);
+        wide::<4, Watertight>(&name, &tracer, Method::Bvh4, bvh4, &ray, wt, &simds, &mut stack);
+        let mt = walk.closest_with(Intersect::MollerTrumbore, &ray, 0.0, f32::INFINITY, &mut stack, &mut c);
+        wide::<8, MollerTrumbore>(&name, &tracer, Method::Bvh8, bvh8, &ray, mt, &simds, &mut stack);
+        wide::<4, MollerTrumbore>(&name, &tracer, Method::Bvh4, bvh4, &ray, mt, &simds, &mut stack);
         rays += 1;
         if a.is_none() {
             misses += 1;

@@ -224,9 +224,14 @@ fn a_walk_on_a_missing_layout_is_refused() {
     assert_eq!(escape.walk(Method::Stackless).unwrap().method(), Method::Stackless);
     assert_eq!(child_pair.walk(Method::Auto).unwrap().method(), Method::Bvh8);
     assert_eq!(child_pair.walk(Method::Bvh8).unwrap().method(), Method::Bvh8);
-    assert!(escape.walk(Method::Bvh8).is_err(), "the wide BVH is collapsed from the child-pair layout");
+    assert_eq!(child_pair.walk(Method::Bvh4).unwrap().method(), Method::Bvh4);
+    for method in [Method::Bvh8, Method::Bvh4] {
+        let e = escape.walk(method).err().expect("the wide BVHs are collapsed from the child-pair layout");
+        assert!(matches!(e, RenderError::MissingLayout { layout: "child-pair", .. }), "{method:?}: {e:?}");
+    }
     let up = Ray::new(Vec3::new(0.0, 1e-3, 0.0), Vec3::Y);
-    for walk in [escape.walk(Method::Auto).unwrap(), child_pair.walk(Method::Ordered).unwrap()] {
+    let walks = [Method::Ordered, Method::Bvh8, Method::Bvh4].map(|m| child_pair.walk(m).unwrap());
+    for walk in [escape.walk(Method::Auto).unwrap()].into_iter().chain(walks) {
         let hit = walk.closest(&up, 0.0, f32::INFINITY, &mut Stack::default(), &mut Cost::default());
         assert!(hit.is_some_and(|h| (h.t - (2.0 - 1e-3)).abs() < 1e-4), "{:?}: {hit:?}", walk.method());
     }
@@ -357,4 +362,10 @@ fn the_canvas_does_not_change_the_image() {
     let (other, _) = settings(&room, "medium", Mode::Whitted, Method::Packet, 31, 45);
     let other = Canvas::new(&Settings { aovs: false, ..other });
     same_image(&want, &render_into(&tracer, &s, &plan, other, &|_| {}).unwrap(), "a canvas of another size");
+    // The buffers of another frame of the same size (other pixels, other AOVs) are overwritten.
+    let (cast, _) = settings(&room, "wide", Mode::Cast, Method::Packet, 45, 31);
+    let before = tracer_cpu::render(&tracer, &cast, method).unwrap();
+    assert_ne!(before.rgb, want.rgb);
+    let reused = Canvas::reuse(before);
+    same_image(&want, &render_into(&tracer, &s, &plan, reused, &|_| {}).unwrap(), "another frame's buffers");
 }

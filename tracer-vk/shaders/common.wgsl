@@ -340,10 +340,16 @@ struct Ray {
     o: vec3<f32>,
     d: vec3<f32>,
     inv: vec3<f32>,
+    // Origin, direction and reciprocal all finite: no slab distance of this ray can be NaN
+    // (node bounds are finite, the reader checks), so `slab` may use plain min/max.
+    nan_free: bool,
 }
 
 fn make_ray(o: vec3<f32>, d: vec3<f32>) -> Ray {
-    return Ray(o, d, div3_rn(vec3<f32>(1.0), d));
+    let inv = div3_rn(vec3<f32>(1.0), d);
+    let finite = is_finite(o.x) && is_finite(o.y) && is_finite(o.z) && is_finite(d.x) && is_finite(d.y)
+        && is_finite(d.z) && is_finite(inv.x) && is_finite(inv.y) && is_finite(inv.z);
+    return Ray(o, d, inv, finite);
 }
 
 fn is_nan(x: f32) -> bool {
@@ -357,9 +363,23 @@ fn may_hold(near: f32, t: f32) -> bool {
 
 // Slab test; returns the entry distance, or -1 for a miss. An axis with a NaN distance (origin in
 // the face's plane, direction parallel to it) is skipped, as on the CPU.
+//
+// A distance is NaN only where a bound minus the origin is 0 and the reciprocal infinite (or an
+// input is not finite), so for a `nan_free` ray the per-axis NaN tests are skipped: min/max give
+// the same entry and exit as the selects below (up to the sign of a zero entry, which no caller
+// can tell apart), at less than half their instructions, and box tests are most of a walk's work.
 fn slab(n: Node, r: Ray, t_max: f32) -> f32 {
     let lo = (n.min - r.o) * r.inv;
     let hi = (n.max - r.o) * r.inv;
+    if r.nan_free {
+        let enter = min(lo, hi);
+        let exit = max(lo, hi);
+        let near = max(max(enter.x, enter.y), max(enter.z, 0.0));
+        // t_max by select, as below, so that a NaN t_max misses here too.
+        let e = min(min(exit.x, exit.y), exit.z);
+        let far = select(t_max, e, e < t_max);
+        return select(-1.0, near, may_hold(near, far));
+    }
     var near = 0.0;
     var far = t_max;
     for (var a = 0u; a < 3u; a++) {

@@ -102,6 +102,31 @@ impl Stage {
         self != Stage::Convert
     }
 
+    /// Whether the stage traces incoherent rays: cosine-distributed AO and diffuse rays, whose
+    /// neighbours in a warp go different ways and end at different times. The H100 measured
+    /// persistent threads faster for these (AO frames 1.13-1.34x the plain kernels') and slower
+    /// for coherent ones (cast frames 0.75-0.89x), docs/gpu-benchmark.md. Whitted's shadow and
+    /// mirror rays stay with the coherent ones: they leave neighbouring hits towards one light or
+    /// in nearly one direction, and no measurement has shown a gain for them.
+    pub fn incoherent(self) -> bool {
+        matches!(self, Stage::Ao | Stage::Diffuse)
+    }
+
+    /// The tracing stages a frame of `mode` runs (the conversion aside).
+    pub fn tracing(mode: &render_spec::Mode) -> &'static [Stage] {
+        match mode {
+            render_spec::Mode::Cast => &[Stage::Cast],
+            render_spec::Mode::Whitted => &[Stage::Primary, Stage::Shade, Stage::Bounce],
+            render_spec::Mode::Ao(_) => &[Stage::Primary, Stage::Ao],
+            render_spec::Mode::Diffuse => &[Stage::Primary, Stage::Diffuse],
+        }
+    }
+
+    /// The stage's name in stages.wgsl (`stage_{name}`).
+    pub fn name(self) -> &'static str {
+        self.parts().0
+    }
+
     /// The stage's parts in stages.wgsl: `{prefix}_begin`, `{prefix}_end` and `{Prefix}Job`.
     fn parts(self) -> (&'static str, &'static str) {
         match self {
@@ -164,18 +189,52 @@ pub struct Specialisation {
     /// (`--self-hits`; [`counters::SELF_SHADOW`] and after): a variant, so the default kernels
     /// carry no such test.
     pub self_hits: bool,
-    /// The tracing stages run as persistent threads (`--persistent on`; `persistent` in
+    /// Which tracing stages run as persistent threads (`--persistent`; `persistent` in
     /// stages.wgsl): as many workgroups as the device holds at once, each subgroup taking pixels
     /// from a counter and refilling its lanes whose rays ended. Methods that
     /// [`Method::walks_in_steps`] only; the images are the plain kernels'.
-    pub persistent: bool,
+    /// [`Specialisation::persistent_stage`] is the choice per stage.
+    pub persistent: Persistent,
     /// Persistent kernels: a subgroup's finished lanes take new pixels once this many of every 32
-    /// lanes are idle (1: as soon as one is; 32: only when all are, no replacement).
-    pub refill: u32,
+    /// lanes are idle (1: as soon as one is; 32: only when all are, no replacement); `None`: the
+    /// setting's own ([`Specialisation::refill_idle`]).
+    pub refill: Option<u32>,
 }
 
-/// [`Specialisation::refill`] by default: a quarter of the lanes idle.
+/// Which tracing stages run as persistent threads ([`Specialisation::persistent`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Persistent {
+    /// Plain kernels, one invocation per pixel (`--persistent off`).
+    Off,
+    /// Every tracing stage, refilling once [`DEFAULT_REFILL`] lanes of 32 are idle (`--persistent
+    /// on`).
+    On,
+    /// The stages that trace incoherent rays ([`Stage::incoherent`]: AO and diffuse), refilling
+    /// once [`INCOHERENT_REFILL`] lanes of 32 are idle; plain kernels for the others
+    /// (`--persistent auto`, the default of `trace-vk render` and `bench`). Where the method or
+    /// the device cannot run persistent kernels, the plain ones, unasked
+    /// ([`crate::render::Renderer::set_persistent`]).
+    Auto,
+}
+
+impl Persistent {
+    /// The name `--persistent` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Persistent::Off => "off",
+            Persistent::On => "on",
+            Persistent::Auto => "auto",
+        }
+    }
+}
+
+/// [`Specialisation::refill`] of `--persistent on`: a quarter of the lanes idle.
 pub const DEFAULT_REFILL: u32 = 8;
+
+/// [`Specialisation::refill`] of `--persistent auto`'s incoherent stages: half of the lanes idle,
+/// 4-5% faster than [`DEFAULT_REFILL`] for AO frames on the H100 (docs/gpu-benchmark.md, the
+/// refill sweep of tools/scripts/h100-persistent.sh).
+pub const INCOHERENT_REFILL: u32 = 16;
 
 /// How the kernels read the corners of a triangle (`--vertices`): defined with the settings both
 /// tracers share.
@@ -232,14 +291,34 @@ impl Specialisation {
             vertices: Vertices::Expanded,
             first_vertex: 0,
             self_hits: false,
-            persistent: false,
-            refill: DEFAULT_REFILL,
+            persistent: Persistent::Off,
+            refill: None,
         }
     }
 
-    /// Whether `stage`'s kernel is a persistent one (and so takes subgroup operations).
+    /// Whether `stage`'s kernel is a persistent one (and so takes subgroup operations): the one
+    /// place that decides it per stage.
     pub fn persistent_stage(&self, stage: Stage) -> bool {
-        self.persistent && self.method.walks_in_steps() && stage.traces()
+        self.method.walks_in_steps()
+            && stage.traces()
+            && match self.persistent {
+                Persistent::Off => false,
+                Persistent::On => true,
+                Persistent::Auto => stage.incoherent(),
+            }
+    }
+
+    /// Whether any stage runs persistently (the frame then holds a work word per pass).
+    pub fn any_persistent(&self) -> bool {
+        self.method.walks_in_steps() && self.persistent != Persistent::Off
+    }
+
+    /// Idle lanes of 32 before a persistent subgroup refills: [`Specialisation::refill`] where
+    /// given, else [`INCOHERENT_REFILL`] under [`Persistent::Auto`] (whose persistent stages are
+    /// all incoherent) and [`DEFAULT_REFILL`] under [`Persistent::On`].
+    pub fn refill_idle(&self) -> u32 {
+        let own = if self.persistent == Persistent::Auto { INCOHERENT_REFILL } else { DEFAULT_REFILL };
+        self.refill.unwrap_or(own).clamp(1, 32)
     }
 
     /// The `//#if` blocks of the kernel files this specialisation keeps.
@@ -469,7 +548,7 @@ pub fn source_half(stage: Stage, spec: &Specialisation, half: Half) -> String {
              @compute @workgroup_size(WG_X * WG_Y)\n\
              fn main(@builtin(local_invocation_index) li: u32) {{\n\
              \x20   lid = li;\n    persistent();\n}}\n",
-            spec.refill.clamp(1, 32)
+            spec.refill_idle()
         )
     } else {
         format!(
@@ -950,7 +1029,13 @@ mod tests {
         for method in [Method::Lst, Method::Stackless] {
             for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Ao, Stage::Diffuse] {
                 for (ray_list, self_hits, split) in [(false, false, Split::NONE), (true, true, split)] {
-                    let s = Specialisation { persistent: true, ray_list, self_hits, split, ..spec(method, true, true) };
+                    let s = Specialisation {
+                        persistent: Persistent::On,
+                        ray_list,
+                        self_hits,
+                        split,
+                        ..spec(method, true, true)
+                    };
                     assert!(s.persistent_stage(stage));
                     let text = source(stage, &s);
                     assert!(
@@ -962,15 +1047,56 @@ mod tests {
                 let plain = source(stage, &spec(method, true, true));
                 assert!(!plain.contains("fn persistent(") && !plain.contains("subgroupAdd("), "{method:?} {stage:?}");
             }
-            let convert = Specialisation { persistent: true, ..spec(method, true, true) };
+            let convert = Specialisation { persistent: Persistent::On, ..spec(method, true, true) };
             assert!(!convert.persistent_stage(Stage::Convert));
             assert!(!source(Stage::Convert, &convert).contains("fn persistent("));
         }
         for method in [Method::Sst, Method::SstSubgroup, Method::RtPipeline, Method::Cwbvh] {
-            let s = Specialisation { persistent: true, ..spec(method, true, true) };
+            let s = Specialisation { persistent: Persistent::On, ..spec(method, true, true) };
             assert!(!s.persistent_stage(Stage::Cast));
             assert!(!source(Stage::Cast, &s).contains("fn persistent("), "{method:?}");
         }
+    }
+
+    /// `--persistent auto` runs the AO and diffuse stages persistently with 16 idle lanes before
+    /// a refill and every other stage plain; `on` runs every tracing stage with 8, `off` none;
+    /// an explicit refill overrides either; the methods that do not walk in steps stay plain.
+    #[test]
+    fn auto_runs_the_incoherent_stages_persistently_and_the_coherent_ones_plain() {
+        let tracing = [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Ao, Stage::Diffuse];
+        for method in Method::ALL {
+            let with = |persistent, refill| Specialisation { persistent, refill, ..spec(method, true, true) };
+            let walks = matches!(method, Method::Lst | Method::Stackless);
+            for stage in tracing.into_iter().chain([Stage::Convert]) {
+                let incoherent = matches!(stage, Stage::Ao | Stage::Diffuse);
+                assert!(!with(Persistent::Off, None).persistent_stage(stage), "{method:?} {stage:?} off");
+                assert_eq!(
+                    with(Persistent::On, None).persistent_stage(stage),
+                    walks && stage != Stage::Convert,
+                    "{method:?} {stage:?} on"
+                );
+                assert_eq!(
+                    with(Persistent::Auto, Some(3)).persistent_stage(stage),
+                    walks && incoherent,
+                    "{method:?} {stage:?} auto"
+                );
+                let source = source(stage, &with(Persistent::Auto, None));
+                assert_eq!(source.contains("fn persistent("), walks && incoherent, "{method:?} {stage:?}");
+                if walks && incoherent {
+                    assert!(source.contains("const REFILL_IDLE: u32 = 16u;"), "{method:?} {stage:?}");
+                }
+            }
+            assert!(with(Persistent::Auto, None).any_persistent() == walks);
+            assert!(!with(Persistent::Off, Some(16)).any_persistent());
+        }
+        let lst = |persistent, refill| Specialisation { persistent, refill, ..spec(Method::Lst, true, true) };
+        assert_eq!(lst(Persistent::On, None).refill_idle(), DEFAULT_REFILL);
+        assert_eq!(lst(Persistent::Auto, None).refill_idle(), INCOHERENT_REFILL);
+        assert_eq!((DEFAULT_REFILL, INCOHERENT_REFILL), (8, 16), "the H100's measured thresholds");
+        assert_eq!(lst(Persistent::On, Some(16)).refill_idle(), 16);
+        assert_eq!(lst(Persistent::Auto, Some(8)).refill_idle(), 8);
+        assert!(source(Stage::Ao, &lst(Persistent::Auto, Some(4))).contains("const REFILL_IDLE: u32 = 4u;"));
+        assert!(source(Stage::Ao, &lst(Persistent::On, None)).contains("const REFILL_IDLE: u32 = 8u;"));
     }
 
     #[test]

@@ -10,7 +10,7 @@
 
 use crate::device::{Buffer, DeviceKind, Gpu, Pipeline};
 use crate::error::VkError;
-use crate::kernels::{self, Half, Method, Specialisation, Split, Stage, Vertices, counters};
+use crate::kernels::{self, Half, Method, Persistent, Specialisation, Split, Stage, Vertices, counters};
 use crate::rt::RtTracer;
 use crate::tiles::{self, Tile};
 use bvh_format::{Light, SceneFile};
@@ -405,8 +405,8 @@ impl<'g> Renderer<'g> {
             vertices: Vertices::Expanded,
             first_vertex: 0,
             self_hits: false,
-            persistent: false,
-            refill: kernels::DEFAULT_REFILL,
+            persistent: Persistent::Off,
+            refill: None,
         };
         let (wx, wy) = workgroup;
         let limit = info.max_workgroup_invocations.min(info.max_workgroup_size[0]).min(MAX_WORKGROUP_INVOCATIONS);
@@ -601,31 +601,44 @@ impl<'g> Renderer<'g> {
         }
     }
 
-    /// Runs the tracing stages as persistent threads (`--persistent on`, [`Specialisation::persistent`]),
-    /// launching about `invocations` invocations per dispatch (rounded up to whole workgroups;
-    /// `None`: [`PERSISTENT_INVOCATIONS`]). Refused, in one sentence, for a method whose traversal
-    /// does not walk in steps and on a device without the subgroup operations the kernels take
-    /// their work with. The images and ray counts are the plain kernels'.
-    pub fn set_persistent(&mut self, on: bool, invocations: Option<u32>) -> Result<(), VkRenderError> {
-        self.set_persistent_with(on, invocations, kernels::DEFAULT_REFILL)
+    /// Runs the tracing stages that `mode` names as persistent threads (`--persistent`,
+    /// [`Specialisation::persistent`]), launching about `invocations` invocations per dispatch
+    /// (rounded up to whole workgroups; `None`: [`PERSISTENT_INVOCATIONS`]), with the setting's own
+    /// refill threshold. [`Persistent::On`] is refused, in one sentence, for a method whose
+    /// traversal does not walk in steps and on a device without the subgroup operations the kernels
+    /// take their work with; [`Persistent::Auto`] is no request and gives such a method or device
+    /// its plain kernels without a word. The images and ray counts are the plain kernels'.
+    pub fn set_persistent(&mut self, mode: Persistent, invocations: Option<u32>) -> Result<(), VkRenderError> {
+        self.set_persistent_with(mode, invocations, None)
     }
 
     /// [`Renderer::set_persistent`] with the lanes of every 32 that must be idle before a
-    /// subgroup takes new pixels ([`Specialisation::refill`], 1 to 32).
+    /// subgroup takes new pixels ([`Specialisation::refill`], 1 to 32; `None`: the setting's own).
+    ///
+    /// On a CPU device (lavapipe) auto chooses as on a GPU rather than plain: its persistent
+    /// kernels are safe there because every subgroup takes at most [`CPU_PERSISTENT_CAP`] pixels
+    /// per lane, so a lane's loops run the steps of a few walks, not of the thousands that pass
+    /// gallivm's 65,535 iterations, and the counts check refuses, in one sentence, any frame whose
+    /// work a loop limit cut short. The images are the plain kernels' bit for bit, so the tests on
+    /// lavapipe run the very stage mix that a GPU runs by default.
     pub fn set_persistent_with(
         &mut self,
-        on: bool,
+        mode: Persistent,
         invocations: Option<u32>,
-        refill: u32,
+        refill: Option<u32>,
     ) -> Result<(), VkRenderError> {
-        if on && !self.spec.method.walks_in_steps() {
-            return Err(VkRenderError::NotPersistent(self.spec.method.name()));
+        let method = self.spec.method;
+        let subgroups = self.gpu.info().supports_subgroup_ops;
+        if mode == Persistent::On && !method.walks_in_steps() {
+            return Err(VkRenderError::NotPersistent(method.name()));
         }
-        if on && !self.gpu.info().supports_subgroup_ops {
+        if mode == Persistent::On && !subgroups {
             return Err(VkRenderError::NoSubgroups(self.gpu.info().name.clone()));
         }
+        let mode =
+            if mode == Persistent::Auto && !(method.walks_in_steps() && subgroups) { Persistent::Off } else { mode };
         self.persistent_invocations = invocations.unwrap_or(PERSISTENT_INVOCATIONS).max(1);
-        self.specialise(Specialisation { persistent: on, refill: refill.clamp(1, 32), ..self.spec });
+        self.specialise(Specialisation { persistent: mode, refill: refill.map(|r| r.clamp(1, 32)), ..self.spec });
         Ok(())
     }
 
@@ -810,7 +823,7 @@ impl<'g> Renderer<'g> {
         let lights_buf = g.create_buffer_with(&lights, "lights")?;
         // After the live-path words, one work word per pass of a submission for the persistent
         // kernels (`persistent` in stages.wgsl).
-        let work_words = if self.spec.persistent {
+        let work_words = if self.spec.any_persistent() {
             passes_per_submission(s.mode, s.lights.len() as u32, indirections, self.frames_per_submission)
         } else {
             0

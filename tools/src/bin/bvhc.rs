@@ -334,7 +334,7 @@ fn info(file: &Path) -> Result<(), String> {
     let vk = |m, v| per_tri(tracer_vk::render::upload_bytes_with(&scene, m, v));
     use tracer_vk::kernels::{Method as Vk, Vertices};
     say!(
-        "  bytes/triangle  file {:.1}; trace-cpu holds {:.1}, with --vertices indexed {:.1} (bvh8 and auto add their wide BVH); trace-vk uploads {:.1} (lst, sst), {:.1} (stackless), with --vertices indexed {:.1}, {:.1}{}",
+        "  bytes/triangle  file {:.1}; trace-cpu holds {:.1}, with --vertices indexed {:.1} (bvh8, bvh4 and auto add their wide BVH); trace-vk uploads {:.1} (lst, sst), {:.1} (stackless), with --vertices indexed {:.1}, {:.1}{}",
         per_tri(total),
         per_tri(tracer_cpu::held_bytes(&scene, Vertices::Expanded)),
         per_tri(tracer_cpu::held_bytes(&scene, Vertices::Indexed)),

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
-use tools::cpu_bench::{CpuBench, collapses, held_line, thread_pool};
+use tools::cpu_bench::{CpuBench, held_line, thread_pool};
 use tools::render_args::{RenderArgs, VerticesArg, parse_count};
 use tools::say;
 use tracer_cpu::{Method, Tracer};
@@ -28,7 +28,8 @@ enum Command {
         /// frame's own rays at the start finds faster (the stackless walk for a file compiled
         /// with only the escape-pointer layout); packet: SIMD packets where the CPU has AVX2 (else ordered);
         /// ordered child-pair traversal; the stackless escape-pointer walk; bvh8: the wide BVH
-        /// collapsed at load from the child-pair layout, one ray at a time.
+        /// (8 children per node) collapsed at load from the child-pair layout, one ray at a time;
+        /// bvh4: the same with 4 children per node; bvh8-packet: 8-ray packets on the wide BVH.
         #[arg(long, value_enum, default_value = "auto")]
         method: MethodArg,
         /// Render the exact reference instead: f64 arithmetic throughout, every bounce up to the
@@ -105,15 +106,16 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     let method = method.0;
     let pool = thread_pool(threads)?;
     // The scene prepared for tracing before the clock starts, as the file's reading is: the wide
-    // BVH of bvh8 and auto is collapsed at load, and its time printed apart.
+    // BVH of bvh8, bvh4 and auto is collapsed at load, and its time printed apart.
     let form = args.vertices.map_or(Default::default(), VerticesArg::vertices);
     let mut tracer = Tracer::with_vertices(scene, form);
     tracer.count_self_hits(args.self_hits);
-    let collapse = (!reference && collapses(method, scene)).then(|| {
-        let t = Instant::now();
-        tracer.bvh8();
-        t.elapsed().as_secs_f64()
-    });
+    let collapse = (!reference)
+        .then(|| {
+            let t = Instant::now();
+            tracer.collapse_for(method).then(|| t.elapsed().as_secs_f64())
+        })
+        .flatten();
     // The image's buffers paged in before the clock starts, as the ray report's output is: the
     // first writes to fresh memory cost a page fault each (a few microseconds in a VM).
     let paged = Instant::now();

@@ -5,10 +5,12 @@ use std::process::ExitCode;
 use tools::auto::Picker;
 use tools::bench::{Defaults, MatrixArgs};
 use tools::cli::{Progress, duration, rays_per_second};
-use tools::render_args::{PersistentArg, PersistentTuning, RenderArgs, VerticesArg, parse_count, parse_workgroup};
+use tools::render_args::{
+    BenchPersistentTuning, PersistentArg, PersistentTuning, RenderArgs, VerticesArg, parse_count, parse_workgroup,
+};
 use tools::say;
 use tools::vk_bench::{AUTO, VkBench, check_validation};
-use tracer_vk::kernels::Method;
+use tracer_vk::kernels::{Method, Persistent, Specialisation, Stage};
 use tracer_vk::render::RT_TRAVERSAL;
 use tracer_vk::render::Renderer;
 use tracer_vk::rt::Support;
@@ -56,8 +58,9 @@ enum Command {
         /// Workgroup shape (pixels): width and height powers of two, at most 1024 invocations.
         #[arg(long, value_parser = parse_workgroup, default_value = "8x8", allow_hyphen_values = true)]
         workgroup: (u32, u32),
-        /// Run the tracing stages as persistent threads (lst and stackless; the same image).
-        #[arg(long, value_enum, default_value = "off")]
+        /// Run tracing stages as persistent threads (lst and stackless; the same image): on for
+        /// every one, auto for the AO and diffuse stages only (where they win on the H100).
+        #[arg(long, value_enum, default_value = "auto")]
         persistent: PersistentArg,
         #[command(flatten)]
         tuning: PersistentTuning,
@@ -95,12 +98,14 @@ struct BenchArgs {
     /// a large frame cut into small frames' dispatches, rays as coherent as the large frame's.
     #[arg(long, value_parser = parse_tile_pixels)]
     tile_pixels: Option<u64>,
-    /// Time each method with plain kernels, persistent threads (`render --persistent`) or both,
-    /// side by side: persistent rows are named METHOD+persistent (lst and stackless only).
-    #[arg(long, value_delimiter = ',', value_enum, default_value = "off")]
+    /// Time each method with plain kernels (rows METHOD+plain), persistent threads in every
+    /// tracing stage (METHOD+persistent) or auto's choice (`render --persistent`; rows METHOD),
+    /// side by side. Only lst and stackless run persistently: the other methods' off and auto
+    /// are one row, METHOD, and on (which they refuse) adds none beside them.
+    #[arg(long, value_delimiter = ',', value_enum, default_value = "auto")]
     persistent: Vec<PersistentArg>,
     #[command(flatten)]
-    tuning: PersistentTuning,
+    tuning: BenchPersistentTuning,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -230,7 +235,8 @@ fn render(
         Some(m) => (m, None),
         None => {
             let picker = Picker::new(&gpu, scene, args.scene.as_deref(), workgroup, args.exact, auto.recalibrate)
-                .among(&candidates);
+                .among(&candidates)
+                .with_persistent(persistent.persistent());
             let pick = picker.pick(&settings)?;
             (pick.method, Some(pick))
         }
@@ -241,11 +247,9 @@ fn render(
     if let Some(v) = vertices {
         renderer.set_vertices(v.vertices()).map_err(|e| e.to_string())?;
     }
-    if persistent.on() {
-        renderer
-            .set_persistent_with(true, tuning.persistent_invocations, tuning.persistent_refill)
-            .map_err(|e| e.to_string())?;
-    }
+    renderer
+        .set_persistent_with(persistent.persistent(), tuning.persistent_invocations, tuning.persistent_refill)
+        .map_err(|e| e.to_string())?;
     let pixels = u64::from(settings.width) * u64::from(settings.height);
     let bar = Progress::new(pixels, "rendering {bar:40} {percent}% of the pixels ({elapsed}, {eta} left)", false);
     let out = bar
@@ -265,7 +269,7 @@ fn render(
         tools::render_args::accuracy_note(&settings.accuracy, scene),
         method.name(),
         if args.exact { " (exact)" } else { "" },
-        if persistent.on() { " (persistent threads)" } else { "" },
+        persistent_note(renderer.specialisation(), &settings.mode),
         gpu.info().name,
         duration(out.gpu_ms / 1e3),
         loaded.timing_note(),
@@ -308,6 +312,17 @@ fn render(
     Ok(())
 }
 
+/// The report's note of the stages of a `mode` frame that ran as persistent threads, if any.
+fn persistent_note(spec: &Specialisation, mode: &render_spec::Mode) -> String {
+    let stages: Vec<&str> =
+        Stage::tracing(mode).iter().filter(|&&s| spec.persistent_stage(s)).map(|s| s.name()).collect();
+    match stages.len() {
+        0 => String::new(),
+        n if n == Stage::tracing(mode).len() => " (persistent threads)".to_owned(),
+        _ => format!(" (persistent threads: {} stage, refill {})", stages.join(" and "), spec.refill_idle()),
+    }
+}
+
 /// The method, or `None` for auto.
 fn method_of(m: MethodArg) -> Option<Method> {
     Some(match m {
@@ -323,15 +338,27 @@ fn method_of(m: MethodArg) -> Option<Method> {
 
 fn bench(b: &BenchArgs) -> Result<(), String> {
     let mut names: Vec<String> = Vec::new();
+    // The persistent rows once per refill given (off has none).
+    let refills: Vec<Option<u32>> = match b.tuning.persistent_refill.as_slice() {
+        [] => vec![None],
+        list => list.iter().map(|&r| Some(r)).collect(),
+    };
+    let only_on = b.persistent.iter().all(|p| p.persistent() == Persistent::On);
     for &m in &b.methods {
         for &v in &b.matrix.vertices {
             for &p in &b.persistent {
-                let name = match method_of(m) {
-                    Some(m) => tools::vk_bench::method_name(m, v.vertices(), p.on()),
-                    None => AUTO.to_owned(),
-                };
-                if !names.contains(&name) {
-                    names.push(name);
+                for &refill in &refills {
+                    let p = p.persistent();
+                    let refill = if p == Persistent::Off { None } else { refill };
+                    let name = match method_of(m) {
+                        // `on` refuses such a method; beside off or auto, its plain row is all it has.
+                        Some(m) if p == Persistent::On && !m.walks_in_steps() && !only_on => continue,
+                        Some(m) => tools::vk_bench::method_name(m, v.vertices(), p, refill),
+                        None => AUTO.to_owned(),
+                    };
+                    if !names.contains(&name) {
+                        names.push(name);
+                    }
                 }
             }
         }
@@ -345,7 +372,7 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
         in_flight: b.in_flight,
         tile_pixels: b.tile_pixels,
         report_uploads: b.matrix.vertices.iter().any(|&v| v != VerticesArg::Expanded),
-        persistent: b.tuning,
+        persistent_invocations: b.tuning.persistent_invocations,
         ..VkBench::new(open_for(&b.device, &all)?, b.workgroup, b.exact)
     };
     tools::bench::run(&bench, &b.matrix, &methods, Defaults { frames: 50, warmup: 3 })?;
