@@ -4,12 +4,14 @@
 # 1 and all threads, primary, shadow, secondary, AO and diffuse rays. New columns against
 # h100-cpuwide.sh: "ours bvh8 AVX-512" (the wide BVH's single-ray traversal with the AVX-512 path
 # forced; "ours bvh8" is the AVX2 path, the default) and "ours bvh8 packet" (`--method
-# bvh8-packet`: 8-ray AVX2 packets on the wide BVH), beside rtcIntersect1/rtcOccluded1 (default
-# and robust flags) and rtcIntersect8/rtcOccluded8. Since branch bvh4 also "ours bvh4" (`--method
-# bvh4`: the 4-wide BVH, 4 children per node, 128-bit node and leaf tests, one ray at a time): the
-# first table's last three columns `bvh4 / Embree 1`, `bvh4 / Embree 1 robust` and `bvh4 / bvh8`.
+# bvh8-packet`: 8-ray AVX2 packets on the wide BVH, Embree's coherent walk since branch pkt8),
+# beside rtcIntersect1/rtcOccluded1 and rtcIntersect8/rtcOccluded8 (default and robust flags).
+# Since branch bvh4 also "ours bvh4" (`--method bvh4`: the 4-wide BVH, 4 children per node,
+# 128-bit node and leaf tests, one ray at a time): the first table's last three columns
+# `bvh4 / Embree 1`, `bvh4 / Embree 1 robust` and `bvh4 / bvh8`.
 # ENGINES="ours bvh4,ours bvh8,Embree 1,Embree 1 robust" runs only those tracers (`--engines`;
-# about 2 minutes instead of 5), e.g. with SIZES=640x480,1920x1440.
+# about 2 minutes instead of 6), e.g. with SIZES=640x480,1920x1440; ENGINES="ours bvh8 packet,
+# ours packet,Embree 8,Embree 8 robust" only the packet target's.
 #
 # Run from the repository root on the device machine. The host has no Rust toolchain nor Embree:
 # build here (Debian 12 with libembree-dev) and carry .bin/ (ignored):
@@ -22,9 +24,12 @@
 # Device tool: command `bash tools/scripts/h100-simd.sh`, carry [".bin"]. Writes into $OUT
 # (default ./out/h100-simd): ray-report.md (the report's markdown: issue 11's ratios first, then
 # Mrays/s and hit agreement; written at the end), host.txt, log.txt (one line per measured row
-# as it goes: Mrays/s of the 11 tracers in the report's column order, `-` for one left out, so a
-# cut-off run still tells; the 3rd is bvh8, the 6th and 7th Embree 1 and robust, the 11th bvh4).
-# Expected run time: about 5-6 minutes (11 tracers, 1920x1440 only, 3 rounds; the one-thread passes
+# as it goes: Mrays/s of the 12 tracers in the report's column order, `-` for one left out, so a
+# cut-off run still tells; the 3rd is bvh8, the 5th bvh8 packet, the 6th and 7th Embree 1 and
+# robust, the 8th and 9th Embree 8 and robust, the 12th bvh4), and at the end of stdout the packet
+# target's rows: primary and shadow, bvh8 packet / Embree 8 and / Embree 8 robust (issue 11 item 2:
+# >= 100%), packet (binary tree) / Embree 8.
+# Expected run time: about 6 minutes (12 tracers, 1920x1440 only, 3 rounds; the one-thread passes
 # over the dragon's and million's sets are most of it). SIZES=640x480,1920x1440 adds the small
 # size (about 2 more minutes).
 set -euo pipefail
@@ -54,3 +59,7 @@ echo "== ray report: bunny, dragon, million; $SIZES; 1 and $ALL threads =="
 .bin/ray_report --sizes "$SIZES" --threads "1,$ALL" --reps 3 ${ENGINES:+--engines "$ENGINES"} \
   --out "$OUT/ray-report.md" >/dev/null
 echo "done: $OUT/ray-report.md"
+echo "== packets against Embree 8, primary and shadow rays (target >= 100% in both Embree columns) =="
+echo "scene | size | kind | threads | bvh8 packet / Embree 8 | bvh8 packet / Embree 8 robust | packet / Embree 8"
+# Columns of the report's first table: 2-5 the row, 9-11 the three packet ratios.
+awk -F'|' '/^### Throughput/ { exit } $4 ~ /^ (primary|shadow) $/ { print $2 "|" $3 "|" $4 "|" $5 "|" $9 "|" $10 "|" $11 }' "$OUT/ray-report.md"

@@ -704,7 +704,7 @@ pub(crate) mod avx2 {
     }
 
     /// The ray, splatted.
-    pub(super) struct Lanes<V> {
+    pub(crate) struct Lanes<V> {
         pub o: [V; 3],
         pub d: [V; 3],
         pub inv: [V; 3],
@@ -758,7 +758,7 @@ pub(crate) mod avx2 {
     /// [`crate::geometry::intersect`] on the block's triangles, operation by operation; returns
     /// (hit mask, t, w1, w2, sum) (`u = w1 * (1 / sum)`, computed for the closest hit only).
     #[inline(always)]
-    pub(super) fn watertight<V: Vector, const W: usize>(b: &TriBlock<W>, r: &Lanes<V>, t_min: V, t_max: V) -> [V; 5] {
+    pub(crate) fn watertight<V: Vector, const W: usize>(b: &TriBlock<W>, r: &Lanes<V>, t_min: V, t_max: V) -> [V; 5] {
         let (o, d) = (&r.o, &r.d);
         let (a0, a1, a2) = (sub3(&b.p[0], o), sub3(&b.p[1], o), sub3(&b.p[2], o));
         let w2 = edge_function(&a0, &a1, d);
@@ -783,7 +783,7 @@ pub(crate) mod avx2 {
     /// [`crate::geometry::intersect_moller_trumbore`] on the block's triangles, operation by
     /// operation; returns (hit mask, t, u, v, 1).
     #[inline(always)]
-    pub(super) fn moller_trumbore<V: Vector, const W: usize>(
+    pub(crate) fn moller_trumbore<V: Vector, const W: usize>(
         b: &TriBlock<W>,
         r: &Lanes<V>,
         t_min: V,
@@ -852,7 +852,7 @@ pub(crate) mod avx2 {
 
     /// Asks for the cache lines of the node or leaf block `r`.
     #[inline(always)]
-    pub(super) fn prefetch<const W: usize>(bvh: &WideBvh<W>, r: u32) {
+    pub(crate) fn prefetch<const W: usize>(bvh: &WideBvh<W>, r: u32) {
         let (ptr, lines) = if r & LEAF == 0 {
             (bvh.nodes.as_ptr().wrapping_add(r as usize).cast::<i8>(), size_of::<WideNode<W>>() / 64)
         } else {

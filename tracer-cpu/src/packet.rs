@@ -257,6 +257,22 @@ pub(crate) mod avx2 {
     #[target_feature(enable = "avx2")]
     #[inline]
     fn intersect(tri: &Triangle, pk: &Packet, t_min: __m256, t_max: __m256) -> [__m256; 5] {
+        // The plane's normal is the triangle's alone: computed once, in scalar, as the scalar
+        // path computes it.
+        intersect_with_normal(tri, crate::geometry::plane_normal(tri), pk, t_min, t_max)
+    }
+
+    /// [`intersect`] with the triangle's [`plane_normal`](crate::geometry::plane_normal) given
+    /// (the wide packets compute a leaf block's 8 normals at once).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(crate) fn intersect_with_normal(
+        tri: &Triangle,
+        n: [f32; 3],
+        pk: &Packet,
+        t_min: __m256,
+        t_max: __m256,
+    ) -> [__m256; 5] {
         let (o, d) = (&pk.o, &pk.d);
         // Written out, not in closures: a closure does not inherit AVX2, so its lane operations
         // would not inline.
@@ -277,11 +293,6 @@ pub(crate) mod avx2 {
             _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
         );
         let sum = add(add(w0, w1), w2);
-        // The plane's normal is the triangle's alone: computed once, in scalar, as the scalar
-        // path computes it.
-        let e1 = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
-        let e2 = [p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]];
-        let n = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]];
         let n = [splat(n[0]), splat(n[1]), splat(n[2])];
         let den = add(add(mul(n[0], d[0]), mul(n[1], d[1])), mul(n[2], d[2]));
         let t = _mm256_div_ps(add(add(mul(n[0], a0[0]), mul(n[1], a0[1])), mul(n[2], a0[2])), den);
