@@ -248,9 +248,13 @@ pub fn run(
 ) -> Tally {
     let (tx, rx) = mpsc::channel();
     let (c, g) = (Arc::clone(case), gpu.cloned());
-    std::thread::spawn(move || {
+    let worker = std::thread::spawn(move || {
         let r =
             std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| render_all(&c, method, intersect, g.as_deref())));
+        // Let go of the device before answering: were this thread's reference the last one, the
+        // device would be destroyed here while the caller (or the process's exit) goes on, and
+        // lavapipe crashes when its teardown races the exit.
+        drop((c, g));
         let _ = tx.send(match r {
             Ok(Ok(images)) => Ended::Images(images),
             Ok(Err(e)) => Ended::Stopped(e),
@@ -263,7 +267,12 @@ pub fn run(
         });
     });
     let mut tally = Tally::default();
-    match rx.recv_timeout(case.time_limit(limit)) {
+    let answer = rx.recv_timeout(case.time_limit(limit));
+    if answer.is_ok() {
+        // It has answered, so it only has to end: no thread of a finished run outlives it.
+        let _ = worker.join();
+    }
+    match answer {
         Ok(Ended::Images(images)) => {
             for (k, image) in images.iter().enumerate() {
                 let expected = match &case.expect {
