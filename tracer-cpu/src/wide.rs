@@ -709,31 +709,11 @@ mod avx {
             }
             V3::new(Avx8(axis(p.x.0, n.x.0)), Avx8(axis(p.y.0, n.y.0)), Avx8(axis(p.z.0, n.z.0)))
         }
-        /// Eight 4-float loads and a transpose instead of 24 single-float inserts.
+        /// [`Self::gather4`]'s transpose without its fourth row (the compiler drops that shuffle).
         #[inline(always)]
         fn gather3(v: [&[f32; 4]; LANES]) -> V3<Self> {
-            #[inline(always)]
-            fn pair(lo: &[f32; 4], hi: &[f32; 4]) -> __m256 {
-                unsafe {
-                    _mm256_insertf128_ps::<1>(
-                        _mm256_castps128_ps256(_mm_loadu_ps(lo.as_ptr())),
-                        _mm_loadu_ps(hi.as_ptr()),
-                    )
-                }
-            }
-            unsafe {
-                // Lanes i and i + 4 share a register: x0 y0 z0 w0 | x4 y4 z4 w4, and so on.
-                let (t0, t1, t2, t3) = (pair(v[0], v[4]), pair(v[1], v[5]), pair(v[2], v[6]), pair(v[3], v[7]));
-                let xy01 = _mm256_unpacklo_ps(t0, t1);
-                let zw01 = _mm256_unpackhi_ps(t0, t1);
-                let xy23 = _mm256_unpacklo_ps(t2, t3);
-                let zw23 = _mm256_unpackhi_ps(t2, t3);
-                V3::new(
-                    Avx8(_mm256_shuffle_ps::<0x44>(xy01, xy23)),
-                    Avx8(_mm256_shuffle_ps::<0xEE>(xy01, xy23)),
-                    Avx8(_mm256_shuffle_ps::<0x44>(zw01, zw23)),
-                )
-            }
+            let [x, y, z, _] = Self::gather4(v);
+            V3::new(x, y, z)
         }
         /// Eight 4-float loads and a transpose instead of 32 single-float inserts.
         #[inline(always)]
