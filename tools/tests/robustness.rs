@@ -162,3 +162,22 @@ fn restore(dir: &std::path::Path, before: &[(std::path::PathBuf, Vec<u8>)]) {
         }
     }
 }
+
+/// `stress --method` runs only the methods it names (so that a long sweep can be split over
+/// several runs) and refuses a name that is none of them, writing nothing.
+#[test]
+fn stress_runs_only_the_methods_asked_for() {
+    let dir = scratch("stress-method");
+    let args = |method: &'static str| {
+        ["--cpu-only", "--quick", "--axis", "distance", "--method", method, "--out", "r.md", "--chart", "c"]
+    };
+    let o = run_in(&dir, "stress", &args("GPU nope"), Duration::from_secs(60));
+    assert_one_sentence_error(&o, "none of the sweep's methods");
+    assert!(!dir.join("r.md").exists(), "a refused run wrote its report");
+    let o = run_in(&dir, "stress", &args("cpu ordered"), Duration::from_secs(120));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report = std::fs::read_to_string(dir.join("r.md")).expect("the report is written");
+    assert!(report.contains("| point | CPU ordered |"), "{report}");
+    assert!(!report.contains("CPU stackless") && !report.contains("CPU packet"), "{report}");
+    assert!(report.contains("--method \"cpu ordered\""), "the report names its command: {report}");
+}

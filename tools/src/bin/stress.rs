@@ -58,6 +58,10 @@ struct Cli {
     /// Run only the axes whose names contain this text (repeatable), e.g. `--axis distance`.
     #[arg(long)]
     axis: Vec<String>,
+    /// Run only this method (repeatable), by its column name, e.g. `--method "GPU sst"`, so that a
+    /// long sweep can be split over several runs (each writes its own report or section).
+    #[arg(long)]
+    method: Vec<String>,
     /// Describe the machine in the report as this (default: the CPU model and the device's name).
     #[arg(long)]
     machine: Option<String>,
@@ -109,8 +113,13 @@ fn sweep(cli: &Cli) -> Result<(), String> {
     } else {
         Some(Arc::new(tracer_vk::Gpu::new(cli.device, false).map_err(|e| format!("{e} (or run with --cpu-only)"))?))
     };
+    if let Some(unknown) = cli.method.iter().find(|w| !METHODS.iter().any(|m| m.name().eq_ignore_ascii_case(w))) {
+        let names: Vec<String> = METHODS.iter().map(|m| format!("{:?}", m.name())).collect();
+        return Err(format!("--method {unknown:?} is none of the sweep's methods ({})", names.join(", ")));
+    }
+    let asked = |m: &Method| cli.method.is_empty() || cli.method.iter().any(|w| m.name().eq_ignore_ascii_case(w));
     let methods: Vec<Method> =
-        METHODS.iter().copied().filter(|m| gpu.is_some() || matches!(m, Method::Cpu(_))).collect();
+        METHODS.iter().copied().filter(|m| (gpu.is_some() || matches!(m, Method::Cpu(_))) && asked(m)).collect();
     let machine = cli.machine.clone().unwrap_or_else(|| {
         let device = gpu.as_ref().map_or("no Vulkan device".to_owned(), |g| g.info().name.clone());
         format!("{}; Vulkan: {device}", cpu_model())
@@ -122,9 +131,22 @@ fn sweep(cli: &Cli) -> Result<(), String> {
     cases.retain(|c| c.axis != AXES[13] || c.pixels() <= cli.max_frame_pixels);
     let runs: usize = cases.iter().map(|c| if c.both_tests { 2 } else { 1 }).sum();
     let progress = Progress::new((runs * methods.len()) as u64, "{bar:40} {pos}/{len} {msg}", false);
+    // Without a terminal (a log, a remote run) the bar is not drawn: a line per finished run
+    // instead, so that a sweep cut short still shows how far it got.
+    let lines = !std::io::IsTerminal::is_terminal(&std::io::stderr());
     let rows = tools::stress::sweep(cases, &methods, gpu, Duration::from_secs(cli.timeout), &|row| {
         progress.inc(1);
         progress.set_message(format!("{} {} {}", row.axis, row.label, row.line()));
+        if lines {
+            say!(
+                "[{:.0} s] {} {} {}: {}",
+                started.elapsed().as_secs_f64(),
+                row.axis,
+                row.label,
+                row.line(),
+                report::cell(&row.tally)
+            );
+        }
     });
     progress.finish();
 
@@ -135,6 +157,7 @@ fn sweep(cli: &Cli) -> Result<(), String> {
         .map(|r| format!("{} {}: {} {}", r.axis, r.label, r.line(), report::cell(&r.tally)))
         .collect();
     let axes: String = cli.axis.iter().map(|a| format!(" --axis {a:?}")).collect();
+    let axes: String = axes + &cli.method.iter().map(|m| format!(" --method {m:?}")).collect::<String>();
     let frames = if cli.max_frame_pixels == 1 << 28 {
         String::new()
     } else {

@@ -10,6 +10,7 @@ pub fn bin(name: &str) -> &'static str {
         "bvhc" => env!("CARGO_BIN_EXE_bvhc"),
         "trace-cpu" => env!("CARGO_BIN_EXE_trace-cpu"),
         "trace-vk" => env!("CARGO_BIN_EXE_trace-vk"),
+        "stress" => env!("CARGO_BIN_EXE_stress"),
         _ => panic!("no binary {name}"),
     }
 }
