@@ -914,6 +914,23 @@ mod tests {
     use glam::Vec3;
     use render_spec::{CameraSpec, Mode};
 
+    /// A frame through `render_in` with `tiles` and `avx` as given: packets for `Method::Packet`,
+    /// one ray at a time for the other (resolved) methods.
+    fn traced_frame(
+        tracer: &Tracer<'_>,
+        settings: &Settings,
+        method: Method,
+        walk: Walk<'_>,
+        tiles: Tiles,
+        avx: bool,
+    ) -> Result<Image, RenderError> {
+        let canvas = Canvas::new(settings);
+        match method {
+            Method::Packet => render_in(tracer, settings, method, || Packets::new(walk), tiles, &|_| {}, avx, canvas),
+            m => render_in(tracer, settings, m, || OneByOne::new(walk), tiles, &|_| {}, avx, canvas),
+        }
+    }
+
     fn same_directions<L: Lanes>() {
         let cams = [
             CameraSpec { eye: Vec3::new(0.0, 0.1, 0.3), at: Vec3::new(0.01, 0.1, 0.0), up: Vec3::Y, fov_deg: 45.0 },
@@ -965,41 +982,11 @@ mod tests {
                 };
                 let tiles = Tiles { rows: 6, columns: 12 };
                 let walk = tracer.walk(method).unwrap();
-                let image = |avx| match method.resolve(&scene) {
-                    Method::Packet => render_in(
-                        &tracer,
-                        &settings,
-                        Method::Packet,
-                        || Packets::new(walk),
-                        tiles,
-                        &|_| {},
-                        avx,
-                        Canvas::new(&settings),
-                    ),
-                    m => render_in(
-                        &tracer,
-                        &settings,
-                        m,
-                        || OneByOne::new(walk),
-                        tiles,
-                        &|_| {},
-                        avx,
-                        Canvas::new(&settings),
-                    ),
-                };
+                let image = |avx| traced_frame(&tracer, &settings, method.resolve(&scene), walk, tiles, avx);
                 let (a, b) = (image(true).unwrap(), image(false).unwrap());
                 assert_eq!(a.rgb, b.rgb, "{mode:?} {method:?}");
                 for tiles in [Tiles { rows: 2, columns: usize::MAX }, Tiles { rows: usize::MAX, columns: 1 }] {
-                    let other = render_in(
-                        &tracer,
-                        &settings,
-                        Method::Packet,
-                        || Packets::new(walk),
-                        tiles,
-                        &|_| {},
-                        true,
-                        Canvas::new(&settings),
-                    );
+                    let other = traced_frame(&tracer, &settings, Method::Packet, walk, tiles, true);
                     assert_eq!(a.rgb, other.unwrap().rgb, "{mode:?} {method:?}: {tiles:?}");
                 }
                 assert_eq!(a.rgb, render(&tracer, &settings, method).unwrap().rgb, "{mode:?} {method:?}: other tiles");
@@ -1068,29 +1055,8 @@ mod tests {
             for method in [Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8] {
                 let walk = tracer.walk(method).unwrap();
                 for avx in [true, false] {
-                    let image = match method.resolve(&scene) {
-                        Method::Packet => render_in(
-                            &tracer,
-                            &settings,
-                            Method::Packet,
-                            || Packets::new(walk),
-                            Tiles::default(),
-                            &|_| {},
-                            avx,
-                            Canvas::new(&settings),
-                        ),
-                        m => render_in(
-                            &tracer,
-                            &settings,
-                            m,
-                            || OneByOne::new(walk),
-                            Tiles::default(),
-                            &|_| {},
-                            avx,
-                            Canvas::new(&settings),
-                        ),
-                    }
-                    .unwrap();
+                    let image =
+                        traced_frame(&tracer, &settings, method.resolve(&scene), walk, Tiles::default(), avx).unwrap();
                     assert_eq!(image.rgb, want, "{spp} spp, {method:?}, avx {avx}");
                     let single = render(&tracer, &one, method).unwrap();
                     assert_eq!(image.rays.primary, single.rays.primary * spp as u64);
