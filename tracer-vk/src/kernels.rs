@@ -1058,6 +1058,51 @@ mod tests {
         }
     }
 
+    /// The calls in `block` (of a function of `module`), each with the number of loops around it.
+    fn calls_in_loops(module: &naga::Module, block: &naga::Block, loops: u32, out: &mut Vec<(String, u32)>) {
+        for statement in block.iter() {
+            match statement {
+                naga::Statement::Block(b) => calls_in_loops(module, b, loops, out),
+                naga::Statement::If { accept, reject, .. } => {
+                    calls_in_loops(module, accept, loops, out);
+                    calls_in_loops(module, reject, loops, out);
+                }
+                naga::Statement::Switch { cases, .. } => {
+                    cases.iter().for_each(|c| calls_in_loops(module, &c.body, loops, out));
+                }
+                naga::Statement::Loop { body, continuing, .. } => {
+                    calls_in_loops(module, body, loops + 1, out);
+                    calls_in_loops(module, continuing, loops + 1, out);
+                }
+                naga::Statement::Call { function, .. } => {
+                    out.push((module.functions[*function].name.clone().unwrap_or_default(), loops));
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// The plain kernels' LST and stackless `trace` walk "while-while": the inner-node step
+    /// (stackless: the box test) in a loop inside the loop that tests leaves, and never
+    /// `walk_step`, whose one node of either kind per iteration makes a warp's lanes at leaves and
+    /// at inner nodes take turns. (The persistent kernels still step.)
+    #[test]
+    fn plain_trace_walks_inner_nodes_in_a_loop_of_their_own() {
+        for (method, inner) in [(Method::Lst, "walk_inner"), (Method::Stackless, "walk_box")] {
+            let module = naga::front::wgsl::parse_str(&source(Stage::Cast, &spec(method, false, false))).unwrap();
+            let (_, trace) = module.functions.iter().find(|(_, f)| f.name.as_deref() == Some("trace")).unwrap();
+            let mut calls = Vec::new();
+            calls_in_loops(&module, &trace.body, 0, &mut calls);
+            let loops_around =
+                |name: &str| -> Vec<u32> { calls.iter().filter(|(n, _)| n == name).map(|&(_, l)| l).collect() };
+            assert_eq!(loops_around(inner), [2], "{method:?}: {calls:?}");
+            assert_eq!(loops_around("walk_leaf"), [1], "{method:?}: {calls:?}");
+            assert!(loops_around("walk_step").is_empty(), "{method:?}: {calls:?}");
+            let persistent = Specialisation { persistent: Persistent::On, ..spec(method, false, false) };
+            assert!(source(Stage::Cast, &persistent).contains("walking = walk_step(&walk);"), "{method:?}");
+        }
+    }
+
     /// `--persistent auto` runs the AO and diffuse stages persistently with 16 idle lanes before
     /// a refill and every other stage plain; `on` runs every tracing stage with 8, `off` none;
     /// an explicit refill overrides either; the methods that do not walk in steps stay plain.
