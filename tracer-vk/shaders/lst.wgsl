@@ -118,6 +118,7 @@ fn walk_step(w: ptr<function, Walk>) -> bool {
     return walk_pop(w);
 }
 
+//#if IN_ORDER
 fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec {
     var w: Walk;
     if !walk_begin(&w, r, t_min, t_max, any_hit, enabled) {
@@ -146,3 +147,63 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
     }
     return w.best;
 }
+//#endif
+
+//#if SPECULATIVE
+// Speculative while-while (Aila and Laine 2009, section 5; `Renderer::set_speculative`): a lane
+// that reaches a leaf postpones its test and walks on through inner nodes (popping with the
+// distance before that test) until it stands on a second leaf, its walk runs out, or every active
+// lane of the subgroup holds a leaf; then the lanes test their leaves together. Leaves are still
+// tested in the walk's order, each at most once, but the walk on past a postponed leaf does not
+// know that leaf's hits, so it may enter subtrees (and test leaves) that the plain walk skips:
+// per ray, nodes and triangles tested are at least the plain walk's (equal for an any-hit ray
+// until its hit, as its distance bound does not change before), and the closest hit is the same.
+fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec {
+    var w: Walk;
+    if !walk_begin(&w, r, t_min, t_max, any_hit, enabled) {
+        return w.best;
+    }
+    // `going`: the walk has a node to enter (`current`); `at`: `n` is that node, entered already
+    // (a second leaf found while one was postponed: the next leaf to test).
+    var going = true;
+    var at = false;
+    var n: Node;
+    loop {
+        var postponed = false;
+        var leaf: Node;
+        loop {
+            if subgroupAll(postponed) {
+                break;
+            }
+            if !at {
+                if !going {
+                    break;
+                }
+                if !walk_enter(&w) {
+                    return w.best;
+                }
+                n = nodes[w.current];
+            }
+            at = false;
+            if n.count > 0u {
+                if postponed {
+                    at = true;
+                    break;
+                }
+                leaf = n;
+                postponed = true;
+                going = walk_pop(&w);
+            } else {
+                going = walk_inner(&w, n) || walk_pop(&w);
+            }
+        }
+        if postponed && walk_leaf(&w, leaf) {
+            return w.best;
+        }
+        if !going && !at {
+            return w.best;
+        }
+    }
+    return w.best;
+}
+//#endif

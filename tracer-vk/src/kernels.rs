@@ -199,6 +199,11 @@ pub struct Specialisation {
     /// lanes are idle (1: as soon as one is; 32: only when all are, no replacement); `None`: the
     /// setting's own ([`Specialisation::refill_idle`]).
     pub refill: Option<u32>,
+    /// LST's plain kernels walk speculatively (`trace-vk bench --speculative`; the SPECULATIVE
+    /// `trace` of lst.wgsl): a lane that found a leaf walks on until its subgroup all have one,
+    /// then they test their leaves together. The same hits, but per ray at least the plain walk's
+    /// nodes and triangles, so the cost AOVs may exceed the CPU's; off by default.
+    pub speculative: bool,
 }
 
 /// Which tracing stages run as persistent threads ([`Specialisation::persistent`]).
@@ -293,6 +298,7 @@ impl Specialisation {
             self_hits: false,
             persistent: Persistent::Off,
             refill: None,
+            speculative: false,
         }
     }
 
@@ -350,7 +356,14 @@ impl Specialisation {
         if self.self_hits {
             features.push("SELF_HITS");
         }
+        features.push(if self.speculates() { "SPECULATIVE" } else { "IN_ORDER" });
         features
+    }
+
+    /// Whether the kernels walk speculatively ([`Specialisation::speculative`]: LST's plain
+    /// kernels; persistent ones step their walks) and so take subgroup operations.
+    pub fn speculates(&self) -> bool {
+        self.speculative && self.method == Method::Lst
     }
 }
 
@@ -770,7 +783,7 @@ pub fn compile_half(stage: Stage, spec: &Specialisation, half: Half) -> Result<V
         _ => format!("{} {:?} kernel", spec.method.name(), stage),
     };
     let text = source_half(stage, spec, half);
-    let words = if spec.method == Method::SstSubgroup || spec.persistent_stage(stage) {
+    let words = if spec.method == Method::SstSubgroup || spec.persistent_stage(stage) || spec.speculates() {
         shader::translate_with_subgroups(&text, &label, &[])?
     } else {
         shader::translate(&text, &label, &[])?
@@ -1100,6 +1113,15 @@ mod tests {
             assert!(loops_around("walk_step").is_empty(), "{method:?}: {calls:?}");
             let persistent = Specialisation { persistent: Persistent::On, ..spec(method, false, false) };
             assert!(source(Stage::Cast, &persistent).contains("walking = walk_step(&walk);"), "{method:?}");
+            // Speculation is LST's variant only, and the default kernels carry none of it.
+            let speculative = Specialisation { speculative: true, ..spec(method, true, true) };
+            assert_eq!(speculative.speculates(), method == Method::Lst);
+            assert!(!source(Stage::Primary, &spec(method, true, true)).contains("subgroupAll("), "{method:?}");
+            for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Ao, Stage::Diffuse] {
+                let text = source(stage, &speculative);
+                assert_eq!(text.contains("if subgroupAll(postponed)"), method == Method::Lst, "{method:?} {stage:?}");
+                compile(stage, &speculative).unwrap_or_else(|e| panic!("{method:?} {stage:?}: {e}"));
+            }
         }
     }
 
