@@ -9,7 +9,9 @@
 // walks the same nodes in the same order "while-while" (Aila and Laine, HPG 2009): an inner loop
 // descends (and pops) through inner nodes until the lane stands on a leaf, and only then tests it,
 // so the lanes of a subgroup that are at inner nodes and those at leaves do not take turns every
-// node as they would stepping one node at a time.
+// node as they would stepping one node at a time. That `trace` walks in order (IN_ORDER, the
+// default); SPECULATIVE's, below, lets a lane walk on past a leaf while others in its subgroup
+// still look for one.
 
 struct Walk {
     r: Ray,
@@ -150,14 +152,16 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
 //#endif
 
 //#if SPECULATIVE
-// Speculative while-while (Aila and Laine 2009, section 5; `Renderer::set_speculative`): a lane
-// that reaches a leaf postpones its test and walks on through inner nodes (popping with the
-// distance before that test) until it stands on a second leaf, its walk runs out, or every active
-// lane of the subgroup holds a leaf; then the lanes test their leaves together. Leaves are still
-// tested in the walk's order, each at most once, but the walk on past a postponed leaf does not
-// know that leaf's hits, so it may enter subtrees (and test leaves) that the plain walk skips:
-// per ray, nodes and triangles tested are at least the plain walk's (equal for an any-hit ray
-// until its hit, as its distance bound does not change before), and the closest hit is the same.
+// Speculative while-while (Aila and Laine 2009, "speculative traversal";
+// `Renderer::set_speculative`, off by default): a lane that reaches a leaf postpones its test and
+// walks on through inner nodes (popping with the distance bound before that test) until it stands
+// on a second leaf, its walk runs out, or every active lane of the subgroup holds a leaf; then the
+// lanes test their leaves together. Leaves are still tested in the walk's order, each at most
+// once, but the walk past a postponed leaf does not know that leaf's hits, so it may enter
+// subtrees (and test leaves) that the in-order walk skips: per ray, the nodes and triangles tested
+// are at least the in-order walk's, and the closest hit is the same. An any-hit ray tests the
+// same triangles (its bound does not change before the hit that ends it) and at most a few more
+// nodes.
 fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec {
     var w: Walk;
     if !walk_begin(&w, r, t_min, t_max, any_hit, enabled) {
