@@ -172,9 +172,10 @@ fn trace(r: Ray, t_min: f32, t_max: f32, any_hit: bool, enabled: bool) -> HitRec
     var going = true;
     var at = false;
     var n: Node;
+    // The postponed leaf, where `postponed`.
+    var leaf: Node;
     loop {
         var postponed = false;
-        var leaf: Node;
         loop {
             if subgroupAll(postponed) {
                 break;
