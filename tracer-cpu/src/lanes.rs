@@ -81,11 +81,11 @@ impl<'a> OneByOne<'a> {
         // Every lane's ray with its reciprocals made before the first is traced, so that no
         // ray's first box test waits for its divisions.
         let prepared: [Ray; LANES] = std::array::from_fn(|i| rays.ray(i));
-        for i in 0..LANES {
+        for (i, ray) in prepared.iter().enumerate() {
             if !rays.valid[i] {
                 continue;
             }
-            let hit = self.walk.trace::<ANY, T>(&prepared[i], 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
+            let hit = self.walk.trace::<ANY, T>(ray, 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
             out.set(i, hit);
         }
         out

@@ -46,7 +46,8 @@ pub struct Shading<'a> {
     /// Whether every triangle is flat (the file has no vertex normals): surfaces are then
     /// shaded with their geometric normals without reading or interpolating any.
     flat: bool,
-    /// Whether a material is glass (`kt > 0` without `kr > 0`): only then is refraction computed.
+    /// Whether a material has `kt > 0` (glass, unless `kr > 0` makes it a mirror): only then is
+    /// refraction computed, in blocks with a glass hit.
     glass: bool,
 }
 
@@ -136,7 +137,7 @@ impl<'a> Shading<'a> {
             aovs: s.aovs,
             self_hits: false,
             flat: scene.normal_indices.is_empty(),
-            glass: scene.materials.iter().any(|m| !(m.kr > 0.0) && m.kt > 0.0),
+            glass: scene.materials.iter().any(|m| m.kt > 0.0),
         }
     }
 
