@@ -993,6 +993,25 @@ mod tests {
     /// The image with AVX lanes is the image with plain arrays (the path of CPUs without AVX2),
     /// for every way of tracing the rays, and does not depend on the tiles.
     #[test]
+    fn next_block_visits_the_blocks_of_a_band_in_tile_order() {
+        for (w, rows) in [(1, 1), (3, 2), (4, 2), (61, 6), (64, 8), (1922, 2), (13, 7)] {
+            for columns in [4, 8, 12, 1 << 30] {
+                let mut want = Vec::new();
+                for x0 in (0..w).step_by(columns) {
+                    for dy in (0..rows).step_by(2) {
+                        want.extend((x0..(x0 + columns).min(w)).step_by(4).map(|bx| (bx, dy)));
+                    }
+                }
+                let mut got = vec![(0, 0)];
+                while let Some(n) = next_block(*got.last().unwrap(), w, rows, columns) {
+                    got.push(n);
+                }
+                assert_eq!(got, want, "{w} x {rows} in tiles {columns} wide");
+            }
+        }
+    }
+
+    #[test]
     fn both_lane_types_render_the_same_image() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/room.toml");
         let scene = bvh_build::import::load(&path, &Default::default()).unwrap();
