@@ -3,7 +3,7 @@
 //! of one indirection) to a [`TraceLanes`], which traces them as an AVX2 packet or one by one.
 //! Every way finds the same hits (bit for bit), so the choice changes speed and the cost AOV only.
 
-use crate::geometry::{MollerTrumbore, TriangleTest, Watertight};
+use crate::geometry::{MollerTrumbore, Ray, TriangleTest, Watertight};
 use crate::packet::{self, Entry, LANES, Rays, Results};
 use crate::render::Walk;
 use crate::traverse::Stack;
@@ -75,14 +75,17 @@ impl<'a> OneByOne<'a> {
         Self { walk, stack: Stack::default() }
     }
 
+    #[inline(always)]
     fn trace<const ANY: bool, T: TriangleTest>(&mut self, rays: &Rays) -> Results {
         let mut out = Results::default();
-        for i in 0..LANES {
+        // Every lane's ray with its reciprocals made before the first is traced, so that no
+        // ray's first box test waits for its divisions.
+        let prepared: [Ray; LANES] = std::array::from_fn(|i| rays.ray(i));
+        for (i, ray) in prepared.iter().enumerate() {
             if !rays.valid[i] {
                 continue;
             }
-            let ray = rays.ray(i);
-            let hit = self.walk.trace::<ANY, T>(&ray, 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
+            let hit = self.walk.trace::<ANY, T>(ray, 0.0, rays.t_max[i], &mut self.stack, &mut out.cost[i]);
             out.set(i, hit);
         }
         out

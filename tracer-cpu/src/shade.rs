@@ -211,6 +211,15 @@ pub fn secondary_of<R: Real>(kr: R, kt: R, ior: R, shading: V3<R>, front: R::Mas
     }
 }
 
+/// [`secondary_of`] for lanes none of which is glass (`kt > 0` without `kr > 0`): in every
+/// lane the same `exists`, and where a ray exists (the mirrors) the same direction, side and
+/// factor, without the refraction (a division and two square roots) that no lane takes.
+#[inline(always)]
+pub fn reflection_of<R: Real>(kr: R, shading: V3<R>, dir: V3<R>) -> SecondaryOf<R> {
+    let mirror = kr.gt(R::splat(0.0));
+    SecondaryOf { dir: reflect_of(dir, shading), same_side: mirror, factor: kr, exists: mirror }
+}
+
 /// [`BounceStop::worth_tracing`] for any lanes, given the stop's [`BounceStop::chain`] at their
 /// (common) depth: computed once per depth, not once per lane.
 #[inline(always)]

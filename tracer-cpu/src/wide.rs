@@ -905,6 +905,35 @@ mod tests {
         );
     }
 
+    /// `reflection_of` on lanes is `secondary_of` on one ray wherever no lane is glass (`kt`
+    /// made `-kt * kt`: zero, negative or NaN): the same `exists` everywhere, the same ray where
+    /// one exists.
+    fn reflections_like_one_ray<L: Lanes>() {
+        let mut g = Gen::new(0x5eed_0f9a);
+        let inputs: Vec<Vec<Vec3>> = (0..4096).map(|_| (0..4).map(|_| g.v()).collect()).collect();
+        // Inputs: 0 shading normal, 1 dir, 2 (kr, kt, ior), 3 (front when y < 0).
+        check::<L>(
+            "reflection",
+            &inputs,
+            |a| {
+                let not_glass = -(a[2].y * a[2].y);
+                let s = shade::secondary_of(a[2].x, not_glass, a[2].z, a[0], a[3].y.lt(0.0), a[1]);
+                let e = s.exists;
+                let dir = if e { s.dir } else { V3::zero() };
+                (flat(&[dir]).into_iter().chain([if e { s.factor } else { 0.0 }]).collect(), vec![e, e && s.same_side])
+            },
+            |a| {
+                let s = shade::reflection_of(a[2].x, a[0], a[1]);
+                let e = s.exists;
+                let dir = V3::select(e, s.dir, V3::zero());
+                (
+                    flat(&[dir]).into_iter().chain([L::select(e, s.factor, L::splat(0.0))]).collect(),
+                    vec![e, e & s.same_side],
+                )
+            },
+        );
+    }
+
     /// Radiance to 8 bits on lanes, against the scalar conversion, over every float of a range
     /// sampled densely and the special values.
     fn quantize_like_one_ray<L: Lanes>() {
@@ -961,6 +990,7 @@ mod tests {
     #[test]
     fn portable_lanes_match_one_ray_bit_for_bit() {
         all_formulas::<F8>();
+        reflections_like_one_ray::<F8>();
         quantize_like_one_ray::<F8>();
         power_like_one_ray::<F8>();
         offsets_like_one_ray::<F8>();
@@ -971,6 +1001,7 @@ mod tests {
     fn avx_lanes_match_one_ray_bit_for_bit() {
         assert!(crate::packet::available(), "this test needs a CPU with AVX2");
         all_formulas::<Avx8>();
+        reflections_like_one_ray::<Avx8>();
         quantize_like_one_ray::<Avx8>();
         power_like_one_ray::<Avx8>();
         offsets_like_one_ray::<Avx8>();
