@@ -592,68 +592,6 @@ fn persistent_kernels_render_the_plain_images_bit_for_bit() {
     assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
 }
 
-/// LST's speculative walk (`Renderer::set_speculative`, lst.wgsl's SPECULATIVE `trace`) gives
-/// the CPU's images, distances, triangles and ray counts bit for bit (exact kernels) in every mode
-/// and on both scenes; its costs are its own: per pixel at least the in-order walk's (the CPU's,
-/// which the plain kernels equal), and in all more, or it did not speculate. Other traversals
-/// refuse it in one sentence.
-#[test]
-fn speculative_lst_renders_the_cpus_images_at_no_lower_cost() {
-    let gpu = gpu();
-    for name in ["room.toml", "bunny.toml"] {
-        let scene = compile(name);
-        let tracer = Tracer::new(&scene);
-        let cam = CameraSpec::from(scene.camera("medium").expect("the camera exists"));
-        let (mut nodes, mut tris) = ((0u64, 0u64), (0u64, 0u64));
-        for mode in [Mode::Cast, Mode::Whitted, Mode::Ao(Ao { samples: 3, length: 0.1 }), Mode::Diffuse] {
-            let s = Settings {
-                width: 64,
-                height: 48,
-                camera: cam,
-                mode,
-                lights: scene.lights.clone(),
-                max_indirections: scene.settings.max_indirections,
-                aovs: true,
-                accuracy: Accuracy::default(),
-            };
-            let cpu = tracer_cpu::render(&tracer, &s, Method::Ordered).expect("the CPU renders");
-            let mut r = Renderer::new(&gpu, &scene, VkMethod::Lst, (8, 8)).expect("the scene uploads");
-            r.set_exact(true);
-            r.set_persistent(Persistent::Off, None).expect("the plain kernels");
-            r.set_speculative(true).expect("LST walks speculatively where subgroups vote");
-            assert!(r.specialisation().speculates());
-            let out = r.render(&s).expect("the GPU renders speculatively").image;
-            let what = format!("{name} {mode:?} speculative");
-            assert_eq!(out.rays, cpu.rays, "{what}: ray counts");
-            assert_eq!(differing_pixels(&out, &cpu), 0, "{what}: pixels differ");
-            let (g, c) = (out.aov.as_ref().expect("AOVs"), cpu.aov.as_ref().expect("AOVs"));
-            assert!(g.t.iter().zip(&c.t).all(|(a, b)| a.to_bits() == b.to_bits()), "{what}: distances");
-            assert_eq!(g.prim, c.prim, "{what}: triangles");
-            let below = |a: &[u32], b: &[u32]| a.iter().zip(b).filter(|(x, y)| x < y).count();
-            assert_eq!(below(&g.nodes, &c.nodes), 0, "{what}: pixels that visited fewer nodes than the CPU");
-            assert_eq!(below(&g.tris, &c.tris), 0, "{what}: pixels that tested fewer triangles than the CPU");
-            let sum = |a: &[u32]| a.iter().map(|&x| u64::from(x)).sum::<u64>();
-            println!(
-                "{what}: nodes {} (CPU {}), triangles {} (CPU {})",
-                sum(&g.nodes),
-                sum(&c.nodes),
-                sum(&g.tris),
-                sum(&c.tris)
-            );
-            nodes = (nodes.0 + sum(&g.nodes), nodes.1 + sum(&c.nodes));
-            tris = (tris.0 + sum(&g.tris), tris.1 + sum(&c.tris));
-        }
-        assert!(nodes.0 > nodes.1, "{name}: the speculative walk visited no node more than the CPU's");
-    }
-    let scene = compile("room.toml");
-    let mut r = Renderer::new(&gpu, &scene, VkMethod::Stackless, (8, 8)).expect("the scene uploads");
-    let e = r.set_speculative(true).expect_err("only LST walks speculatively");
-    assert!(e.to_string().contains("stackless") && !e.to_string().contains('\n'), "{e}");
-    assert!(!r.specialisation().speculates());
-    let messages = gpu.validation_messages();
-    assert!(messages.is_empty(), "the validation layer reported: {messages:#?}");
-}
-
 /// `--persistent auto` (the default of `trace-vk render` and `bench`): the AO and diffuse stages
 /// run as persistent threads refilling at 16 idle lanes of 32 (or the refill given), every other
 /// stage plain, and every mode renders the plain kernels' images, AOVs and ray counts bit for bit

@@ -17,10 +17,6 @@ pub const AUTO: &str = "auto";
 /// `--exact on`).
 pub const EXACT_SUFFIX: &str = "+exact";
 
-/// Marks a method name for LST's speculative walk (`trace-vk bench --speculative`,
-/// `Renderer::set_speculative`): `lst+speculative`, after any other suffix.
-pub const SPECULATIVE_SUFFIX: &str = "+speculative";
-
 /// Marks a method name for the indexed vertex form (`trace-vk bench --vertices indexed`).
 pub use crate::bench::INDEXED_SUFFIX;
 
@@ -257,10 +253,6 @@ impl Bench for VkBench {
             Some(name) => (name, true),
             None => (method, self.exact),
         };
-        let (name, speculative) = match name.strip_suffix(SPECULATIVE_SUFFIX) {
-            Some(name) => (name, true),
-            None => (name, false),
-        };
         if name == AUTO {
             let picker =
                 Picker::new(&self.gpu, scene, path, self.workgroup, exact, self.recalibrate).among(&self.candidates);
@@ -268,14 +260,11 @@ impl Bench for VkBench {
         }
         let (name, persistent, refill) = split_persistent(name)?;
         let (name, form) = crate::bench::split_form(name);
-        let mut r = self.renderer(scene, method_of(name)?, exact, form, (persistent, refill))?;
-        r.set_speculative(speculative).map_err(|e| e.to_string())?;
-        Ok(VkRenderer::Fixed(Box::new(r)))
+        Ok(VkRenderer::Fixed(Box::new(self.renderer(scene, method_of(name)?, exact, form, (persistent, refill))?)))
     }
 
     fn unsupported(&self, method: &str) -> Option<String> {
         let name = method.strip_suffix(EXACT_SUFFIX).unwrap_or(method);
-        let name = name.strip_suffix(SPECULATIVE_SUFFIX).unwrap_or(name);
         let (name, persistent, _) = split_persistent(name).ok()?;
         let m = method_of(name.strip_suffix(INDEXED_SUFFIX).unwrap_or(name)).ok()?;
         if persistent == Persistent::On && !m.walks_in_steps() {

@@ -199,11 +199,6 @@ pub struct Specialisation {
     /// lanes are idle (1: as soon as one is; 32: only when all are, no replacement); `None`: the
     /// setting's own ([`Specialisation::refill_idle`]).
     pub refill: Option<u32>,
-    /// LST's plain kernels walk speculatively (`trace-vk bench --speculative`; the SPECULATIVE
-    /// `trace` of lst.wgsl): a lane that found a leaf walks on until its subgroup all have one,
-    /// then they test their leaves together. The same hits, but per ray at least the plain walk's
-    /// nodes and triangles, so the cost AOVs may exceed the CPU's; off by default.
-    pub speculative: bool,
 }
 
 /// Which tracing stages run as persistent threads ([`Specialisation::persistent`]).
@@ -298,7 +293,6 @@ impl Specialisation {
             self_hits: false,
             persistent: Persistent::Off,
             refill: None,
-            speculative: false,
         }
     }
 
@@ -356,14 +350,7 @@ impl Specialisation {
         if self.self_hits {
             features.push("SELF_HITS");
         }
-        features.push(if self.speculates() { "SPECULATIVE" } else { "IN_ORDER" });
         features
-    }
-
-    /// Whether the kernels walk speculatively ([`Specialisation::speculative`]: LST's plain
-    /// kernels; persistent ones step their walks) and so take subgroup operations.
-    pub fn speculates(&self) -> bool {
-        self.speculative && self.method == Method::Lst
     }
 }
 
@@ -783,7 +770,7 @@ pub fn compile_half(stage: Stage, spec: &Specialisation, half: Half) -> Result<V
         _ => format!("{} {:?} kernel", spec.method.name(), stage),
     };
     let text = source_half(stage, spec, half);
-    let words = if spec.method == Method::SstSubgroup || spec.persistent_stage(stage) || spec.speculates() {
+    let words = if spec.method == Method::SstSubgroup || spec.persistent_stage(stage) {
         shader::translate_with_subgroups(&text, &label, &[])?
     } else {
         shader::translate(&text, &label, &[])?
@@ -1068,60 +1055,6 @@ mod tests {
             let s = Specialisation { persistent: Persistent::On, ..spec(method, true, true) };
             assert!(!s.persistent_stage(Stage::Cast));
             assert!(!source(Stage::Cast, &s).contains("fn persistent("), "{method:?}");
-        }
-    }
-
-    /// The calls in `block` (of a function of `module`), each with the number of loops around it.
-    fn calls_in_loops(module: &naga::Module, block: &naga::Block, loops: u32, out: &mut Vec<(String, u32)>) {
-        for statement in block.iter() {
-            match statement {
-                naga::Statement::Block(b) => calls_in_loops(module, b, loops, out),
-                naga::Statement::If { accept, reject, .. } => {
-                    calls_in_loops(module, accept, loops, out);
-                    calls_in_loops(module, reject, loops, out);
-                }
-                naga::Statement::Switch { cases, .. } => {
-                    cases.iter().for_each(|c| calls_in_loops(module, &c.body, loops, out));
-                }
-                naga::Statement::Loop { body, continuing, .. } => {
-                    calls_in_loops(module, body, loops + 1, out);
-                    calls_in_loops(module, continuing, loops + 1, out);
-                }
-                naga::Statement::Call { function, .. } => {
-                    out.push((module.functions[*function].name.clone().unwrap_or_default(), loops));
-                }
-                _ => {}
-            }
-        }
-    }
-
-    /// The plain kernels' LST and stackless `trace` walk "while-while": the inner-node step
-    /// (stackless: the box test) in a loop inside the loop that tests leaves, and never
-    /// `walk_step`, whose one node of either kind per iteration makes a warp's lanes at leaves and
-    /// at inner nodes take turns. (The persistent kernels still step.)
-    #[test]
-    fn plain_trace_walks_inner_nodes_in_a_loop_of_their_own() {
-        for (method, inner) in [(Method::Lst, "walk_inner"), (Method::Stackless, "walk_box")] {
-            let module = naga::front::wgsl::parse_str(&source(Stage::Cast, &spec(method, false, false))).unwrap();
-            let (_, trace) = module.functions.iter().find(|(_, f)| f.name.as_deref() == Some("trace")).unwrap();
-            let mut calls = Vec::new();
-            calls_in_loops(&module, &trace.body, 0, &mut calls);
-            let loops_around =
-                |name: &str| -> Vec<u32> { calls.iter().filter(|(n, _)| n == name).map(|&(_, l)| l).collect() };
-            assert_eq!(loops_around(inner), [2], "{method:?}: {calls:?}");
-            assert_eq!(loops_around("walk_leaf"), [1], "{method:?}: {calls:?}");
-            assert!(loops_around("walk_step").is_empty(), "{method:?}: {calls:?}");
-            let persistent = Specialisation { persistent: Persistent::On, ..spec(method, false, false) };
-            assert!(source(Stage::Cast, &persistent).contains("walking = walk_step(&walk);"), "{method:?}");
-            // Speculation is LST's variant only, and the default kernels carry none of it.
-            let speculative = Specialisation { speculative: true, ..spec(method, true, true) };
-            assert_eq!(speculative.speculates(), method == Method::Lst);
-            assert!(!source(Stage::Primary, &spec(method, true, true)).contains("subgroupAll("), "{method:?}");
-            for stage in [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Ao, Stage::Diffuse] {
-                let text = source(stage, &speculative);
-                assert_eq!(text.contains("if subgroupAll(postponed)"), method == Method::Lst, "{method:?} {stage:?}");
-                compile(stage, &speculative).unwrap_or_else(|e| panic!("{method:?} {stage:?}: {e}"));
-            }
         }
     }
 

@@ -80,10 +80,6 @@ pub enum VkRenderError {
     NoSubgroups(String),
     #[error("the {0} traversal does not run as persistent threads; use lst or stackless, or --persistent off")]
     NotPersistent(&'static str),
-    #[error("the {0} traversal does not walk speculatively; use lst, or leave out --speculative")]
-    NotSpeculative(&'static str),
-    #[error("{0} lacks the subgroup vote that speculative walks wait for their subgroup with; leave out --speculative")]
-    NoSpeculation(String),
     #[error(
         "SST needs {needed} bytes of workgroup memory for its stack of a tree {depth} deep and a leaf cache of one triangle, more than the device's {limit}; use LST or stackless"
     )]
@@ -411,7 +407,6 @@ impl<'g> Renderer<'g> {
             self_hits: false,
             persistent: Persistent::Off,
             refill: None,
-            speculative: false,
         };
         let (wx, wy) = workgroup;
         let limit = info.max_workgroup_invocations.min(info.max_workgroup_size[0]).min(MAX_WORKGROUP_INVOCATIONS);
@@ -536,21 +531,6 @@ impl<'g> Renderer<'g> {
     /// triangle test per such ray.
     pub fn set_self_hits(&mut self, on: bool) {
         self.specialise(Specialisation { self_hits: on, ..self.spec });
-    }
-
-    /// Walks LST's plain kernels speculatively in the frames after this
-    /// ([`Specialisation::speculative`]): the same images, but the cost AOVs count at least the
-    /// plain walk's nodes and triangles. Refused, in one sentence, for another method and on a
-    /// device without subgroup operations. (Persistent stages step their walks and are unchanged.)
-    pub fn set_speculative(&mut self, on: bool) -> Result<(), VkRenderError> {
-        if on && self.spec.method != Method::Lst {
-            return Err(VkRenderError::NotSpeculative(self.spec.method.name()));
-        }
-        if on && !self.gpu.info().supports_subgroup_ops {
-            return Err(VkRenderError::NoSpeculation(self.gpu.info().name.clone()));
-        }
-        self.specialise(Specialisation { speculative: on, ..self.spec });
-        Ok(())
     }
 
     /// The closest hits of the given rays (origin, direction; the direction need not be unit),

@@ -104,11 +104,6 @@ struct BenchArgs {
     /// are one row, METHOD, and on (which they refuse) adds none beside them.
     #[arg(long, value_delimiter = ',', value_enum, default_value = "auto")]
     persistent: Vec<PersistentArg>,
-    /// Also time LST's speculative walk (rows METHOD+speculative beside each lst row): a lane
-    /// that found a leaf walks on until its whole subgroup has one, then they test them together.
-    /// The same images; the plain kernels only (persistent stages step their walks as before).
-    #[arg(long)]
-    speculative: bool,
     #[command(flatten)]
     tuning: BenchPersistentTuning,
     #[command(flatten)]
@@ -361,12 +356,8 @@ fn bench(b: &BenchArgs) -> Result<(), String> {
                         Some(m) => tools::vk_bench::method_name(m, v.vertices(), p, refill),
                         None => AUTO.to_owned(),
                     };
-                    let speculative = (b.speculative && matches!(m, MethodArg::Lst))
-                        .then(|| name.clone() + tools::vk_bench::SPECULATIVE_SUFFIX);
-                    for name in std::iter::once(name).chain(speculative) {
-                        if !names.contains(&name) {
-                            names.push(name);
-                        }
+                    if !names.contains(&name) {
+                        names.push(name);
                     }
                 }
             }
