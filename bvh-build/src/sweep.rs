@@ -167,51 +167,90 @@ fn sweep_pair(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: b
     Some(Split { mid: 1, left: one(&prims[0]), right: one(&prims[1]), in_spare: false })
 }
 
-/// [`sweep_with`] for at most `N` primitives, with every buffer on the stack and the boxes loaded
-/// once. Each axis sorts keys of the centroid's ordered bits (high half) and the primitive's place
-/// (low half), then puts runs of equal centroids in input-id order: the order of `sweep_with`'s
-/// keys, hence the same sums in the same order and the same split.
-fn sweep_small<const N: usize>(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
-    let n = prims.len();
-    debug_assert!(n <= N && N <= 64);
-    let scale = AreaScale::of(&nb.aabb);
-    let mut boxes = [Aabb::EMPTY; N];
-    let mut sorted = [[u64::MAX; N]; 3];
-    for (i, p) in prims.iter().enumerate() {
-        let b = p.aabb();
-        boxes[i] = b;
-        let c = (b.min + b.max) * 0.5;
-        for (axis, keys) in sorted.iter_mut().enumerate() {
-            keys[i] = (ordered_bits(c[axis]) as u64) << 32 | i as u64;
-        }
-    }
-    let at = |key: u64| (key & 0xffff_ffff) as usize;
-    let mut best: Option<(f32, usize, usize)> = None;
-    let mut right_area = [0f32; N];
-    for (axis, keys) in sorted.iter_mut().enumerate() {
-        match N {
-            4 => network_sort(keys, &NET4),
-            8 => network_sort(keys, &NET8),
-            16 => network_sort(keys, &NET16),
-            _ => keys[..n].sort_unstable(),
-        }
-        // Equal centroids in input-id order (rare: a short insertion sort of each run).
-        for i in 1..n {
-            let mut j = i;
-            while j > 0 && keys[j] >> 32 == keys[j - 1] >> 32 && prims[at(keys[j])].id < prims[at(keys[j - 1])].id {
-                keys.swap(j, j - 1);
-                j -= 1;
+/// The most primitives of a [`Presorted`] set: its orders hold places in a `u8`, and its arrays
+/// live on the stack.
+pub const PRESORTED_MAX: usize = 64;
+
+/// A small set of primitives (at most `N`, at most [`PRESORTED_MAX`]) sorted once per axis: their
+/// boxes by their place in the slice they came from, and those places in the order of
+/// [`sweep_with`]'s keys on each axis (centroid, then input id). A stable filter of a sorted order
+/// is sorted by the same keys, so the orders of any subset (a child's, a grandchild's) are filtered
+/// from these without sorting again: [`presorted_split`] on them sums the same boxes in the same
+/// order as a sweep that sorts, hence chooses the same split.
+pub(crate) struct Presorted<const N: usize> {
+    pub(crate) boxes: [Aabb; N],
+    pub(crate) orders: [[u8; N]; 3],
+}
+
+impl<const N: usize> Presorted<N> {
+    pub(crate) fn new(prims: &[PrimRef]) -> Presorted<N> {
+        let n = prims.len();
+        debug_assert!(n <= N && N <= PRESORTED_MAX);
+        let mut boxes = [Aabb::EMPTY; N];
+        // Keys: the centroid's ordered bits (high half) and the primitive's place (low half).
+        let mut sorted = [[u64::MAX; N]; 3];
+        for (i, p) in prims.iter().enumerate() {
+            let b = p.aabb();
+            boxes[i] = b;
+            let c = (b.min + b.max) * 0.5;
+            for (axis, keys) in sorted.iter_mut().enumerate() {
+                keys[i] = (ordered_bits(c[axis]) as u64) << 32 | i as u64;
             }
         }
-        let order = &keys[..n];
+        let at = |key: u64| (key & 0xffff_ffff) as usize;
+        let mut orders = [[0u8; N]; 3];
+        for (keys, order) in sorted.iter_mut().zip(&mut orders) {
+            match n {
+                0..=4 => network_sort(keys.first_chunk_mut::<4>().expect("N >= 4"), &NET4),
+                5..=8 => network_sort(keys.first_chunk_mut::<8>().expect("N >= 8"), &NET8),
+                9..=16 => network_sort(keys.first_chunk_mut::<16>().expect("N >= 16"), &NET16),
+                _ => keys[..n].sort_unstable(),
+            }
+            // Equal centroids in input-id order (rare: a short insertion sort of each run).
+            for i in 1..n {
+                let mut j = i;
+                while j > 0 && keys[j] >> 32 == keys[j - 1] >> 32 && prims[at(keys[j])].id < prims[at(keys[j - 1])].id {
+                    keys.swap(j, j - 1);
+                    j -= 1;
+                }
+            }
+            for (o, &k) in order.iter_mut().zip(&keys[..n]) {
+                *o = at(k) as u8;
+            }
+        }
+        Presorted { boxes, orders }
+    }
+}
+
+/// The full-sweep split of the primitives whose boxes are `boxes[i]` for `i` in `orders[axis]`,
+/// given in [`Presorted`]'s order on each axis: `(axis, left count)`, the left side being
+/// `orders[axis][..left count]`. `None` as [`sweep_split`] gives it (all centroids equal, or a
+/// cheaper leaf when `may_leaf`).
+#[inline(always)]
+pub(crate) fn presorted_split(
+    costs: &Costs,
+    boxes: &[Aabb],
+    orders: [&[u8]; 3],
+    nb: &NodeBounds,
+    may_leaf: bool,
+) -> Option<(usize, usize)> {
+    if nb.centroids.extent().max_element() <= 0.0 {
+        return None;
+    }
+    let n = orders[0].len();
+    debug_assert!((2..=PRESORTED_MAX).contains(&n));
+    let scale = AreaScale::of(&nb.aabb);
+    let mut best: Option<(f32, usize, usize)> = None;
+    let mut right_area = [0f32; PRESORTED_MAX];
+    for (axis, order) in orders.iter().enumerate() {
         let mut acc = Aabb::EMPTY;
         for i in (1..n).rev() {
-            acc.grow(&boxes[at(order[i])]);
+            acc.grow(&boxes[order[i] as usize]);
             right_area[i] = scale.half_area(&acc) * (n - i) as f32;
         }
         let mut left = Aabb::EMPTY;
         for i in 1..n {
-            left.grow(&boxes[at(order[i - 1])]);
+            left.grow(&boxes[order[i - 1] as usize]);
             let weighted = scale.half_area(&left) * i as f32 + right_area[i];
             if best.is_none_or(|(b, _, _)| weighted < b) {
                 best = Some((weighted, axis, i));
@@ -223,21 +262,42 @@ fn sweep_small<const N: usize>(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBo
     if may_leaf && cost >= costs.leaf_cost(n) {
         return None;
     }
+    Some((axis, mid))
+}
+
+/// The box and centroid box of the primitives `boxes[i]`, `i` in `of`.
+#[inline(always)]
+pub(crate) fn bounds_at(boxes: &[Aabb], of: &[u8]) -> NodeBounds {
+    let mut nb = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
+    for &i in of {
+        let b = &boxes[i as usize];
+        nb.aabb.grow(b);
+        nb.centroids.grow_point((b.min + b.max) * 0.5);
+    }
+    nb
+}
+
+/// [`sweep_with`] for at most `N` primitives, with every buffer on the stack and the boxes loaded
+/// once: [`Presorted`] sorts them, [`presorted_split`] sweeps.
+fn sweep_small<const N: usize>(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
+    let n = prims.len();
+    let set = Presorted::<N>::new(prims);
+    let orders = set.orders.each_ref().map(|o| &o[..n]);
+    let (axis, mid) = presorted_split(costs, &set.boxes, orders, nb, may_leaf)?;
     let mut copy = [PrimRef::zeroed(); N];
     copy[..n].copy_from_slice(prims);
-    let empty = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
-    let (mut left, mut right) = (empty, empty);
-    for (i, (dst, &key)) in prims.iter_mut().zip(&sorted[axis][..n]).enumerate() {
-        let b = &boxes[at(key)];
-        *dst = copy[at(key)];
-        let side = if i < mid { &mut left } else { &mut right };
-        side.aabb.grow(b);
-        side.centroids.grow_point((b.min + b.max) * 0.5);
+    for (dst, &i) in prims.iter_mut().zip(orders[axis]) {
+        *dst = copy[i as usize];
     }
-    Some(Split { mid, left, right, in_spare: false })
+    let (left, right) = orders[axis].split_at(mid);
+    Some(Split { mid, left: bounds_at(&set.boxes, left), right: bounds_at(&set.boxes, right), in_spare: false })
 }
 
 impl Splitter for SweepSah {
+    fn sweeps_up_to(&self) -> usize {
+        PRESORTED_MAX
+    }
+
     fn split(&self, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
         sweep_split(&self.costs, prims, nb, may_leaf)
     }
