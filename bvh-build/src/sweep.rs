@@ -46,7 +46,6 @@ pub fn sweep_split(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_le
     // Most nodes swept are the binned builder's smallest (up to 16 primitives by default, half a
     // million of them in a million-triangle tree): on the stack they skip the scratch buffers.
     match prims.len() {
-        2 => return sweep_pair(costs, prims, nb, may_leaf),
         n if n <= 4 => return sweep_small::<4>(costs, prims, nb, may_leaf),
         n if n <= 8 => return sweep_small::<8>(costs, prims, nb, may_leaf),
         n if n <= 16 => return sweep_small::<16>(costs, prims, nb, may_leaf),
@@ -148,25 +147,6 @@ fn network_sort<const N: usize>(keys: &mut [u64; N], net: &[(u8, u8)]) {
     }
 }
 
-/// [`sweep_with`] for two primitives (two in five nodes swept in a binned tree): every axis offers
-/// the one split, at the same cost (a sum of the two areas in either order), so the first axis
-/// wins and sets the order.
-fn sweep_pair(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
-    let scale = AreaScale::of(&nb.aabb);
-    let (a, b) = (prims[0].aabb(), prims[1].aabb());
-    let weighted = scale.half_area(&a) + scale.half_area(&b);
-    let cost = costs.split_cost(scale.half_area(&nb.aabb) as f64, weighted as f64);
-    if may_leaf && cost >= costs.leaf_cost(2) {
-        return None;
-    }
-    let key = |p: &PrimRef| (ordered_bits(p.centroid().x) as u64) << 32 | p.id as u64;
-    if key(&prims[1]) < key(&prims[0]) {
-        prims.swap(0, 1);
-    }
-    let one = |p: &PrimRef| NodeBounds { aabb: p.aabb(), centroids: Aabb { min: p.centroid(), max: p.centroid() } };
-    Some(Split { mid: 1, left: one(&prims[0]), right: one(&prims[1]), in_spare: false })
-}
-
 /// The most primitives of a [`Presorted`] set: its orders hold places in a `u8`, and its arrays
 /// live on the stack.
 pub const PRESORTED_MAX: usize = 64;
@@ -240,6 +220,13 @@ pub(crate) fn presorted_split(
     let n = orders[0].len();
     debug_assert!((2..=PRESORTED_MAX).contains(&n));
     let scale = AreaScale::of(&nb.aabb);
+    if n == 2 {
+        // Two in five nodes swept: every axis offers the one split at the same cost (the sum of
+        // the two areas in either order), so the first axis wins.
+        let weighted = scale.half_area(&boxes[orders[0][0] as usize]) + scale.half_area(&boxes[orders[0][1] as usize]);
+        let cost = costs.split_cost(scale.half_area(&nb.aabb) as f64, weighted as f64);
+        return (!(may_leaf && cost >= costs.leaf_cost(n))).then_some((0, 1));
+    }
     let mut best: Option<(f32, usize, usize)> = None;
     let mut right_area = [0f32; PRESORTED_MAX];
     for (axis, order) in orders.iter().enumerate() {
