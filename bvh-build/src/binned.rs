@@ -248,7 +248,7 @@ impl BinnedSah {
         let parent_area = scale.half_area(&nb.aabb) as f64;
         // (area-weighted count of both children, axis, plane): within one node the SAH cost grows
         // with the weighted count, so only the chosen candidates' costs are computed in full.
-        let mut best: Option<(f32, usize, usize)> = None;
+        let (mut best_weighted, mut best_at) = (f32::INFINITY, 0);
         let mut right_area = [0f32; 256];
         let mut right_area_vec;
         let right_area: &mut [f32] = if k <= 256 {
@@ -271,15 +271,17 @@ impl BinnedSah {
             for plane in 1..k {
                 left.grow(&ab[plane - 1]);
                 left_n += ac[plane - 1] as usize;
-                if left_n == 0 || left_n == n {
-                    continue;
-                }
+                // Selects, not branches: which plane beats the best so far is hard to predict.
+                // A plane with an empty side is no candidate; every other weighted count is
+                // finite (areas in node units times counts), so it beats the infinite start.
                 let weighted = scale.half_area(&left) * left_n as f32 + right_area[plane];
-                if best.is_none_or(|(c, _, _)| weighted < c) {
-                    best = Some((weighted, axis, plane));
-                }
+                let weighted = if left_n == 0 || left_n == n { f32::INFINITY } else { weighted };
+                let better = weighted < best_weighted;
+                best_weighted = if better { weighted } else { best_weighted };
+                best_at = if better { axis * k + plane } else { best_at };
             }
         }
+        let best = (best_at != 0).then(|| (best_weighted, best_at / k, best_at % k));
         let beats_leaf = |cost: f64| !(may_leaf && cost >= self.costs.leaf_cost(n));
 
         let large = bins.bounds[3 * k];

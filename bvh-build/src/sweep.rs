@@ -227,9 +227,12 @@ pub(crate) fn presorted_split(
         let cost = costs.split_cost(scale.half_area(&nb.aabb) as f64, weighted as f64);
         return (!(may_leaf && cost >= costs.leaf_cost(n))).then_some((0, 1));
     }
-    let mut best: Option<(f32, usize, usize)> = None;
+    // The first candidate always wins over the infinite start: its weighted count is finite
+    // (areas in node units times counts). Selects, not branches: which split beats the best so
+    // far is hard to predict.
+    let (mut weighted, mut axis, mut mid) = (f32::INFINITY, 0, 0);
     let mut right_area = [0f32; PRESORTED_MAX];
-    for (axis, order) in orders.iter().enumerate() {
+    for (a, order) in orders.iter().enumerate() {
         let mut acc = Aabb::EMPTY;
         for i in (1..n).rev() {
             acc.grow(&boxes[order[i] as usize]);
@@ -238,13 +241,15 @@ pub(crate) fn presorted_split(
         let mut left = Aabb::EMPTY;
         for i in 1..n {
             left.grow(&boxes[order[i - 1] as usize]);
-            let weighted = scale.half_area(&left) * i as f32 + right_area[i];
-            if best.is_none_or(|(b, _, _)| weighted < b) {
-                best = Some((weighted, axis, i));
-            }
+            let w = scale.half_area(&left) * i as f32 + right_area[i];
+            let better = w < weighted;
+            weighted = if better { w } else { weighted };
+            (axis, mid) = if better { (a, i) } else { (axis, mid) };
         }
     }
-    let (weighted, axis, mid) = best?;
+    if mid == 0 {
+        return None; // no finite weighted count: not from valid input, which is finite
+    }
     let cost = costs.split_cost(scale.half_area(&nb.aabb) as f64, weighted as f64);
     if may_leaf && cost >= costs.leaf_cost(n) {
         return None;
