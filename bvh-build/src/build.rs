@@ -2,7 +2,7 @@
 //! degenerate input, rayon parallelism, and the final child-pair layout. A [`Splitter`] (binned or
 //! sweep) only decides where to split one node.
 
-use crate::sweep::{PRESORTED_MAX, Presorted, bounds_at, presorted_split};
+use crate::sweep::{PRESORTED_MAX, Presorted, presorted_split};
 use crate::top::{At, Top, top_units};
 use bvh_format::Node;
 use glam::Vec3A;
@@ -403,23 +403,22 @@ fn build_presorted<S: Splitter, const N: usize>(
 ) -> (u32, u32) {
     let n = refs.len();
     let set = Presorted::<N>::new(refs);
-    let places: [u8; PRESORTED_MAX] = std::array::from_fn(|i| i as u8);
-    let sub = Subtree { ctx, refs, boxes: &set.boxes };
-    sub.node::<N>(set.orders.each_ref().map(|o| &o[..n]), &places[..n], order, first, slots, slot, bounds)
+    let sub = Subtree { ctx, ids: &set.ids, boxes: &set.boxes };
+    sub.node::<N>(set.orders.each_ref().map(|o| &o[..n]), &set.local[..n], order, first, slots, slot, bounds)
 }
 
-/// What every node of a [`build_presorted`] subtree shares: its primitives in the order of the
-/// slice they came in, and their boxes.
+/// What every node of a [`build_presorted`] subtree shares: its primitives' input ids and boxes,
+/// by local index ([`Presorted`]).
 struct Subtree<'a, 'c, S: Splitter> {
     ctx: &'a Ctx<'c, S>,
-    refs: &'a [PrimRef],
+    ids: &'a [u32],
     boxes: &'a [Aabb],
 }
 
 impl<S: Splitter> Subtree<'_, '_, S> {
-    /// One node: its primitives (places in `refs`) in the order of each axis, and in the order
-    /// the per-node build would hold them in its slice (`slice`: the parent's chosen axis order),
-    /// which the leaves keep.
+    /// One node: its primitives (local indices) in the order of each axis, and in the order the
+    /// per-node build would hold them in its slice (`slice`: the parent's chosen axis order; the
+    /// slice's own order at the subtree's root), which the leaves keep.
     #[allow(clippy::too_many_arguments)]
     fn node<const N: usize>(
         &self,
@@ -447,7 +446,7 @@ impl<S: Splitter> Subtree<'_, '_, S> {
                 here.index = first as u32;
                 here.nodes = 1;
                 for (o, &i) in order.iter_mut().zip(slice) {
-                    *o = self.refs[i as usize].id;
+                    *o = self.ids[i as usize];
                 }
                 if let Some(pr) = ctx.progress {
                     pr.fetch_add(n, Ordering::Relaxed);
@@ -456,26 +455,33 @@ impl<S: Splitter> Subtree<'_, '_, S> {
             }
             None => (n / 2, slice),
         };
-        // Each axis's order split stably by side; the chosen side order is already split.
+        // Each axis's order split stably by side, the three side by side.
+        let (left_slice, right_slice) = side_of.split_at(mid);
         let mut left_side = [false; N];
-        for (k, &i) in side_of.iter().enumerate() {
-            left_side[i as usize] = k < mid;
+        let (mut left_nb, mut right_nb) = (empty_bounds(), empty_bounds());
+        for (sides, nb, left) in [(left_slice, &mut left_nb, true), (right_slice, &mut right_nb, false)] {
+            for &i in sides {
+                left_side[i as usize] = left;
+                let b = &self.boxes[i as usize];
+                nb.aabb.grow(b);
+                nb.centroids.grow_point((b.min + b.max) * 0.5);
+            }
         }
         let (mut lefts, mut rights) = ([[0u8; N]; 3], [[0u8; N]; 3]);
-        for ((src, ld), rd) in orders.iter().zip(&mut lefts).zip(&mut rights) {
-            let (mut l, mut r) = (0, 0);
-            for &i in *src {
+        let [o0, o1, o2] = orders;
+        let (o1, o2) = (&o1[..n], &o2[..n]);
+        let (mut l, mut r) = ([0usize; 3], [0usize; 3]);
+        for k in 0..n {
+            for (a, &i) in [o0[k], o1[k], o2[k]].iter().enumerate() {
                 // Branch-free: written to both sides, kept on the one whose cursor moves on (the
                 // other's next write overwrites it; neither cursor passes its side's count).
                 let left = left_side[i as usize];
-                ld[l] = i;
-                rd[r] = i;
-                l += left as usize;
-                r += !left as usize;
+                lefts[a][l[a]] = i;
+                rights[a][r[a]] = i;
+                l[a] += left as usize;
+                r[a] += !left as usize;
             }
         }
-        let (left_slice, right_slice) = side_of.split_at(mid);
-        let (left_nb, right_nb) = (bounds_at(self.boxes, left_slice), bounds_at(self.boxes, right_slice));
         let right_slot = slot + 2 * mid;
         here.index = right_slot as u32;
         let (left_order, right_order) = order.split_at_mut(mid);
@@ -489,6 +495,10 @@ impl<S: Splitter> Subtree<'_, '_, S> {
         here.count = 1 + lh.max(rh);
         (here.nodes, here.count)
     }
+}
+
+fn empty_bounds() -> NodeBounds {
+    NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY }
 }
 
 /// Splits at the object median along the widest centroid axis; with all centroids equal, simply
