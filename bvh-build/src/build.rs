@@ -433,7 +433,7 @@ impl<S: Splitter> Subtree<'_, '_, S> {
         let ctx = self.ctx;
         let n = slice.len();
         let may_leaf = n <= ctx.costs.max_leaf_size;
-        let split = if n == 1 { None } else { presorted_split(&ctx.costs, self.boxes, orders, &bounds, may_leaf) };
+        let split = if n == 1 { None } else { presorted_split::<N>(&ctx.costs, self.boxes, orders, &bounds, may_leaf) };
         let (here, below) = slots.split_first_mut().expect("a subtree owns at least one slot");
         here.min = bounds.aabb.min.into();
         here.max = bounds.aabb.max.into();

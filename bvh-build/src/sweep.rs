@@ -226,7 +226,7 @@ impl<const N: usize> Presorted<N> {
 /// `orders[axis][..left count]`. `None` as [`sweep_split`] gives it (all centroids equal, or a
 /// cheaper leaf when `may_leaf`).
 #[inline(always)]
-pub(crate) fn presorted_split(
+pub(crate) fn presorted_split<const N: usize>(
     costs: &Costs,
     boxes: &[Aabb],
     orders: [&[u8]; 3],
@@ -237,7 +237,7 @@ pub(crate) fn presorted_split(
         return None;
     }
     let n = orders[0].len();
-    debug_assert!((2..=PRESORTED_MAX).contains(&n));
+    debug_assert!((2..=N).contains(&n));
     let scale = AreaScale::of(&nb.aabb);
     if n == 2 {
         // Two in five nodes swept: every axis offers the one split at the same cost (the sum of
@@ -254,7 +254,7 @@ pub(crate) fn presorted_split(
     // best so far is hard to predict.
     let [o0, o1, o2] = orders;
     let (o1, o2) = (&o1[..n], &o2[..n]);
-    let mut right_area = [[0f32; 3]; PRESORTED_MAX];
+    let mut right_area = [[0f32; 3]; N];
     let mut acc = [Aabb::EMPTY; 3];
     for i in (1..n).rev() {
         let count = (n - i) as f32;
@@ -308,7 +308,7 @@ fn sweep_small<const N: usize>(costs: &Costs, prims: &mut [PrimRef], nb: &NodeBo
     let n = prims.len();
     let set = Presorted::<N>::new(prims);
     let orders = set.orders.each_ref().map(|o| &o[..n]);
-    let (axis, mid) = presorted_split(costs, &set.boxes, orders, nb, may_leaf)?;
+    let (axis, mid) = presorted_split::<N>(costs, &set.boxes, orders, nb, may_leaf)?;
     let mut copy = [PrimRef::zeroed(); N];
     copy[..n].copy_from_slice(prims);
     for (dst, &i) in prims.iter_mut().zip(orders[axis]) {
