@@ -377,18 +377,18 @@ fn partition(prims: &mut [PrimRef], mid: usize, goes_left: impl Fn(&PrimRef, Vec
         if ls == le && i < mid {
             (ls, le) = (0, 0);
             let end = (i + BLOCK).min(mid);
-            for k in i..end {
+            for (k, p) in (i..end).zip(&prims[i..end]) {
                 lbuf[le] = k as u32;
-                le += !sort(&prims[k]) as usize;
+                le += !sort(p) as usize;
             }
             (i, moved) = (end, true);
         }
         if rs == re && j > mid {
             (rs, re) = (0, 0);
             let end = j.saturating_sub(BLOCK).max(mid);
-            for k in (end..j).rev() {
+            for (k, p) in (end..j).zip(&prims[end..j]).rev() {
                 rbuf[re] = k as u32;
-                re += sort(&prims[k]) as usize;
+                re += sort(p) as usize;
             }
             (j, moved) = (end, true);
         }
