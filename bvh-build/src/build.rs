@@ -471,7 +471,8 @@ impl<S: Splitter> Subtree<'_, '_, S> {
         let [o0, o1, o2] = orders;
         let (o1, o2) = (&o1[..n], &o2[..n]);
         let (mut l, mut r) = ([0usize; 3], [0usize; 3]);
-        for k in 0..n {
+        // Children of one primitive are leaves, which need no orders (two in five nodes here).
+        for k in 0..if n > 2 { n } else { 0 } {
             for (a, &i) in [o0[k], o1[k], o2[k]].iter().enumerate() {
                 // Branch-free: written to both sides, kept on the one whose cursor moves on (the
                 // other's next write overwrites it; neither cursor passes its side's count).
