@@ -86,13 +86,24 @@ impl Grid {
     }
 
     /// The bin of centroid `c` on each axis. Clamped while still a float (`max` takes NaN, from
-    /// an infinite scale times 0, to 0), the conversion is one truncation per lane without the
-    /// range checks of a saturating `as usize`, which cost more than the rest of the binning.
+    /// an infinite scale times 0, to 0), the conversion is one truncation of all lanes at once
+    /// (`cvttps2dq`): a saturating `as` per lane, `as_ivec3` included, compiles to a conversion, a
+    /// range check and a NaN check per lane, with branches, which cost more than the rest of the
+    /// binning. For the clamped values both truncate alike, so the bins are the same.
     #[inline(always)]
     fn bins_of(&self, c: Vec3A) -> [usize; 3] {
         let f = ((c - self.lo) * self.scale).max(Vec3A::ZERO).min(Vec3A::splat(self.last));
-        let i = f.as_ivec3();
-        [i.x as usize, i.y as usize, i.z as usize]
+        #[cfg(target_arch = "x86_64")]
+        {
+            // SAFETY: SSE2 is part of every x86-64 target, so the instruction exists.
+            let i: [i32; 4] = bytemuck::cast(unsafe { std::arch::x86_64::_mm_cvttps_epi32(f.into()) });
+            [i[0] as usize, i[1] as usize, i[2] as usize]
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let i = f.as_ivec3();
+            [i.x as usize, i.y as usize, i.z as usize]
+        }
     }
 
     /// Whether centroid `c` lies in a bin before `plane` on `axis`: the same arithmetic as
@@ -237,7 +248,7 @@ impl BinnedSah {
         let parent_area = scale.half_area(&nb.aabb) as f64;
         // (area-weighted count of both children, axis, plane): within one node the SAH cost grows
         // with the weighted count, so only the chosen candidates' costs are computed in full.
-        let mut best: Option<(f32, usize, usize)> = None;
+        let (mut best_weighted, mut best_at) = (f32::INFINITY, 0);
         let mut right_area = [0f32; 256];
         let mut right_area_vec;
         let right_area: &mut [f32] = if k <= 256 {
@@ -260,15 +271,17 @@ impl BinnedSah {
             for plane in 1..k {
                 left.grow(&ab[plane - 1]);
                 left_n += ac[plane - 1] as usize;
-                if left_n == 0 || left_n == n {
-                    continue;
-                }
+                // Selects, not branches: which plane beats the best so far is hard to predict.
+                // A plane with an empty side is no candidate; every other weighted count is
+                // finite (areas in node units times counts), so it beats the infinite start.
                 let weighted = scale.half_area(&left) * left_n as f32 + right_area[plane];
-                if best.is_none_or(|(c, _, _)| weighted < c) {
-                    best = Some((weighted, axis, plane));
-                }
+                let weighted = if left_n == 0 || left_n == n { f32::INFINITY } else { weighted };
+                let better = weighted < best_weighted;
+                best_weighted = if better { weighted } else { best_weighted };
+                best_at = if better { axis * k + plane } else { best_at };
             }
         }
+        let best = (best_at != 0).then(|| (best_weighted, best_at / k, best_at % k));
         let beats_leaf = |cost: f64| !(may_leaf && cost >= self.costs.leaf_cost(n));
 
         let large = bins.bounds[3 * k];
@@ -305,8 +318,14 @@ impl BinnedSah {
         self.bin_into(prims, &grid, k, bins);
         let choice = self.choose(bins, k, prims.len(), nb, may_leaf, || small_bounds(prims, grid.big))?;
         let (mut left, mut right) = choice.children();
-        let mid = partition(prims, &mut left, &mut right, |p, c| choice.goes_left(&grid, p, c));
+        let mid = choice.left_count(&bins.counts, k);
         debug_assert!(mid > 0 && mid < prims.len());
+        // One closure per kind of split, so that the partition's loop holds no match.
+        let sides = match choice {
+            Choice::Plane { axis, plane, .. } => partition(prims, mid, |_, c| grid.left_of(c, axis, plane as f32)),
+            Choice::Large { .. } => partition(prims, mid, |p, _| p.area >= grid.big),
+        };
+        (left.centroids, right.centroids) = sides;
         Some(Split { mid, left, right, in_spare: false })
     }
 }
@@ -320,44 +339,73 @@ fn small_bounds(prims: &[PrimRef], big: f32) -> Aabb {
     rest
 }
 
-/// Moves the primitives for which `goes_left(prim, centroid)` holds to the front, in place
-/// (Hoare: each misplaced pair is swapped once), and grows each side's centroid bounds on the
-/// way; returns how many went left.
+/// Primitives examined per block of [`partition`]'s scans.
+const BLOCK: usize = 64;
+
+/// Moves the primitives for which `goes_left(prim, centroid)` holds to the front, in place, given
+/// how many do (`mid`, from the bins), and returns the centroid bounds of both sides. The pairs
+/// swapped are Hoare's (the first primitive before `mid` that goes right with the last one from
+/// `mid` on that goes left, and so on inwards), so the order is the one Hoare's partition leaves,
+/// but found without a branch per primitive: the scans note the misplaced ones of a block of
+/// [`BLOCK`] on each side (Edelkamp and Weiß's BlockQuicksort), then swap them. Where a primitive
+/// goes is as good as random near the leaves, and a mispredicted branch cost more than the rest
+/// of its test.
 #[inline(always)]
-fn partition(
-    prims: &mut [PrimRef],
-    left: &mut NodeBounds,
-    right: &mut NodeBounds,
-    goes_left: impl Fn(&PrimRef, Vec3A) -> bool,
-) -> usize {
-    let (mut i, mut j) = (0usize, prims.len());
+fn partition(prims: &mut [PrimRef], mid: usize, goes_left: impl Fn(&PrimRef, Vec3A) -> bool) -> (Aabb, Aabb) {
+    let n = prims.len();
+    let (mut l, mut r) = (Aabb::EMPTY, Aabb::EMPTY);
+    let (inf, neg) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+    // Grows the bounds of the side `p` goes to, branch-free; returns whether that is the left.
+    let mut sort = |p: &PrimRef| {
+        let c = p.centroid();
+        let left = goes_left(p, c);
+        let m = glam::BVec3A::splat(left);
+        l.min = l.min.min(Vec3A::select(m, c, inf));
+        l.max = l.max.max(Vec3A::select(m, c, neg));
+        r.min = r.min.min(Vec3A::select(m, inf, c));
+        r.max = r.max.max(Vec3A::select(m, neg, c));
+        left
+    };
+    // Misplaced primitives of the current blocks, `[start, end)` of each buffer: before `mid`
+    // ascending, from `mid` on descending.
+    let (mut lbuf, mut rbuf) = ([0u32; BLOCK], [0u32; BLOCK]);
+    let (mut ls, mut le, mut rs, mut re) = (0, 0, 0, 0);
+    // Next primitive to scan before `mid` (upwards), and one past the next from `mid` on (downwards).
+    let (mut i, mut j) = (0, n);
     loop {
-        while i < j {
-            let c = prims[i].centroid();
-            if !goes_left(&prims[i], c) {
-                break;
+        let mut moved = false;
+        if ls == le && i < mid {
+            (ls, le) = (0, 0);
+            let end = (i + BLOCK).min(mid);
+            for (k, p) in (i..end).zip(&prims[i..end]) {
+                lbuf[le] = k as u32;
+                le += !sort(p) as usize;
             }
-            left.centroids.grow_point(c);
-            i += 1;
+            (i, moved) = (end, true);
         }
-        while i < j {
-            let c = prims[j - 1].centroid();
-            if goes_left(&prims[j - 1], c) {
-                break;
+        if rs == re && j > mid {
+            (rs, re) = (0, 0);
+            let end = j.saturating_sub(BLOCK).max(mid);
+            for (k, p) in (end..j).zip(&prims[end..j]).rev() {
+                rbuf[re] = k as u32;
+                re += sort(p) as usize;
             }
-            right.centroids.grow_point(c);
-            j -= 1;
+            (j, moved) = (end, true);
         }
-        if i == j {
-            return i;
+        let m = (le - ls).min(re - rs);
+        for (&a, &b) in lbuf[ls..ls + m].iter().zip(&rbuf[rs..rs + m]) {
+            prims.swap(a as usize, b as usize);
         }
-        // prims[i] goes right and prims[j - 1] left: swap them into place.
-        prims.swap(i, j - 1);
-        left.centroids.grow_point(prims[i].centroid());
-        right.centroids.grow_point(prims[j - 1].centroid());
-        i += 1;
-        j -= 1;
+        (ls, rs) = (ls + m, rs + m);
+        // Done when both sides are scanned and their blocks swapped; a block left over on one
+        // side only would mean the bins miscounted, which the assertions below report.
+        if !moved && m == 0 {
+            break;
+        }
     }
+    debug_assert!(prims[..mid].iter().all(|p| goes_left(p, p.centroid())), "the bins counted the left side");
+    debug_assert!(prims[mid..].iter().all(|p| !goes_left(p, p.centroid())), "the bins counted the right side");
+    (l, r)
 }
 
 /// Copies `src` into `dst` partitioned, stably: each chunk of [`CHUNK`] primitives sends
@@ -400,6 +448,10 @@ fn scatter(
 }
 
 impl Splitter for BinnedSah {
+    fn sweeps_up_to(&self) -> usize {
+        self.bins.min(crate::sweep::PRESORTED_MAX)
+    }
+
     fn split(&self, prims: &mut [PrimRef], nb: &NodeBounds, may_leaf: bool) -> Option<Split> {
         // A node no larger than the bin count is swept exactly: sorting a handful of centroids
         // costs less than clearing and sweeping K bins per axis, and finds at least as good a plane.
@@ -460,5 +512,61 @@ impl Splitter for BinnedSah {
         let mid = left_counts.iter().sum();
         debug_assert!(mid > 0 && mid < prims.len());
         Some(Split { mid, left, right, in_spare: true })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Hoare's partition as the builder had it: the reference for [`partition`]'s order.
+    fn hoare(prims: &mut [PrimRef], goes_left: impl Fn(&PrimRef) -> bool) -> usize {
+        let (mut i, mut j) = (0usize, prims.len());
+        loop {
+            while i < j && goes_left(&prims[i]) {
+                i += 1;
+            }
+            while i < j && !goes_left(&prims[j - 1]) {
+                j -= 1;
+            }
+            if i == j {
+                return i;
+            }
+            prims.swap(i, j - 1);
+            i += 1;
+            j -= 1;
+        }
+    }
+
+    #[test]
+    fn the_block_partition_leaves_hoares_order() {
+        let mut rng = ::tests::Rng(2024);
+        for case in 0..3000 {
+            // Sizes around the block's multiples, and shares of the left side from none to all.
+            let n = 1 + case % (3 * BLOCK + 5);
+            let share = rng.unit();
+            let prims: Vec<PrimRef> = (0..n)
+                .map(|i| {
+                    let min = [rng.unit(), rng.unit(), rng.unit()];
+                    let max = [min[0] + 0.1, min[1] + 0.2, min[2] + 0.3];
+                    let area = if rng.unit() < share { 1.0 } else { 0.0 };
+                    PrimRef { min, id: i as u32, max, area }
+                })
+                .collect();
+            let goes_left = |p: &PrimRef| p.area > 0.5;
+            let mut expected = prims.clone();
+            let mid = hoare(&mut expected, goes_left);
+            let mut got = prims.clone();
+            let (l, r) = partition(&mut got, mid, |p, _| goes_left(p));
+            let ids = |v: &[PrimRef]| v.iter().map(|p| p.id).collect::<Vec<_>>();
+            assert_eq!(ids(&expected), ids(&got), "case {case}: n {n}, {mid} left");
+            let centroids = |v: &[PrimRef]| {
+                v.iter().fold(Aabb::EMPTY, |mut a, p| {
+                    a.grow_point(p.centroid());
+                    a
+                })
+            };
+            assert_eq!((l, r), (centroids(&got[..mid]), centroids(&got[mid..])), "case {case}: centroid bounds");
+        }
     }
 }

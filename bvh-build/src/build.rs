@@ -2,6 +2,7 @@
 //! degenerate input, rayon parallelism, and the final child-pair layout. A [`Splitter`] (binned or
 //! sweep) only decides where to split one node.
 
+use crate::sweep::{PRESORTED_MAX, Presorted, presorted_split};
 use crate::top::{At, Top, top_units};
 use bvh_format::Node;
 use glam::Vec3A;
@@ -191,6 +192,13 @@ pub trait Splitter: Sync {
         let _ = spare;
         self.split(refs, bounds, may_leaf)
     }
+
+    /// The largest node that [`Splitter::split`] splits by the full sweep ([`crate::sweep`]), and
+    /// whose subtree, all of it swept too, the build may therefore build from one sorted order
+    /// per axis ([`build_presorted`]); 0 for none.
+    fn sweeps_up_to(&self) -> usize {
+        0
+    }
 }
 
 /// Nodes with more primitives than this are split by [`Splitter::split_parallel`]: every thread
@@ -232,6 +240,9 @@ struct Ctx<'a, S: Splitter> {
     /// Whether subtrees are reinserted in the top of the finished tree ([`crate::top`]); always
     /// outside tests.
     reshape_top: bool,
+    /// Whether small swept subtrees are built from one sorted order per axis
+    /// ([`build_presorted`]); always outside tests, which compare it with a sort per node.
+    presorted: bool,
 }
 
 /// Builds a tree over `refs` (used as scratch space: their order afterwards means nothing) with
@@ -244,7 +255,8 @@ pub fn build<S: Splitter>(
     progress: Option<&AtomicUsize>,
     escape: bool,
 ) -> BuiltTree {
-    build_with(refs, Ctx { splitter, costs, progress, parallel_node: PARALLEL_NODE, reshape_top: true }, escape)
+    let ctx = Ctx { splitter, costs, progress, parallel_node: PARALLEL_NODE, reshape_top: true, presorted: true };
+    build_with(refs, ctx, escape)
 }
 
 fn build_with<S: Splitter>(refs: &mut [PrimRef], ctx: Ctx<'_, S>, escape: bool) -> BuiltTree {
@@ -313,6 +325,18 @@ fn build_node<S: Splitter>(
     depth: u32,
 ) -> (u32, u32) {
     let n = p.refs.len();
+    // A subtree that the depth limit cannot reach (each level takes at least one primitive off).
+    if ctx.presorted
+        && n >= 2
+        && n <= ctx.splitter.sweeps_up_to()
+        && depth as usize + n <= ctx.costs.depth_limit as usize
+    {
+        return if n <= 16 {
+            build_presorted::<S, 16>(ctx, p.refs, p.order, first, slots, slot, bounds)
+        } else {
+            build_presorted::<S, { PRESORTED_MAX }>(ctx, p.refs, p.order, first, slots, slot, bounds)
+        };
+    }
     let may_leaf = n <= ctx.costs.max_leaf_size;
     let split = if n == 1 {
         None
@@ -360,6 +384,122 @@ fn build_node<S: Splitter>(
     here.nodes = 1 + l + r;
     here.count = 1 + lh.max(rh);
     (here.nodes, here.count)
+}
+
+/// [`build_node`] for a subtree of at most `N` primitives that the splitter sweeps all of
+/// ([`Splitter::sweeps_up_to`]), out of the depth limit's reach: the primitives are sorted once
+/// per axis ([`Presorted`]) and each child's orders are filtered from its parent's, where the
+/// per-node sweep sorts every node's primitives again (a fifth of a binned build's time went to
+/// sweeping these nodes). The same splits as [`build_node`], hence the same tree and leaf order:
+/// `tests::presorted_subtrees_build_the_tree_of_a_sort_per_node`.
+fn build_presorted<S: Splitter, const N: usize>(
+    ctx: &Ctx<'_, S>,
+    refs: &[PrimRef],
+    order: &mut [u32],
+    first: usize,
+    slots: &mut [Slot],
+    slot: usize,
+    bounds: NodeBounds,
+) -> (u32, u32) {
+    let n = refs.len();
+    let set = Presorted::<N>::new(refs);
+    let sub = Subtree { ctx, ids: &set.ids, boxes: &set.boxes };
+    sub.node::<N>(set.orders.each_ref().map(|o| &o[..n]), &set.local[..n], order, first, slots, slot, bounds)
+}
+
+/// What every node of a [`build_presorted`] subtree shares: its primitives' input ids and boxes,
+/// by local index ([`Presorted`]).
+struct Subtree<'a, 'c, S: Splitter> {
+    ctx: &'a Ctx<'c, S>,
+    ids: &'a [u32],
+    boxes: &'a [Aabb],
+}
+
+impl<S: Splitter> Subtree<'_, '_, S> {
+    /// One node: its primitives (local indices) in the order of each axis, and in the order the
+    /// per-node build would hold them in its slice (`slice`: the parent's chosen axis order; the
+    /// slice's own order at the subtree's root), which the leaves keep.
+    #[allow(clippy::too_many_arguments)]
+    fn node<const N: usize>(
+        &self,
+        orders: [&[u8]; 3],
+        slice: &[u8],
+        order: &mut [u32],
+        first: usize,
+        slots: &mut [Slot],
+        slot: usize,
+        bounds: NodeBounds,
+    ) -> (u32, u32) {
+        let ctx = self.ctx;
+        let n = slice.len();
+        let may_leaf = n <= ctx.costs.max_leaf_size;
+        let split = if n == 1 { None } else { presorted_split::<N>(&ctx.costs, self.boxes, orders, &bounds, may_leaf) };
+        let (here, below) = slots.split_first_mut().expect("a subtree owns at least one slot");
+        here.min = bounds.aabb.min.into();
+        here.max = bounds.aabb.max.into();
+        // No split: a leaf, or, for a node too large for one whose centroids all coincide, the
+        // middle of its slice (as `median_split` does without a centroid extent).
+        let (mid, side_of) = match split {
+            Some((axis, mid)) => (mid, orders[axis]),
+            None if may_leaf || n == 1 => {
+                here.count = n as u32;
+                here.index = first as u32;
+                here.nodes = 1;
+                for (o, &i) in order.iter_mut().zip(slice) {
+                    *o = self.ids[i as usize];
+                }
+                if let Some(pr) = ctx.progress {
+                    pr.fetch_add(n, Ordering::Relaxed);
+                }
+                return (1, 0);
+            }
+            None => (n / 2, slice),
+        };
+        // Each axis's order split stably by side, the three side by side.
+        let (left_slice, right_slice) = side_of.split_at(mid);
+        let mut left_side = [false; N];
+        let (mut left_nb, mut right_nb) = (empty_bounds(), empty_bounds());
+        for (sides, nb, left) in [(left_slice, &mut left_nb, true), (right_slice, &mut right_nb, false)] {
+            for &i in sides {
+                left_side[i as usize] = left;
+                let b = &self.boxes[i as usize];
+                nb.aabb.grow(b);
+                nb.centroids.grow_point((b.min + b.max) * 0.5);
+            }
+        }
+        let (mut lefts, mut rights) = ([[0u8; N]; 3], [[0u8; N]; 3]);
+        let [o0, o1, o2] = orders;
+        let (o1, o2) = (&o1[..n], &o2[..n]);
+        let (mut l, mut r) = ([0usize; 3], [0usize; 3]);
+        // Children of one primitive are leaves, which need no orders (two in five nodes here).
+        for k in 0..if n > 2 { n } else { 0 } {
+            for (a, &i) in [o0[k], o1[k], o2[k]].iter().enumerate() {
+                // Branch-free: written to both sides, kept on the one whose cursor moves on (the
+                // other's next write overwrites it; neither cursor passes its side's count).
+                let left = left_side[i as usize];
+                lefts[a][l[a]] = i;
+                rights[a][r[a]] = i;
+                l[a] += left as usize;
+                r[a] += !left as usize;
+            }
+        }
+        let right_slot = slot + 2 * mid;
+        here.index = right_slot as u32;
+        let (left_order, right_order) = order.split_at_mut(mid);
+        let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
+        let left_orders = lefts.each_ref().map(|o| &o[..mid]);
+        let right_orders = rights.each_ref().map(|o| &o[..n - mid]);
+        let (l, lh) = self.node::<N>(left_orders, left_slice, left_order, first, left_slots, slot + 1, left_nb);
+        let (r, rh) =
+            self.node::<N>(right_orders, right_slice, right_order, first + mid, right_slots, right_slot, right_nb);
+        here.nodes = 1 + l + r;
+        here.count = 1 + lh.max(rh);
+        (here.nodes, here.count)
+    }
+}
+
+fn empty_bounds() -> NodeBounds {
+    NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY }
 }
 
 /// Splits at the object median along the widest centroid axis; with all centroids equal, simply
@@ -614,9 +754,77 @@ mod tests {
         let splitter = crate::binned::BinnedSah { bins: 16, costs };
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
         pool.install(|| {
-            let ctx = super::Ctx { splitter: &splitter, costs, progress: None, parallel_node, reshape_top };
+            let ctx =
+                super::Ctx { splitter: &splitter, costs, progress: None, parallel_node, reshape_top, presorted: true };
             super::build_with(&mut super::prim_refs(tris), ctx, true)
         })
+    }
+
+    /// Triangles on a coarse grid (many centroids tie on some axis, so the input-id order
+    /// decides), clusters of identical triangles (no plane separates them: the middle split) and
+    /// a soup.
+    fn ties_and_duplicates(n: usize) -> Vec<[Vec3; 3]> {
+        let mut rng = ::tests::Rng(7);
+        let mut tris: Vec<[Vec3; 3]> = (0..n)
+            .map(|_| {
+                let mut v = || (rng.unit() * 6.0).floor();
+                let c = Vec3::new(v(), v(), v());
+                [c, c + Vec3::new(v() + 1.0, 0.0, 0.0), c + Vec3::new(0.0, v() + 1.0, v())]
+            })
+            .collect();
+        for k in 0..40 {
+            let t = [
+                Vec3::splat(k as f32 * 3.0),
+                Vec3::splat(k as f32 * 3.0) + Vec3::X,
+                Vec3::splat(k as f32 * 3.0) + Vec3::Y,
+            ];
+            tris.extend(std::iter::repeat_n(t, 1 + k % 23));
+        }
+        tris.extend(soup(n));
+        tris
+    }
+
+    #[test]
+    fn presorted_subtrees_build_the_tree_of_a_sort_per_node() {
+        use crate::binned::BinnedSah;
+        use crate::sweep::SweepSah;
+        fn both<S: super::Splitter>(tris: &[[Vec3; 3]], splitter: &S, costs: super::Costs, what: &str) {
+            let build = |presorted| {
+                let ctx = super::Ctx {
+                    splitter,
+                    costs,
+                    progress: None,
+                    parallel_node: super::PARALLEL_NODE,
+                    reshape_top: true,
+                    presorted,
+                };
+                super::build_with(&mut super::prim_refs(tris), ctx, true)
+            };
+            let (sorting, presorted) = (build(false), build(true));
+            check_shape(Tree::child_pair(&presorted.nodes), tris.len() as u32).expect("valid tree");
+            assert_eq!(sorting.nodes, presorted.nodes, "{what}: the same nodes");
+            assert_eq!(sorting.order, presorted.order, "{what}: the same leaf order");
+            assert_eq!(sorting.escape, presorted.escape, "{what}: the same escape layout");
+        }
+        let costs =
+            super::Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 8, depth_limit: super::DEPTH_LIMIT };
+        for tris in [ties_and_duplicates(3000), soup_on_floor(5000), soup_in_a_room(2000)] {
+            for bins in [4, 16, 33, 64] {
+                both(&tris, &BinnedSah { bins, costs }, costs, &format!("{bins} bins"));
+            }
+            both(&tris, &SweepSah { costs }, costs, "sweep");
+            // Leaves of one and of four: more levels swept, the middle split of duplicates above
+            // the leaf size, and (limit 10) subtrees near the depth limit left to the per-node path.
+            for (max_leaf_size, depth_limit) in [(1, super::DEPTH_LIMIT), (4, super::DEPTH_LIMIT), (1, 10)] {
+                let costs = super::Costs { max_leaf_size, depth_limit, ..costs };
+                both(
+                    &tris,
+                    &BinnedSah { bins: 16, costs },
+                    costs,
+                    &format!("leaves of {max_leaf_size}, limit {depth_limit}"),
+                );
+            }
+        }
     }
 
     /// The leaf order with each leaf's triangles sorted: the serial partition is in place and
