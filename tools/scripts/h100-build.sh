@@ -20,7 +20,8 @@
 # The scenes are tracked files under scenes/ (million.toml places dragon.glb and two bunny.glb,
 # 17 MiB), so the working tree carries them; the one generated on the host is room_big.toml, the
 # room with its glass sphere at 1024 x 512 segments (1,047,514 triangles), into $OUT.
-# Device tool: command `bash tools/scripts/h100-build.sh`, carry [".bin"]. Writes into $OUT
+# Device tool: command `bash tools/scripts/h100-build.sh`, carry [".bin", ".gl"] (.gl/eval: the
+# fontconfig packages build_report needs). Writes into $OUT
 # (default ./out/h100-build): two.md (2 threads: 16 bins and bvh), two-before.md (the same with
 # the earlier build), build.md (all threads, every builder), before.md (all threads, 16 bins and
 # bvh with the earlier build), others.md (16 and 64 bins and the sweep on the other scenes),
@@ -36,6 +37,12 @@ for b in build_report compile_profile bvhc; do
   [ -x ".bin/$b" ] || { echo "missing .bin/$b (see the top of $0)" >&2; exit 1; }
 done
 export BVH_SCENES_DIR=$PWD/scenes
+# build_report links fontconfig for its chart (plotters): the host has none, so unpack the
+# packages of .gl/eval (libfontconfig1 and what it needs, as ../shared/device.md fetches them).
+if [ -d .gl/eval ]; then
+  for f in .gl/eval/*.deb; do dpkg -x "$f" /; done
+  ldconfig
+fi
 {
   echo "host: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
   echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
