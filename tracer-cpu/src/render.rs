@@ -526,10 +526,13 @@ pub fn plan<'t>(tracer: &'t Tracer<'t>, settings: &Settings, method: Method) -> 
 /// [`plan`] with `timer` timing auto's measurement: the frame's own rays at up to 256 of its
 /// 4 x 2 pixel blocks spread evenly over the image are shaded once as the renderer shades them,
 /// every call of each stage (primary, shadow, secondary, AO or diffuse rays) recorded; then the
-/// workers time each stage's calls one by one on the wide BVH and as packets over the child-pair
-/// tree, alternately, the fastest of 3 rounds each, and each stage goes the way that took less
-/// time summed over the workers (about a millisecond of work, spread over the pool). Images do
-/// not depend on it: every way finds the same hits.
+/// workers (16 chunks, each every 16th block) time each stage's calls one by one on the wide BVH
+/// and as packets over the child-pair tree: single rays once (the recording pass has just warmed
+/// their way), packets twice (the first round warms theirs), and where neither way is more than
+/// 1.3 times the other's, alternately on up to 3 rounds each. Each way's time is the fastest of its
+/// rounds, and each stage goes the way that took less time summed over the workers (about half
+/// a millisecond of work on one thread, spread over the pool). Images do not depend on it: every
+/// way finds the same hits.
 pub fn plan_with<'t>(
     tracer: &'t Tracer<'t>,
     settings: &Settings,
@@ -569,13 +572,16 @@ fn measure(
         }
     }
     let test = settings.accuracy.intersect;
-    // Chunks of the sample for the workers: each times both ways on the same rays.
-    let chunk = blocks.len().div_ceil(16).max(1);
-    Ok(blocks
-        .par_chunks(chunk)
-        .map(|blocks| {
+    // Chunk c takes every CHUNKS-th block from the c-th: each chunk a sample of the whole image, so
+    // that chunks cost about the same (a row of the grid, the sky's or the object's, did not) and
+    // the measurement's wall time on as many workers is about one chunk's share.
+    const CHUNKS: usize = 16;
+    let chunks = CHUNKS.min(blocks.len());
+    Ok((0..chunks)
+        .into_par_iter()
+        .map(|c| {
             let mut record = Recorder { inner: OneByOne::new(wide), calls: Vec::new() };
-            for &(x0, y0) in blocks {
+            for &(x0, y0) in blocks.iter().skip(c).step_by(chunks) {
                 let (rays, seeds, ..) = primary_block::<F8>(&frame, w, h, x0, y0, sample);
                 sh.block::<F8, _>(&rays, &seeds, &mut record);
             }
@@ -597,10 +603,16 @@ fn measure(
                         });
                     }
                 };
-                let (mut t_single, mut t_packets) = (f64::INFINITY, f64::INFINITY);
-                for _ in 0..3 {
-                    t_single = t_single.min(timer.time(stage, false, rays, &mut || run(&mut single)));
+                let mut t_single = timer.time(stage, false, rays, &mut || run(&mut single));
+                let mut t_packets = f64::INFINITY;
+                for round in 0..ROUNDS {
                     t_packets = t_packets.min(timer.time(stage, true, rays, &mut || run(&mut packets)));
+                    if round > 0 {
+                        if clearly_apart(t_single, t_packets) {
+                            break;
+                        }
+                        t_single = t_single.min(timer.time(stage, false, rays, &mut || run(&mut single)));
+                    }
                 }
                 let i = stage.index();
                 (m.rays[i], m.single[i], m.packets[i]) = (rays, t_single, t_packets);
@@ -608,6 +620,15 @@ fn measure(
             m
         })
         .reduce(Measurement::default, Measurement::add))
+}
+
+/// The most rounds auto's measurement times each way of a stage.
+const ROUNDS: usize = 3;
+
+/// Whether one way of tracing took so much longer than the other (by more than the spread of
+/// repeated timings of the same way) that more rounds would not change auto's pick.
+fn clearly_apart(a: f64, b: f64) -> bool {
+    a.max(b) > 1.3 * a.min(b)
 }
 
 /// One call of the Whitted driver, as auto's measurement records it.
