@@ -157,6 +157,23 @@ fn main() {
                             let t1 = wall.now();
                             let timed: f64 = log.0.lock().unwrap().iter().map(|r| r.3).sum();
                             let timings = log.0.lock().unwrap().len();
+                            if std::env::var_os("AUTO_COST_ROUNDS").is_some_and(|v| v == "2") {
+                                // Per stage and way: the sum over the workers of each round.
+                                let mut sums: BTreeMap<(usize, bool, usize), f64> = BTreeMap::new();
+                                // One thread: a chunk ends where the stage goes back (modes of 2 stages or more).
+                                let mut seen: BTreeMap<(usize, bool), usize> = BTreeMap::new();
+                                let mut prev = 0;
+                                for &(_, st, p, secs) in log.0.lock().unwrap().iter() {
+                                    if st < prev {
+                                        seen.clear();
+                                    }
+                                    prev = st;
+                                    let k = seen.entry((st, p)).or_default();
+                                    *sums.entry((st, p, *k)).or_default() += secs;
+                                    *k += 1;
+                                }
+                                eprintln!("  {:?}", sums.iter().map(|((st, p, k), v)| format!("{st}{}{k} {:.1}", if *p { "p" } else { "s" }, v * 1e6)).collect::<Vec<_>>());
+                            }
                             eprintln!("{name} {mode:?} {n}: plan {:.3} ms, of which {timings} timings {:.3} ms", (t1 - t0) * 1e3, timed * 1e3);
                             for (i, r) in first_rounds(log).into_iter().enumerate() {
                                 if r > 0.0 {

@@ -472,7 +472,8 @@ impl TraceLanes for FrameLanes<'_> {
 
 /// What `--method auto`'s measurement found, per stage ([`Stage::index`]): the sampled rays, and
 /// the seconds they took one by one on the wide BVH and as packets (summed over the workers,
-/// each the fastest of its rounds).
+/// each the fastest of its rounds; at least that for single rays where a worker stopped them
+/// once clearly behind the packets).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Measurement {
     pub rays: [u64; Stage::ALL.len()],
@@ -527,12 +528,11 @@ pub fn plan<'t>(tracer: &'t Tracer<'t>, settings: &Settings, method: Method) -> 
 /// 4 x 2 pixel blocks spread evenly over the image are shaded once as the renderer shades them,
 /// every call of each stage (primary, shadow, secondary, AO or diffuse rays) recorded; then the
 /// workers (16 chunks, each every 16th block) time each stage's calls one by one on the wide BVH
-/// and as packets over the child-pair tree: single rays once (the recording pass has just warmed
-/// their way), packets twice (the first round warms theirs), and where neither way is more than
-/// 1.3 times the other's, alternately on up to 3 rounds each. Each way's time is the fastest of its
-/// rounds, and each stage goes the way that took less time summed over the workers (about half
-/// a millisecond of work on one thread, spread over the pool). Images do not depend on it: every
-/// way finds the same hits.
+/// and as packets over the child-pair tree, the fastest of 3 rounds each, the first a warm-up;
+/// where one way has taken more than 1.3 times the other's after two rounds, it gets no third,
+/// and single rays stop their second round once past that (about half a millisecond of work on
+/// one thread, spread over the pool). Each stage goes the way that took less time summed over
+/// the workers. Images do not depend on it: every way finds the same hits.
 pub fn plan_with<'t>(
     tracer: &'t Tracer<'t>,
     settings: &Settings,
@@ -594,8 +594,8 @@ fn measure(
                 if rays == 0 {
                     continue;
                 }
-                let run = |lanes: &mut Mixed<'_>| {
-                    for c in &calls {
+                let run = |lanes: &mut Mixed<'_>, calls: &[&Call]| {
+                    for c in calls {
                         std::hint::black_box(if c.any {
                             lanes.occluded_in(stage, &c.rays, test)
                         } else {
@@ -603,16 +603,34 @@ fn measure(
                         });
                     }
                 };
-                let mut t_single = timer.time(stage, false, rays, &mut || run(&mut single));
-                let mut t_packets = f64::INFINITY;
-                for round in 0..ROUNDS {
-                    t_packets = t_packets.min(timer.time(stage, true, rays, &mut || run(&mut packets)));
-                    if round > 0 {
-                        if clearly_apart(t_single, t_packets) {
+                let mut packet_round = || timer.time(stage, true, rays, &mut || run(&mut packets, &calls));
+                // Single rays in slices, stopping after the slice that passes `limit`: the slices
+                // timed so far are a lower bound of the whole round.
+                let mut single_round = |limit: f64| {
+                    let mut t = 0.0;
+                    for part in calls.chunks(calls.len().div_ceil(SLICES)) {
+                        let rays = part.iter().map(|c| c.rays.count() as u64).sum();
+                        t += timer.time(stage, false, rays, &mut || run(&mut single, part));
+                        if t > limit {
                             break;
                         }
-                        t_single = t_single.min(timer.time(stage, false, rays, &mut || run(&mut single)));
                     }
+                    t
+                };
+                // Each way's first round runs cold (the other way and the other stages have
+                // been through the caches since), up to 5 times the later rounds: it warms up.
+                // Single rays, the slower way on most stages, then run only until they are
+                // clearly behind the packets; the way ahead gets a third round, as both do where
+                // neither is clearly ahead.
+                let mut t_single = single_round(f64::INFINITY);
+                let mut t_packets = packet_round().min(packet_round());
+                t_single = t_single.min(single_round(APART * t_packets));
+                let apart = clearly_apart(t_single, t_packets);
+                if !apart || t_packets < t_single {
+                    t_packets = t_packets.min(packet_round());
+                }
+                if !apart || t_single < t_packets {
+                    t_single = t_single.min(single_round(f64::INFINITY));
                 }
                 let i = stage.index();
                 (m.rays[i], m.single[i], m.packets[i]) = (rays, t_single, t_packets);
@@ -622,13 +640,15 @@ fn measure(
         .reduce(Measurement::default, Measurement::add))
 }
 
-/// The most rounds auto's measurement times each way of a stage.
-const ROUNDS: usize = 3;
+/// The slices a round of single rays is timed in, so that it can stop once clearly behind.
+const SLICES: usize = 8;
 
-/// Whether one way of tracing took so much longer than the other (by more than the spread of
-/// repeated timings of the same way) that more rounds would not change auto's pick.
+/// How many times the other's time one way must take to be clearly behind: more than the spread
+/// of repeated warm timings of the same way, so that more rounds would not change auto's pick.
+const APART: f64 = 1.3;
+
 fn clearly_apart(a: f64, b: f64) -> bool {
-    a.max(b) > 1.3 * a.min(b)
+    a.max(b) > APART * a.min(b)
 }
 
 /// One call of the Whitted driver, as auto's measurement records it.
