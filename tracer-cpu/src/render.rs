@@ -472,8 +472,8 @@ impl TraceLanes for FrameLanes<'_> {
 
 /// What `--method auto`'s measurement found, per stage ([`Stage::index`]): the sampled rays, and
 /// the seconds they took one by one on the wide BVH and as packets (summed over the workers,
-/// each the fastest of its rounds; at least that for single rays where a worker stopped them
-/// once clearly behind the packets).
+/// each the fastest of its rounds; for single rays that a worker stopped once clearly behind the
+/// packets, 1.3 times the packets' time there: at least what they would have taken).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Measurement {
     pub rays: [u64; Stage::ALL.len()],
@@ -528,9 +528,10 @@ pub fn plan<'t>(tracer: &'t Tracer<'t>, settings: &Settings, method: Method) -> 
 /// 4 x 2 pixel blocks spread evenly over the image are shaded once as the renderer shades them,
 /// every call of each stage (primary, shadow, secondary, AO or diffuse rays) recorded; then the
 /// workers (16 chunks, each every 16th block) time each stage's calls one by one on the wide BVH
-/// and as packets over the child-pair tree, the fastest of 3 rounds each, the first a warm-up;
-/// where one way has taken more than 1.3 times the other's after two rounds, it gets no third,
-/// and single rays stop their second round once past that (about half a millisecond of work on
+/// and as packets over the child-pair tree, the fastest of up to 3 rounds each: packets twice
+/// (the first warms them up; the recording pass has warmed the single rays), then single rays,
+/// stopped once they have taken more than 1.3 times the packets' time; where one way is that far
+/// behind it gets no more rounds, and the way ahead a third (about half a millisecond of work on
 /// one thread, spread over the pool). Each stage goes the way that took less time summed over
 /// the workers. Images do not depend on it: every way finds the same hits.
 pub fn plan_with<'t>(
@@ -604,33 +605,38 @@ fn measure(
                     }
                 };
                 let mut packet_round = || timer.time(stage, true, rays, &mut || run(&mut packets, &calls));
-                // Single rays in slices, stopping after the slice that passes `limit`: the slices
-                // timed so far are a lower bound of the whole round.
+                // Single rays in slices; None once they pass `limit`.
                 let mut single_round = |limit: f64| {
                     let mut t = 0.0;
                     for part in calls.chunks(calls.len().div_ceil(SLICES)) {
                         let rays = part.iter().map(|c| c.rays.count() as u64).sum();
                         t += timer.time(stage, false, rays, &mut || run(&mut single, part));
                         if t > limit {
-                            break;
+                            return None;
                         }
                     }
-                    t
+                    Some(t)
                 };
-                // Each way's first round runs cold (the other way and the other stages have
-                // been through the caches since), up to 5 times the later rounds: it warms up.
-                // Single rays, the slower way on most stages, then run only until they are
-                // clearly behind the packets; the way ahead gets a third round, as both do where
-                // neither is clearly ahead.
-                let mut t_single = single_round(f64::INFINITY);
+                // Packets' first round runs cold, 2-4 times slower than the next (the recording
+                // traced single rays on the wide BVH; the other stages have been through the
+                // caches since): it warms up. Single rays then run only until they are clearly
+                // behind the packets (2-4 times slower on most stages), and count as just that
+                // far behind (what was timed may hold a preemption that no other round would
+                // correct); where they are not, the way ahead gets a third round, and both do
+                // where neither is clearly ahead.
                 let mut t_packets = packet_round().min(packet_round());
-                t_single = t_single.min(single_round(APART * t_packets));
-                let apart = clearly_apart(t_single, t_packets);
+                let (mut t_single, apart) = match single_round(APART * t_packets) {
+                    Some(t) => (t, clearly_apart(t, t_packets)),
+                    None => (APART * t_packets, true),
+                };
                 if !apart || t_packets < t_single {
                     t_packets = t_packets.min(packet_round());
                 }
                 if !apart || t_single < t_packets {
-                    t_single = t_single.min(single_round(f64::INFINITY));
+                    t_single = t_single.min(single_round(f64::INFINITY).unwrap_or(f64::INFINITY));
+                }
+                if !apart {
+                    t_single = t_single.min(single_round(f64::INFINITY).unwrap_or(f64::INFINITY));
                 }
                 let i = stage.index();
                 (m.rays[i], m.single[i], m.packets[i]) = (rays, t_single, t_packets);
