@@ -22,8 +22,8 @@ use bvh_format::SceneFile;
 use render_spec::{CameraSpec, Mode, Settings};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use tracer_cpu::lanes::Stage;
 use std::sync::Mutex;
+use tracer_cpu::lanes::Stage;
 use tracer_cpu::render::{Canvas, StageTimer, WallClock, plan, plan_with, render_into};
 use tracer_cpu::{Method, Tracer};
 
@@ -88,9 +88,12 @@ fn main() {
             }
             "--size" => {
                 let (w, h) = v.split_once('x').unwrap_or_else(|| fail("--size takes WxH"));
-                size = (w.parse().unwrap_or_else(|_| fail("bad width")), h.parse().unwrap_or_else(|_| fail("bad height")));
+                size =
+                    (w.parse().unwrap_or_else(|_| fail("bad width")), h.parse().unwrap_or_else(|_| fail("bad height")));
             }
-            "--threads" => threads = list().iter().map(|t| t.parse().unwrap_or_else(|_| fail("bad --threads"))).collect(),
+            "--threads" => {
+                threads = list().iter().map(|t| t.parse().unwrap_or_else(|_| fail("bad --threads"))).collect()
+            }
             "--modes" => {
                 modes = list()
                     .iter()
@@ -112,7 +115,9 @@ fn main() {
         scenes.push(("bunny".into(), dir.join("bunny.toml")));
     }
     println!("load average before: {}", rayset::loadavg());
-    println!("| scene | mode | threads | measure wall ms | frame wall ms | share wall | measure CPU ms | frame CPU ms | share CPU | picks (rounds) | single / packets per stage |");
+    println!(
+        "| scene | mode | threads | measure wall ms | frame wall ms | share wall | measure CPU ms | frame CPU ms | share CPU | picks (rounds) | single / packets per stage |"
+    );
     println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---|---|");
     for (name, path) in &scenes {
         let scene: SceneFile = if path.extension().is_some_and(|e| e == "bvh") {
@@ -147,7 +152,8 @@ fn main() {
                         let p = plan(&tracer, &settings, Method::Auto).unwrap_or_else(|e| fail(&e.to_string()));
                         let (w1, c1) = (wall.now(), cpu.now());
                         let c = canvas.take().unwrap_or_else(|| Canvas::new(&settings));
-                        let image = render_into(&tracer, &settings, &p, c, &|_| {}).unwrap_or_else(|e| fail(&e.to_string()));
+                        let image =
+                            render_into(&tracer, &settings, &p, c, &|_| {}).unwrap_or_else(|e| fail(&e.to_string()));
                         let (w2, c2) = (wall.now(), cpu.now());
                         canvas = Some(Canvas::reuse(image));
                         if round > 0 && std::env::var_os("AUTO_COST_ROUNDS").is_some() {
@@ -172,9 +178,22 @@ fn main() {
                                     *sums.entry((st, p, *k)).or_default() += secs;
                                     *k += 1;
                                 }
-                                eprintln!("  {:?}", sums.iter().map(|((st, p, k), v)| format!("{st}{}{k} {:.1}", if *p { "p" } else { "s" }, v * 1e6)).collect::<Vec<_>>());
+                                eprintln!(
+                                    "  {:?}",
+                                    sums.iter()
+                                        .map(|((st, p, k), v)| format!(
+                                            "{st}{}{k} {:.1}",
+                                            if *p { "p" } else { "s" },
+                                            v * 1e6
+                                        ))
+                                        .collect::<Vec<_>>()
+                                );
                             }
-                            eprintln!("{name} {mode:?} {n}: plan {:.3} ms, of which {timings} timings {:.3} ms", (t1 - t0) * 1e3, timed * 1e3);
+                            eprintln!(
+                                "{name} {mode:?} {n}: plan {:.3} ms, of which {timings} timings {:.3} ms",
+                                (t1 - t0) * 1e3,
+                                timed * 1e3
+                            );
                             for (i, r) in first_rounds(log).into_iter().enumerate() {
                                 if r > 0.0 {
                                     firsts[i].push(r);
@@ -206,8 +225,10 @@ fn main() {
                     .filter(|s| !ratios[s.index()].is_empty())
                     .map(|s| {
                         let f = &firsts[s.index()];
-                        let (lo, hi) = (f.iter().copied().fold(f64::INFINITY, f64::min), f.iter().copied().fold(0.0, f64::max));
-                        let first = if f.is_empty() { String::new() } else { format!(" (first rounds {lo:.2}-{hi:.2})") };
+                        let (lo, hi) =
+                            (f.iter().copied().fold(f64::INFINITY, f64::min), f.iter().copied().fold(0.0, f64::max));
+                        let first =
+                            if f.is_empty() { String::new() } else { format!(" (first rounds {lo:.2}-{hi:.2})") };
                         format!("{} {:.2}{first}", s.name(), median(ratios[s.index()].clone()))
                     })
                     .collect();
