@@ -473,7 +473,7 @@ impl TraceLanes for FrameLanes<'_> {
 /// What `--method auto`'s measurement found, per stage ([`Stage::index`]): the sampled rays, and
 /// the seconds they took one by one on the wide BVH and as packets (summed over the workers,
 /// each the fastest of its rounds; for single rays that a worker stopped once clearly behind the
-/// packets, 1.3 times the packets' time there: at least what they would have taken).
+/// packets, 1.3 times the packets' first two rounds: at least what they would have taken).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Measurement {
     pub rays: [u64; Stage::ALL.len()],
@@ -528,11 +528,11 @@ pub fn plan<'t>(tracer: &'t Tracer<'t>, settings: &Settings, method: Method) -> 
 /// 4 x 2 pixel blocks spread evenly over the image are shaded once as the renderer shades them,
 /// every call of each stage (primary, shadow, secondary, AO or diffuse rays) recorded; then the
 /// workers (16 chunks, each every 16th block) time each stage's calls one by one on the wide BVH
-/// and as packets over the child-pair tree, the fastest of up to 3 rounds each: packets twice
-/// (the first warms them up; the recording pass has warmed the single rays), then single rays,
-/// stopped once they have taken more than 1.3 times the packets' time; where one way is that far
-/// behind it gets no more rounds, and the way ahead a third (about half a millisecond of work on
-/// one thread, spread over the pool). Each stage goes the way that took less time summed over
+/// and as packets over the child-pair tree: packets 3 rounds (the first warms them up; the
+/// recording pass has warmed the single rays), single rays up to 3 until one way has taken more
+/// than 1.3 times the other's time, their first stopped once past 1.3 times the packets' first
+/// two (about half a millisecond of work on one thread, spread over the pool). Each way's time is
+/// the fastest of its rounds, and each stage goes the way that took less time summed over
 /// the workers. Images do not depend on it: every way finds the same hits.
 pub fn plan_with<'t>(
     tracer: &'t Tracer<'t>,
@@ -619,24 +619,25 @@ fn measure(
                 };
                 // Packets' first round runs cold, 2-4 times slower than the next (the recording
                 // traced single rays on the wide BVH; the other stages have been through the
-                // caches since): it warms up. Single rays then run only until they are clearly
-                // behind the packets (2-4 times slower on most stages), and count as just that
-                // far behind (what was timed may hold a preemption that no other round would
-                // correct); where they are not, the way ahead gets a third round, and both do
-                // where neither is clearly ahead.
+                // caches since): it warms up, and packets get 3 rounds, so that one preempted
+                // round does not count. Single rays, 2-4 times slower than packets on most
+                // stages, run only until they are clearly behind the packets' time after two
+                // rounds, and then count as just that far behind (what was timed may hold a
+                // preemption that no other round would correct); where they are not, they get
+                // up to 3 rounds, until one way is clearly ahead.
                 let mut t_packets = packet_round().min(packet_round());
-                let (mut t_single, apart) = match single_round(APART * t_packets) {
-                    Some(t) => (t, clearly_apart(t, t_packets)),
-                    None => (APART * t_packets, true),
-                };
-                if !apart || t_packets < t_single {
-                    t_packets = t_packets.min(packet_round());
-                }
-                if !apart || t_single < t_packets {
+                let limit = APART * t_packets;
+                let first = single_round(limit);
+                t_packets = t_packets.min(packet_round());
+                let mut t_single = first.unwrap_or(limit);
+                for _ in 1..3 {
+                    if first.is_none() || clearly_apart(t_single, t_packets) && t_single > t_packets {
+                        break;
+                    }
                     t_single = t_single.min(single_round(f64::INFINITY).unwrap_or(f64::INFINITY));
-                }
-                if !apart {
-                    t_single = t_single.min(single_round(f64::INFINITY).unwrap_or(f64::INFINITY));
+                    if clearly_apart(t_single, t_packets) {
+                        break;
+                    }
                 }
                 let i = stage.index();
                 (m.rays[i], m.single[i], m.packets[i]) = (rays, t_single, t_packets);
