@@ -530,10 +530,11 @@ pub fn plan<'t>(tracer: &'t Tracer<'t>, settings: &Settings, method: Method) -> 
 /// workers (16 chunks, each every 16th block) time each stage's calls one by one on the wide BVH
 /// and as packets over the child-pair tree: packets 3 rounds (the first warms them up; the
 /// recording pass has warmed the single rays), single rays up to 3 until one way has taken more
-/// than 1.3 times the other's time, their first stopped once past 1.3 times the packets' first
-/// two (about half a millisecond of work on one thread, spread over the pool). Each way's time is
-/// the fastest of its rounds, and each stage goes the way that took less time summed over
-/// the workers. Images do not depend on it: every way finds the same hits.
+/// than 1.3 times the other's time, their first stopped once past twice the packets' first two
+/// and then counted as 1.3 times (about half a millisecond of work on one thread, spread over
+/// the pool). Each way's time is the fastest of its rounds, and each stage goes the way that
+/// took less time summed over the workers. Images do not depend on it: every way finds the same
+/// hits.
 pub fn plan_with<'t>(
     tracer: &'t Tracer<'t>,
     settings: &Settings,
@@ -621,17 +622,17 @@ fn measure(
                 // traced single rays on the wide BVH; the other stages have been through the
                 // caches since): it warms up, and packets get 3 rounds, so that one preempted
                 // round does not count. Single rays, 2-4 times slower than packets on most
-                // stages, run only until they are clearly behind the packets' time after two
-                // rounds, and then count as just that far behind (what was timed may hold a
-                // preemption that no other round would correct); where they are not, they get
-                // up to 3 rounds, until one way is clearly ahead.
+                // stages, run only until they have taken twice the packets' two rounds: their
+                // first round, after the packets', can run up to a third slower than the next
+                // (AO rays), so this margin is wider than APART, and they then count as just
+                // APART behind (what was timed may hold a preemption that no other round would
+                // correct). Otherwise they get up to 3 rounds, until one way is clearly ahead.
                 let mut t_packets = packet_round().min(packet_round());
-                let limit = APART * t_packets;
-                let first = single_round(limit);
+                let first = single_round(STOP * t_packets);
+                let mut t_single = first.unwrap_or(APART * t_packets);
                 t_packets = t_packets.min(packet_round());
-                let mut t_single = first.unwrap_or(limit);
                 for _ in 1..3 {
-                    if first.is_none() || clearly_apart(t_single, t_packets) && t_single > t_packets {
+                    if first.is_none() || t_single > STOP * t_packets {
                         break;
                     }
                     t_single = t_single.min(single_round(f64::INFINITY).unwrap_or(f64::INFINITY));
@@ -653,6 +654,9 @@ const SLICES: usize = 8;
 /// How many times the other's time one way must take to be clearly behind: more than the spread
 /// of repeated warm timings of the same way, so that more rounds would not change auto's pick.
 const APART: f64 = 1.3;
+
+/// How many times the packets' time single rays' first round must take to stop there.
+const STOP: f64 = 2.0;
 
 fn clearly_apart(a: f64, b: f64) -> bool {
     a.max(b) > APART * a.min(b)
