@@ -472,8 +472,9 @@ impl TraceLanes for FrameLanes<'_> {
 
 /// What `--method auto`'s measurement found, per stage ([`Stage::index`]): the sampled rays, and
 /// the seconds they took one by one on the wide BVH and as packets (summed over the workers,
-/// each the fastest of its rounds; for single rays that a worker stopped once clearly behind the
-/// packets, 1.3 times the packets' first two rounds: at least what they would have taken).
+/// each the fastest of its rounds; for single rays that a worker stopped after their first round,
+/// twice as slow as the packets' first two rounds, 1.1 times those: less than they would have
+/// taken).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Measurement {
     pub rays: [u64; Stage::ALL.len()],
@@ -530,8 +531,8 @@ pub fn plan<'t>(tracer: &'t Tracer<'t>, settings: &Settings, method: Method) -> 
 /// workers (16 chunks, each every 16th block) time each stage's calls one by one on the wide BVH
 /// and as packets over the child-pair tree: packets 3 rounds (the first warms them up; the
 /// recording pass has warmed the single rays), single rays up to 3 until one way has taken more
-/// than 1.3 times the other's time, their first stopped once past twice the packets' first two
-/// and then counted as 1.3 times (about half a millisecond of work on one thread, spread over
+/// than 1.3 times the other's time, but only one where it took twice the packets' first two,
+/// stopped there and counted as 1.1 times them (about half a millisecond of work on one thread, spread over
 /// the pool). Each way's time is the fastest of its rounds, and each stage goes the way that
 /// took less time summed over the workers. Images do not depend on it: every way finds the same
 /// hits.
@@ -622,23 +623,25 @@ fn measure(
                 // traced single rays on the wide BVH; the other stages have been through the
                 // caches since): it warms up, and packets get 3 rounds, so that one preempted
                 // round does not count. Single rays, 2-4 times slower than packets on most
-                // stages, run only until they have taken twice the packets' two rounds: their
-                // first round, after the packets', can run up to a third slower than the next
-                // (AO rays), so this margin is wider than APART, and they then count as just
-                // APART behind (what was timed may hold a preemption that no other round would
-                // correct). Otherwise they get up to 3 rounds, until one way is clearly ahead.
-                let mut t_packets = packet_round().min(packet_round());
-                let first = single_round(STOP * t_packets);
-                let mut t_single = first.unwrap_or(APART * t_packets);
-                t_packets = t_packets.min(packet_round());
-                for _ in 1..3 {
-                    if first.is_none() || t_single > STOP * t_packets {
+                // stages, run only until they have taken STOP times the packets' two rounds.
+                // Their first round, after the packets', can itself run cold (AO and diffuse
+                // rays: a third slower on average, more on some workers) or be preempted, so
+                // single rays stopped there count as just BEHIND the packets. Otherwise they get
+                // up to 3 rounds, until one way is clearly ahead.
+                let two = packet_round().min(packet_round());
+                let first = single_round(STOP * two);
+                let t_packets = two.min(packet_round());
+                let behind = first.is_none_or(|t| t > STOP * t_packets);
+                let mut t_single = match first {
+                    Some(t) if !behind => t,
+                    _ => BEHIND * two,
+                };
+                // The way ahead by a clear margin needs one round beside the first to trust it.
+                for round in 1..3 {
+                    if behind || clearly_apart(t_single, t_packets) && (round > 1 || t_single > t_packets) {
                         break;
                     }
                     t_single = t_single.min(single_round(f64::INFINITY).unwrap_or(f64::INFINITY));
-                    if clearly_apart(t_single, t_packets) {
-                        break;
-                    }
                 }
                 let i = stage.index();
                 (m.rays[i], m.single[i], m.packets[i]) = (rays, t_single, t_packets);
@@ -657,6 +660,10 @@ const APART: f64 = 1.3;
 
 /// How many times the packets' time single rays' first round must take to stop there.
 const STOP: f64 = 2.0;
+
+/// How many times the packets' time single rays stopped after their first round count as: a
+/// lower bound where that round ran cold, up to STOP / BEHIND times slower than the next.
+const BEHIND: f64 = 1.1;
 
 fn clearly_apart(a: f64, b: f64) -> bool {
     a.max(b) > APART * a.min(b)
