@@ -80,9 +80,9 @@ fn main() {
     }
     println!("load average before: {}", rayset::loadavg());
     println!(
-        "| scene | mode | threads | measure wall ms | frame wall ms | share wall | measure CPU ms | frame CPU ms | share CPU | picks (rounds) | single / packets per stage |"
+        "| scene | mode | threads | measure ms | frame ms | share | picks (rounds) | single / packets per stage |"
     );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---|---|");
+    println!("|---|---|---:|---:|---:|---:|---|---|");
     for (name, path) in &scenes {
         let scene: SceneFile = if path.extension().is_some_and(|e| e == "bvh") {
             bvh_format::read_file(path).unwrap_or_else(|e| fail(&e.to_string()))

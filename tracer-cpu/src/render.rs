@@ -532,10 +532,10 @@ pub fn plan<'t>(tracer: &'t Tracer<'t>, settings: &Settings, method: Method) -> 
 /// and as packets over the child-pair tree: packets 3 rounds (the first warms them up; the
 /// recording pass has warmed the single rays), single rays up to 3 until one way has taken more
 /// than 1.3 times the other's time, but only one where it took twice the packets' first two,
-/// stopped there and counted as 1.1 times them (about half a millisecond of work on one thread, spread over
-/// the pool). Each way's time is the fastest of its rounds, and each stage goes the way that
-/// took less time summed over the workers. Images do not depend on it: every way finds the same
-/// hits.
+/// stopped there and counted as 1.1 times them (about half a millisecond of work on one
+/// thread, spread over the pool). Each way's time is the fastest of its rounds, and each stage
+/// goes the way that took less time summed over the workers. Images do not depend on it: every
+/// way finds the same hits.
 pub fn plan_with<'t>(
     tracer: &'t Tracer<'t>,
     settings: &Settings,
