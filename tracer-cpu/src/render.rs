@@ -472,7 +472,9 @@ impl TraceLanes for FrameLanes<'_> {
 
 /// What `--method auto`'s measurement found, per stage ([`Stage::index`]): the sampled rays, and
 /// the seconds they took one by one on the wide BVH and as packets (summed over the workers,
-/// each the fastest of its rounds).
+/// each the fastest of its rounds; for single rays that a worker stopped after their first round,
+/// twice as slow as the packets' first two rounds, 1.1 times those: less than they would have
+/// taken).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Measurement {
     pub rays: [u64; Stage::ALL.len()],
@@ -526,10 +528,14 @@ pub fn plan<'t>(tracer: &'t Tracer<'t>, settings: &Settings, method: Method) -> 
 /// [`plan`] with `timer` timing auto's measurement: the frame's own rays at up to 256 of its
 /// 4 x 2 pixel blocks spread evenly over the image are shaded once as the renderer shades them,
 /// every call of each stage (primary, shadow, secondary, AO or diffuse rays) recorded; then the
-/// workers time each stage's calls one by one on the wide BVH and as packets over the child-pair
-/// tree, alternately, the fastest of 3 rounds each, and each stage goes the way that took less
-/// time summed over the workers (about a millisecond of work, spread over the pool). Images do
-/// not depend on it: every way finds the same hits.
+/// workers (16 chunks, each every 16th block) time each stage's calls one by one on the wide BVH
+/// and as packets over the child-pair tree: packets 3 rounds (the first warms them up; the
+/// recording pass has warmed the single rays), single rays up to 3 until one way has taken more
+/// than 1.3 times the other's time, but only one where it took twice the packets' first two,
+/// stopped there and counted as 1.1 times them (about half a millisecond of work on one
+/// thread, spread over the pool). Each way's time is the fastest of its rounds, and each stage
+/// goes the way that took less time summed over the workers. Images do not depend on it: every
+/// way finds the same hits.
 pub fn plan_with<'t>(
     tracer: &'t Tracer<'t>,
     settings: &Settings,
@@ -569,13 +575,16 @@ fn measure(
         }
     }
     let test = settings.accuracy.intersect;
-    // Chunks of the sample for the workers: each times both ways on the same rays.
-    let chunk = blocks.len().div_ceil(16).max(1);
-    Ok(blocks
-        .par_chunks(chunk)
-        .map(|blocks| {
+    // Chunk c takes every CHUNKS-th block from the c-th: each chunk a sample of the whole image, so
+    // that chunks cost about the same (a row of the grid, the sky's or the object's, did not) and
+    // the measurement's wall time on as many workers is about one chunk's share.
+    const CHUNKS: usize = 16;
+    let chunks = CHUNKS.min(blocks.len());
+    Ok((0..chunks)
+        .into_par_iter()
+        .map(|c| {
             let mut record = Recorder { inner: OneByOne::new(wide), calls: Vec::new() };
-            for &(x0, y0) in blocks {
+            for &(x0, y0) in blocks.iter().skip(c).step_by(chunks) {
                 let (rays, seeds, ..) = primary_block::<F8>(&frame, w, h, x0, y0, sample);
                 sh.block::<F8, _>(&rays, &seeds, &mut record);
             }
@@ -588,8 +597,8 @@ fn measure(
                 if rays == 0 {
                     continue;
                 }
-                let run = |lanes: &mut Mixed<'_>| {
-                    for c in &calls {
+                let run = |lanes: &mut Mixed<'_>, calls: &[&Call]| {
+                    for c in calls {
                         std::hint::black_box(if c.any {
                             lanes.occluded_in(stage, &c.rays, test)
                         } else {
@@ -597,10 +606,42 @@ fn measure(
                         });
                     }
                 };
-                let (mut t_single, mut t_packets) = (f64::INFINITY, f64::INFINITY);
-                for _ in 0..3 {
-                    t_single = t_single.min(timer.time(stage, false, rays, &mut || run(&mut single)));
-                    t_packets = t_packets.min(timer.time(stage, true, rays, &mut || run(&mut packets)));
+                let mut packet_round = || timer.time(stage, true, rays, &mut || run(&mut packets, &calls));
+                // Single rays in slices; None once they pass `limit`.
+                let mut single_round = |limit: f64| {
+                    let mut t = 0.0;
+                    for part in calls.chunks(calls.len().div_ceil(SLICES)) {
+                        let rays = part.iter().map(|c| c.rays.count() as u64).sum();
+                        t += timer.time(stage, false, rays, &mut || run(&mut single, part));
+                        if t > limit {
+                            return None;
+                        }
+                    }
+                    Some(t)
+                };
+                // Packets' first round runs cold, 2-4 times slower than the next (the recording
+                // traced single rays on the wide BVH; the other stages have been through the
+                // caches since): it warms up, and packets get 3 rounds, so that one preempted
+                // round does not count. Single rays, 2-4 times slower than packets on most
+                // stages, run only until they have taken STOP times the packets' two rounds.
+                // Their first round, after the packets', can itself run cold (AO and diffuse
+                // rays: a third slower on average, more on some workers) or be preempted, so
+                // single rays stopped there count as just BEHIND the packets. Otherwise they get
+                // up to 3 rounds, until one way is clearly ahead.
+                let two = packet_round().min(packet_round());
+                let first = single_round(STOP * two);
+                let t_packets = two.min(packet_round());
+                let behind = first.is_none_or(|t| t > STOP * t_packets);
+                let mut t_single = match first {
+                    Some(t) if !behind => t,
+                    _ => BEHIND * two,
+                };
+                // The way ahead by a clear margin needs one round beside the first to trust it.
+                for round in 1..3 {
+                    if behind || clearly_apart(t_single, t_packets) && (round > 1 || t_single > t_packets) {
+                        break;
+                    }
+                    t_single = t_single.min(single_round(f64::INFINITY).unwrap_or(f64::INFINITY));
                 }
                 let i = stage.index();
                 (m.rays[i], m.single[i], m.packets[i]) = (rays, t_single, t_packets);
@@ -608,6 +649,24 @@ fn measure(
             m
         })
         .reduce(Measurement::default, Measurement::add))
+}
+
+/// The slices a round of single rays is timed in, so that it can stop once clearly behind.
+const SLICES: usize = 8;
+
+/// How many times the other's time one way must take to be clearly behind: more than the spread
+/// of repeated warm timings of the same way, so that more rounds would not change auto's pick.
+const APART: f64 = 1.3;
+
+/// How many times the packets' time single rays' first round must take to stop there.
+const STOP: f64 = 2.0;
+
+/// How many times the packets' time single rays stopped after their first round count as: a
+/// lower bound where that round ran cold, up to STOP / BEHIND times slower than the next.
+const BEHIND: f64 = 1.1;
+
+fn clearly_apart(a: f64, b: f64) -> bool {
+    a.max(b) > APART * a.min(b)
 }
 
 /// One call of the Whitted driver, as auto's measurement records it.

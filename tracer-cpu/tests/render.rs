@@ -264,11 +264,13 @@ fn progress_reports_every_row_once_and_the_image_is_unchanged() {
 struct Table {
     per_ray: [(f64, f64); 5],
     asked: std::sync::Mutex<std::collections::BTreeSet<usize>>,
+    /// Per stage: the rays timed one by one and as packets, over all rounds and workers.
+    timed: std::sync::Mutex<[[u64; 2]; 5]>,
 }
 
 impl Table {
     fn new(per_ray: [(f64, f64); 5]) -> Self {
-        Self { per_ray, asked: Default::default() }
+        Self { per_ray, asked: Default::default(), timed: Default::default() }
     }
 }
 
@@ -276,6 +278,7 @@ impl StageTimer for Table {
     fn time(&self, stage: Stage, packets: bool, rays: u64, trace: &mut dyn FnMut()) -> f64 {
         trace();
         self.asked.lock().unwrap().insert(stage.index());
+        self.timed.lock().unwrap()[stage.index()][packets as usize] += rays;
         let (single, packet) = self.per_ray[stage.index()];
         rays as f64 * if packets { packet } else { single }
     }
@@ -323,6 +326,57 @@ fn auto_picks_each_kind_of_ray_by_its_measurement() {
             let image = render_into(&tracer, &s, &plan, Canvas::new(&s), &|_| {}).unwrap();
             same_image(&base, &image, &format!("{mode:?} auto {}", plan.describe()));
         }
+    }
+}
+
+/// Auto's measurement stops timing single rays once one way is clearly ahead: with packets 4
+/// times faster, single rays get less than one round (stopped at twice the packets' time) and
+/// count as 1.1 times the packets; with single rays 4 times faster, they get two rounds; where
+/// the ways are 10% apart, three. Packets always get 3 (the first a warm-up). Every pick follows
+/// the table.
+#[test]
+fn auto_stops_timing_the_way_clearly_behind() {
+    let room = common::compile(&common::scenes_dir().join("room.toml"));
+    let tracer = Tracer::new(&room);
+    let (s, _) = settings(&room, "medium", Mode::Whitted, Method::Auto, 64, 48);
+    let stages = [Stage::Primary, Stage::Shadow, Stage::Secondary];
+    // (single, packets) seconds per ray; rounds timed (single, packets) per sampled ray.
+    for ((single, packets), rounds) in
+        [((4e-9, 1e-9), (None, 3)), ((1e-9, 4e-9), (Some(2), 3)), ((1.1e-9, 1e-9), (Some(3), 3))]
+    {
+        let timer = Table::new([(single, packets); 5]);
+        let plan = plan_with(&tracer, &s, Method::Auto, &timer).unwrap();
+        if !tracer_cpu::packet::available() {
+            assert!(
+                plan.measured().is_none() && timer.timed.into_inner().unwrap() == [[0; 2]; 5],
+                "no AVX2: no timing"
+            );
+            continue;
+        }
+        let m = plan.measured().expect("auto measures where packets run");
+        let timed = timer.timed.into_inner().unwrap();
+        for stage in stages {
+            let i = stage.index();
+            let what = format!("{stage:?}, {single} / {packets} s per ray: {m:?}, timed {timed:?}");
+            assert!(m.rays[i] > 0, "{what}");
+            assert_eq!(plan.packet_stages()[i], packets < single, "{what}");
+            assert_eq!(timed[i][1], rounds.1 * m.rays[i], "{what}");
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b;
+            assert!(close(m.packets[i], packets * m.rays[i] as f64), "{what}");
+            match rounds.0 {
+                Some(n) => {
+                    assert_eq!(timed[i][0], n * m.rays[i], "{what}");
+                    assert!(close(m.single[i], single * m.rays[i] as f64), "{what}");
+                }
+                None => {
+                    assert!(timed[i][0] <= m.rays[i], "{what}");
+                    assert!(close(m.single[i], 1.1 * m.packets[i]), "{what}");
+                }
+            }
+        }
+        // 16 calls of 8 primary rays per worker, timed in 8 slices: stopped once past twice the
+        // packets' time, at 5 of the 8 (single rays 4 times slower).
+        assert!(timed[0][0] == m.rays[0] * 5 / 8 || rounds.0.is_some(), "{m:?}, timed {timed:?}");
     }
 }
 
