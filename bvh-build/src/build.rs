@@ -2,7 +2,7 @@
 //! degenerate input, rayon parallelism, and the final child-pair layout. A [`Splitter`] (binned or
 //! sweep) only decides where to split one node.
 
-use crate::sweep::{PRESORTED_MAX, Presorted, presorted_split};
+use crate::sweep::{PRESORTED_MAX, Presorted, bounds_at, presorted_split};
 use crate::top::{At, Top, top_units};
 use bvh_format::Node;
 use glam::Vec3A;
@@ -458,15 +458,10 @@ impl<S: Splitter> Subtree<'_, '_, S> {
         // Each axis's order split stably by side, the three side by side.
         let (left_slice, right_slice) = side_of.split_at(mid);
         let mut left_side = [false; N];
-        let (mut left_nb, mut right_nb) = (empty_bounds(), empty_bounds());
-        for (sides, nb, left) in [(left_slice, &mut left_nb, true), (right_slice, &mut right_nb, false)] {
-            for &i in sides {
-                left_side[i as usize] = left;
-                let b = &self.boxes[i as usize];
-                nb.aabb.grow(b);
-                nb.centroids.grow_point((b.min + b.max) * 0.5);
-            }
+        for &i in left_slice {
+            left_side[i as usize] = true;
         }
+        let (left_nb, right_nb) = (bounds_at(self.boxes, left_slice), bounds_at(self.boxes, right_slice));
         let (mut lefts, mut rights) = ([[0u8; N]; 3], [[0u8; N]; 3]);
         let [o0, o1, o2] = orders;
         let (o1, o2) = (&o1[..n], &o2[..n]);
@@ -496,10 +491,6 @@ impl<S: Splitter> Subtree<'_, '_, S> {
         here.count = 1 + lh.max(rh);
         (here.nodes, here.count)
     }
-}
-
-fn empty_bounds() -> NodeBounds {
-    NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY }
 }
 
 /// Splits at the object median along the widest centroid axis; with all centroids equal, simply
