@@ -19,18 +19,12 @@
 #[path = "../benches/rayset/mod.rs"]
 mod rayset;
 
-use bvh_format::SceneFile;
-use render_spec::{CameraSpec, Mode, Settings};
+use render_spec::{CameraSpec, Mode};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use tracer_cpu::lanes::Stage;
 use tracer_cpu::render::{Canvas, plan, render_into};
 use tracer_cpu::{Method, Tracer};
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn fail(msg: &str) -> ! {
     eprintln!("auto_cost: {msg}");
@@ -84,24 +78,11 @@ fn main() {
     );
     println!("|---|---|---:|---:|---:|---:|---|---|");
     for (name, path) in &scenes {
-        let scene: SceneFile = if path.extension().is_some_and(|e| e == "bvh") {
-            bvh_format::read_file(path).unwrap_or_else(|e| fail(&e.to_string()))
-        } else {
-            rayset::load(path).unwrap_or_else(|e| fail(&e))
-        };
+        let scene = rayset::open(path).unwrap_or_else(|e| fail(&e));
         let tracer = Tracer::new(&scene);
         let camera = CameraSpec::from(scene.camera("medium").unwrap_or_else(|| fail("no camera \"medium\"")));
         for &mode in &modes {
-            let settings = Settings {
-                width: size.0,
-                height: size.1,
-                camera,
-                mode,
-                lights: scene.lights.clone(),
-                max_indirections: scene.settings.max_indirections,
-                aovs: false,
-                accuracy: render_spec::Accuracy::default(),
-            };
+            let settings = rayset::frame_settings(&scene, camera, size, mode);
             for &n in &threads {
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().expect("a thread pool");
                 let wall = rayset::Clock::Wall;
@@ -135,12 +116,12 @@ fn main() {
                         }
                     });
                 }
-                let (mw, fw) = (median(mw), median(fw));
+                let (mw, fw) = (rayset::median(mw), rayset::median(fw));
                 let picks: Vec<String> = picks.iter().map(|(p, k)| format!("{p} ({k})")).collect();
                 let ratios: Vec<String> = Stage::ALL
                     .into_iter()
                     .filter(|s| !ratios[s.index()].is_empty())
-                    .map(|s| format!("{} {:.2}", s.name(), median(ratios[s.index()].clone())))
+                    .map(|s| format!("{} {:.2}", s.name(), rayset::median(ratios[s.index()].clone())))
                     .collect();
                 println!(
                     "| {name} | {mode:?} | {n} | {:.3} | {:.2} | {:.2}% | {} | {} |",

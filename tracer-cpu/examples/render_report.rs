@@ -32,9 +32,8 @@
 #[path = "../benches/rayset/mod.rs"]
 mod rayset;
 
-use bvh_format::SceneFile;
 use rayon::prelude::*;
-use render_spec::{CameraSpec, Intersect, Mode, Settings};
+use render_spec::{CameraSpec, Intersect, Mode};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -219,26 +218,13 @@ fn main() {
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a thread pool");
     let mut rows = Vec::new();
     for (name, path) in &opts.scenes {
-        let scene: SceneFile = if path.extension().is_some_and(|e| e == "bvh") {
-            bvh_format::read_file(path).unwrap_or_else(|e| fail(&e.to_string()))
-        } else {
-            rayset::load(path).unwrap_or_else(|e| fail(&e))
-        };
+        let scene = rayset::open(path).unwrap_or_else(|e| fail(&e));
         let tracer = Tracer::new(&scene);
         let camera = CameraSpec::from(scene.camera(&opts.camera).unwrap_or_else(|| fail("no such camera")));
         let (w, h) = opts.size;
         for &mode in &opts.modes {
             for &method in &opts.methods {
-                let settings = Settings {
-                    width: w,
-                    height: h,
-                    camera,
-                    mode,
-                    lights: scene.lights.clone(),
-                    max_indirections: scene.settings.max_indirections,
-                    aovs: false,
-                    accuracy: render_spec::Accuracy::default(),
-                };
+                let settings = rayset::frame_settings(&scene, camera, (w, h), mode);
                 let sink = Mutex::new(Vec::new());
                 let image = one
                     .install(|| {

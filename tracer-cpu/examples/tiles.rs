@@ -14,7 +14,7 @@
 #[path = "../benches/rayset/mod.rs"]
 mod rayset;
 
-use render_spec::{CameraSpec, Mode, Settings};
+use render_spec::{CameraSpec, Mode};
 use tracer_cpu::render::{Tiles, plan, render_with};
 use tracer_cpu::{Method, Tracer};
 
@@ -47,16 +47,8 @@ fn main() {
         rayset::loadavg()
     );
     for mode in [Mode::Cast, Mode::Whitted] {
-        let settings = Settings {
-            width: w,
-            height: h,
-            camera: CameraSpec::from(scene.camera(camera).expect("the scene has the camera")),
-            mode,
-            lights: scene.lights.clone(),
-            max_indirections: scene.settings.max_indirections,
-            aovs: false,
-            accuracy: render_spec::Accuracy::default(),
-        };
+        let cam = CameraSpec::from(scene.camera(camera).expect("the scene has the camera"));
+        let settings = rayset::frame_settings(&scene, cam, (w, h), mode);
         // The renderer's own tracing for `--method auto`, as measured once here.
         let plan = pool.install(|| plan(&tracer, &settings, Method::Auto)).expect("the scene has a layout");
         // Each band's cost on one thread (the progress call ends a band) in CPU time of that

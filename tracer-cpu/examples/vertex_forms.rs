@@ -22,7 +22,7 @@
 #[path = "../benches/rayset/mod.rs"]
 mod rayset;
 
-use render_spec::{CameraSpec, Mode, Settings, Vertices};
+use render_spec::{CameraSpec, Mode, Vertices};
 use std::path::PathBuf;
 use tracer_cpu::{Method, Tracer};
 
@@ -89,16 +89,7 @@ fn main() {
         let cam = CameraSpec::from(scene.camera(&camera).unwrap_or_else(|| fail("no such camera")));
         let n = scene.triangles.len() as f64;
         for &mode in &modes {
-            let s = Settings {
-                width: size.0,
-                height: size.1,
-                camera: cam,
-                mode,
-                lights: scene.lights.clone(),
-                max_indirections: scene.settings.max_indirections,
-                aovs: false,
-                accuracy: Default::default(),
-            };
+            let s = rayset::frame_settings(&scene, cam, size, mode);
             for &method in &methods {
                 let tracers = [Vertices::Expanded, Vertices::Indexed].map(|v| Tracer::with_vertices(&scene, v));
                 let images = tracers.each_ref().map(|t| tracer_cpu::render(t, &s, method).expect("the tracer renders"));

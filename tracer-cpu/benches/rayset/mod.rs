@@ -9,7 +9,7 @@
 use bvh_format::SceneFile;
 use glam::Vec3;
 use rayon::prelude::*;
-use render_spec::{CameraSpec, Intersect, sequence};
+use render_spec::{CameraSpec, Intersect, Mode, Settings, sequence};
 use std::path::Path;
 use std::time::Instant;
 use tracer_cpu::bvh8::Simd;
@@ -75,6 +75,30 @@ impl RaySet {
 pub fn load(path: &Path) -> Result<SceneFile, String> {
     let scene = bvh_build::import::load(path, &Default::default()).map_err(|e| format!("{}: {e}", path.display()))?;
     bvh_build::compile(&scene, &Default::default(), Default::default()).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// A compiled scene file (`.bvh`) as it is, anything else through [`load`].
+pub fn open(path: &Path) -> Result<SceneFile, String> {
+    if path.extension().is_some_and(|e| e == "bvh") {
+        bvh_format::read_file(path).map_err(|e| format!("{}: {e}", path.display()))
+    } else {
+        load(path)
+    }
+}
+
+/// A `width` x `height` frame of `scene` from `camera` in `mode`, as `trace-cpu render` makes it
+/// by default: the scene's lights and indirections, no AOVs, the default accuracy settings.
+pub fn frame_settings(scene: &SceneFile, camera: CameraSpec, (width, height): (u32, u32), mode: Mode) -> Settings {
+    Settings {
+        width,
+        height,
+        camera,
+        mode,
+        lights: scene.lights.clone(),
+        max_indirections: scene.settings.max_indirections,
+        aovs: false,
+        accuracy: Default::default(),
+    }
 }
 
 /// The ray sets of a scene at `width` x `height`, one of each [`Kind`] in [`Kind::ALL`]'s order.
@@ -356,7 +380,8 @@ pub fn interleaved_medians_on(
     samples.into_iter().map(median).collect()
 }
 
-fn median(mut t: Vec<f64>) -> f64 {
+/// The median (the mean of the middle two for an even count).
+pub fn median(mut t: Vec<f64>) -> f64 {
     t.sort_by(f64::total_cmp);
     let m = t.len() / 2;
     if t.len() % 2 == 1 { t[m] } else { 0.5 * (t[m - 1] + t[m]) }
