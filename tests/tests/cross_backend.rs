@@ -458,12 +458,6 @@ fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
     let gpu = gpu();
     let scene = compile("room.toml");
     let cam = CameraSpec::from(scene.camera("medium").expect("the camera exists"));
-    let aov_bits = |i: &render_spec::Image| {
-        let a = i.aov.as_ref().expect("AOVs were asked for");
-        let t: Vec<u32> = a.t.iter().map(|x| x.to_bits()).collect();
-        let n: Vec<[u32; 3]> = a.normal.iter().map(|n| n.map(f32::to_bits)).collect();
-        (t, n, a.prim.clone(), a.nodes.clone(), a.tris.clone())
-    };
     let cpu_indexed = Tracer::with_vertices(&scene, Vertices::Indexed);
     for method in [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup] {
         let expanded = tracer_vk::render::upload_bytes_with(&scene, method, Vertices::Expanded);
@@ -489,7 +483,7 @@ fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
             let what = format!("{} {:?}", method.name(), s.mode);
             let b = r.render(s).expect("the GPU renders the indexed form").image;
             assert_eq!(a.rgb, b.rgb, "{what}: the indexed form's image differs");
-            assert!(aov_bits(a) == aov_bits(&b), "{what}: the indexed form's AOVs differ");
+            assert!(common::aov_bits(a) == common::aov_bits(&b), "{what}: the indexed form's AOVs differ");
             assert_eq!(a.rays, b.rays, "{what}: rays");
             let cpu = tracer_cpu::render(&cpu_indexed, s, Method::Ordered).expect("the CPU renders the indexed form");
             common::assert_matches_cpu(&format!("{what} indexed"), &cpu, &b);
@@ -517,12 +511,6 @@ fn persistent_kernels_render_the_plain_images_bit_for_bit() {
     let gpu = gpu();
     let scene = compile("room.toml");
     let cam = CameraSpec::from(scene.camera("medium").expect("the camera exists"));
-    let aov_bits = |i: &render_spec::Image| {
-        let a = i.aov.as_ref().expect("AOVs were asked for");
-        let t: Vec<u32> = a.t.iter().map(|x| x.to_bits()).collect();
-        let n: Vec<[u32; 3]> = a.normal.iter().map(|n| n.map(f32::to_bits)).collect();
-        (t, n, a.prim.clone(), a.nodes.clone(), a.tris.clone())
-    };
     let modes = [Mode::Cast, Mode::Whitted, Mode::Ao(Ao { samples: 3, length: 0.1 }), Mode::Diffuse];
     let settings = |mode: Mode, width: u32, height: u32, spp: u32| Settings {
         width,
@@ -562,7 +550,10 @@ fn persistent_kernels_render_the_plain_images_bit_for_bit() {
                 let persistent = r.render(&s).expect("the GPU renders persistently").image;
                 assert!(plain.rays.primary > 0, "{what}: rays were traced");
                 assert_eq!(plain.rgb, persistent.rgb, "{what}: the persistent image differs");
-                assert!(aov_bits(&plain) == aov_bits(&persistent), "{what}: the persistent AOVs differ");
+                assert!(
+                    common::aov_bits(&plain) == common::aov_bits(&persistent),
+                    "{what}: the persistent AOVs differ"
+                );
                 assert_eq!(plain.rays, persistent.rays, "{what}: rays");
             }
         }
@@ -580,7 +571,7 @@ fn persistent_kernels_render_the_plain_images_bit_for_bit() {
         let plain = r.cast_rays(&rays, Accuracy::default()).expect("the plain kernels cast");
         r.set_persistent(Persistent::On, Some(64)).expect("the persistent kernels");
         let persistent = r.cast_rays(&rays, Accuracy::default()).expect("the persistent kernels cast");
-        assert!(aov_bits(&plain) == aov_bits(&persistent), "{}: cast rays", method.name());
+        assert!(common::aov_bits(&plain) == common::aov_bits(&persistent), "{}: cast rays", method.name());
     }
     for method in [VkMethod::Sst, VkMethod::SstSubgroup] {
         let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the scene uploads");
@@ -602,12 +593,6 @@ fn persistent_auto_renders_the_plain_images_bit_for_bit() {
     let gpu = gpu();
     let scene = compile_with("room.toml", Layouts::ALL);
     let cam = CameraSpec::from(scene.camera("medium").expect("the camera exists"));
-    let aov_bits = |i: &render_spec::Image| {
-        let a = i.aov.as_ref().expect("AOVs were asked for");
-        let t: Vec<u32> = a.t.iter().map(|x| x.to_bits()).collect();
-        let n: Vec<[u32; 3]> = a.normal.iter().map(|n| n.map(f32::to_bits)).collect();
-        (t, n, a.prim.clone(), a.nodes.clone(), a.tris.clone())
-    };
     let modes = [Mode::Cast, Mode::Whitted, Mode::Ao(Ao { samples: 4, length: 0.2 }), Mode::Diffuse];
     let settings = |mode: Mode, width: u32, height: u32, spp: u32| Settings {
         width,
@@ -640,7 +625,7 @@ fn persistent_auto_renders_the_plain_images_bit_for_bit() {
                 let auto = r.render(&s).expect("the GPU renders with auto").image;
                 assert!(plain.rays.primary > 0, "{what}: rays were traced");
                 assert_eq!(plain.rgb, auto.rgb, "{what}: auto's image differs");
-                assert!(aov_bits(&plain) == aov_bits(&auto), "{what}: auto's AOVs differ");
+                assert!(common::aov_bits(&plain) == common::aov_bits(&auto), "{what}: auto's AOVs differ");
                 assert_eq!(plain.rays, auto.rays, "{what}: rays");
             }
         }

@@ -100,3 +100,15 @@ pub fn assert_matches_cpu(what: &str, cpu: &Image, gpu: &Image) {
     assert!(d.prim_ties * 1000 <= cpu.rgb.len(), "{what}: {} ties is too many to be ties", d.prim_ties);
     assert_eq!(gpu.rays, cpu.rays, "{what}: primary, shadow and secondary rays");
 }
+
+/// An image's AOVs as bits (distances, normals, triangles, traversal costs), for comparisons that
+/// must hold bit for bit (a NaN or a signed zero counts).
+pub type AovBits = (Vec<u32>, Vec<[u32; 3]>, Vec<u32>, Vec<u32>, Vec<u32>);
+
+/// [`AovBits`] of an image rendered with AOVs.
+pub fn aov_bits(i: &Image) -> AovBits {
+    let a = i.aov.as_ref().expect("AOVs were asked for");
+    let t = a.t.iter().map(|x| x.to_bits()).collect();
+    let n = a.normal.iter().map(|n| n.map(f32::to_bits)).collect();
+    (t, n, a.prim.clone(), a.nodes.clone(), a.tris.clone())
+}
