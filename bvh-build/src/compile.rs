@@ -78,6 +78,7 @@ fn tree_with(
     escape: bool,
 ) -> Result<build::BuiltTree, BuildError> {
     use rayon::prelude::*;
+    let started = std::time::Instant::now();
     check_params(p)?;
     if positions.is_empty() {
         return Err(BuildError::Empty);
@@ -95,12 +96,19 @@ fn tree_with(
         max_leaf_size: p.max_leaf_size as usize,
         depth_limit: build::DEPTH_LIMIT,
     };
-    Ok(match p.strategy {
+    let checked = started.elapsed().as_secs_f64() * 1e3;
+    let mut tree = match p.strategy {
         Strategy::Binned => {
             build::build(&mut refs, &BinnedSah { bins: p.bins as usize, costs }, costs, progress, escape)
         }
         Strategy::Sweep => build::build(&mut refs, &SweepSah { costs }, costs, progress, escape),
-    })
+    };
+    // The checks and the primitive references are set-up too.
+    tree.phases.setup += checked;
+    let t = std::time::Instant::now();
+    drop(refs);
+    tree.phases.release += t.elapsed().as_secs_f64() * 1e3;
+    Ok(tree)
 }
 
 /// Compiles a scene into the file's in-memory form (validated).

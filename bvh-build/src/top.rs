@@ -262,11 +262,12 @@ impl Top {
     }
 
     /// Counts each treelet node's subtree in the finished tree and gives each unit its place in
-    /// the new leaf order (units depth-first, left first); returns `order` permuted to match.
-    pub(crate) fn prepare(&mut self, slots: &[Slot], order: &[u32]) -> Vec<u32> {
+    /// the new leaf order (units depth-first, left first); returns the units' ranges of the
+    /// build's leaf order `(first, count)` in the new order, which the caller copies.
+    pub(crate) fn prepare(&mut self, slots: &[Slot]) -> Vec<(u32, u32)> {
         self.subtree = vec![0; self.nodes.len()];
         self.shift = vec![0; self.nodes.len()];
-        let mut new_order = vec![0u32; order.len()];
+        let mut ranges = Vec::new();
         let mut next = 0u32;
         // Post-order by an explicit stack: (node, children done).
         let mut stack = vec![(self.root, false)];
@@ -275,8 +276,7 @@ impl Top {
             if n.is_unit() {
                 self.subtree[t as usize] = slots[n.slot as usize].nodes;
                 self.shift[t as usize] = next.wrapping_sub(n.first);
-                let (from, to) = (n.first as usize, next as usize);
-                new_order[to..to + n.count as usize].copy_from_slice(&order[from..from + n.count as usize]);
+                ranges.push((n.first, n.count));
                 next += n.count;
             } else if done {
                 self.subtree[t as usize] = 1 + self.subtree[n.kids[0] as usize] + self.subtree[n.kids[1] as usize];
@@ -286,8 +286,7 @@ impl Top {
                 stack.push((n.kids[0], false));
             }
         }
-        debug_assert_eq!(next as usize, order.len());
-        new_order
+        ranges
     }
 
     pub(crate) fn root(&self) -> At {
