@@ -233,10 +233,9 @@ pub trait Splitter: Sync {
 /// busy. It is a size, not a count of threads, so that the tree does not depend on the machine.
 pub const PARALLEL_NODE: usize = 1 << 15;
 
-/// One node of the build, in a gapped depth-first array: a subtree of `c` primitives owns `2c - 1`
-/// slots, its root first, its left subtree next, and its right subtree at `index`.
+/// One node of the build, in the slots of [`Slots`].
 #[repr(C)]
-#[derive(Clone, Copy, bytemuck::Zeroable)]
+#[derive(Clone, Copy)]
 pub(crate) struct Slot {
     pub(crate) min: [f32; 3],
     pub(crate) max: [f32; 3],
@@ -248,6 +247,53 @@ pub(crate) struct Slot {
     pub(crate) index: u32,
     /// Nodes in the subtree rooted here (1 for a leaf): where each layout puts the right child.
     pub(crate) nodes: u32,
+}
+
+/// The built tree, one slot per node. A subtree of `c` primitives owns `2c - 1` slots from its
+/// root's on (as many as it can have nodes), its left subtree's next. Above
+/// [`PARALLEL_SUBTREES`] primitives the right subtree's start `2 x left primitives` slots
+/// further, so that both are built at once; below, a subtree's nodes are packed depth-first at
+/// the start of its slots and the rest are never written. A leaf takes one slot of the `2c - 1`
+/// its `c` primitives own, so about half the slots stay unwritten: they are never faulted in
+/// either (a million triangles: 72 MB of slots, about 40 of them nodes), and the layouts read
+/// the nodes packed.
+pub(crate) struct Slots(Box<[MaybeUninit<Slot>]>);
+
+/// A written slot of one [`Slots`]: made only by [`Slots::root`] and [`Slots::children`], which
+/// is what lets [`Slots::get`] read it. (Every `SlotId` of a build lives in its `build_with` call,
+/// beside the one `Slots` it came from.)
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct SlotId(u32);
+
+impl SlotId {
+    /// The root's slot: the first.
+    pub(crate) const ROOT: SlotId = SlotId(0);
+}
+
+impl Slots {
+    /// The slot's node.
+    #[inline(always)]
+    pub(crate) fn get(&self, s: SlotId) -> &Slot {
+        // SAFETY: `build_node` writes the root's slot (a tree has a root) and, for every inner
+        // node it writes, the slots of both children (the left at the next slot, the right at
+        // `index`) before its own; a `SlotId` is the root or a child of a written inner slot.
+        unsafe { self.0[s.0 as usize].assume_init_ref() }
+    }
+
+    /// An inner node's children, `None` for a leaf.
+    #[inline(always)]
+    pub(crate) fn children(&self, s: SlotId) -> Option<(SlotId, SlotId)> {
+        let sl = self.get(s);
+        (sl.nodes > 1).then_some((SlotId(s.0 + 1), SlotId(sl.index)))
+    }
+
+    /// The first primitive (in the build's leaf order) of the subtree at `s`.
+    pub(crate) fn first_primitive(&self, mut s: SlotId) -> u32 {
+        while let Some((left, _)) = self.children(s) {
+            s = left;
+        }
+        self.get(s).index
+    }
 }
 
 /// A finished tree: child-pair nodes, the escape-pointer layout when asked for, and for each
@@ -292,12 +338,6 @@ unsafe fn written<T, R>(len: usize, fill: impl FnOnce(&mut [MaybeUninit<T>]) -> 
     // SAFETY: the caller's contract: `fill` returned, so it wrote all `len` elements.
     unsafe { v.set_len(len) };
     (v, r)
-}
-
-impl Slot {
-    /// What the slots that a leaf's subtree owns beyond its own hold ([`written`]: every slot
-    /// is written; these are never read).
-    const GAP: Slot = Slot { min: [0.0; 3], max: [0.0; 3], count: 0, index: 0, nodes: 0 };
 }
 
 /// Builds a tree over `refs` (used as scratch space: their order afterwards means nothing) with
@@ -351,14 +391,11 @@ fn build_with<S: Splitter>(refs: &mut [PrimRef], mut ctx: Ctx<'_, S>, escape: bo
     let root = bounds_parallel(refs);
     phases.setup = ms(t);
     ctx.started = Instant::now();
-    // SAFETY: `build_node` writes every slot of its part of the gapped array (its node's, its
-    // leaves' gaps as `Slot::GAP`, the rest split between its children) and every element of its
-    // part of the leaf order (its leaves' primitives; the children's parts split at `mid`).
-    let (slots, mut order) = unsafe {
-        let (slots, order) = written(2 * n - 1, |slots| {
-            written(n, |order| build_node(&ctx, Prims { refs, spare: &mut spare, order }, 0, slots, 0, root, 0)).0
-        });
-        (slots, order)
+    let mut slots = Slots(Box::new_uninit_slice(2 * n - 1));
+    // SAFETY: `build_node` writes every element of its part of the leaf order (its leaves'
+    // primitives; the children's parts split at `mid`).
+    let mut order = unsafe {
+        written(n, |order| build_node(&ctx, Prims { refs, spare: &mut spare, order }, 0, &mut slots.0, 0, root, 0)).0
     };
     phases.tree = ms(ctx.started);
     phases.parallel_splits = ctx.parallel_ns.load(Ordering::Relaxed) as f64 * 1e-6;
@@ -487,7 +524,7 @@ fn build_node<S: Splitter>(
     let (here, below) = slots.split_first_mut().expect("a subtree owns at least one slot");
     let (min, max) = (bounds.aabb.min.into(), bounds.aabb.max.into());
     let Some(split) = split else {
-        leaf(ctx, here, below, Slot { min, max, count: n as u32, index: first as u32, nodes: 1 });
+        leaf(ctx, here, Slot { min, max, count: n as u32, index: first as u32, nodes: 1 });
         assert_eq!(p.order.len(), n, "a node's part of the leaf order holds its primitives");
         for (o, r) in p.order.iter_mut().zip(p.refs.iter()) {
             o.write(r.id);
@@ -499,24 +536,29 @@ fn build_node<S: Splitter>(
     if split.in_spare {
         std::mem::swap(&mut p.refs, &mut p.spare);
     }
-    let right_slot = slot + 2 * mid;
     let (left_p, right_p) = p.split_at(mid);
-    let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
-    let left = || build_node(ctx, left_p, first, left_slots, slot + 1, split.left, depth + 1);
-    let right = || build_node(ctx, right_p, first + mid, right_slots, right_slot, split.right, depth + 1);
-    let ((l, lh), (r, rh)) = if n > PARALLEL_SUBTREES { rayon::join(left, right) } else { (left(), right()) };
+    let ((l, lh), (r, rh), right_slot) = if n > PARALLEL_SUBTREES {
+        let right_slot = slot + 2 * mid;
+        let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
+        let left = || build_node(ctx, left_p, first, left_slots, slot + 1, split.left, depth + 1);
+        let right = || build_node(ctx, right_p, first + mid, right_slots, right_slot, split.right, depth + 1);
+        let (l, r) = rayon::join(left, right);
+        (l, r, right_slot)
+    } else {
+        // Packed: the right subtree right after the left one's nodes ([`Slots`]).
+        let l = build_node(ctx, left_p, first, &mut below[..2 * mid - 1], slot + 1, split.left, depth + 1);
+        let right_slot = slot + 1 + l.0 as usize;
+        let r = build_node(ctx, right_p, first + mid, &mut below[l.0 as usize..], right_slot, split.right, depth + 1);
+        (l, r, right_slot)
+    };
     let (nodes, height) = (1 + l + r, 1 + lh.max(rh));
     here.write(Slot { min, max, count: height, index: right_slot as u32, nodes });
     (nodes, height)
 }
 
-/// Writes a leaf's slot, and the slots its subtree owns beyond it (`gaps`: a subtree of `c`
-/// primitives owns `2c - 1` slots), and counts its primitives as placed.
-fn leaf<S: Splitter>(ctx: &Ctx<'_, S>, here: &mut MaybeUninit<Slot>, gaps: &mut [MaybeUninit<Slot>], slot: Slot) {
+/// Writes a leaf's slot and counts its primitives as placed.
+fn leaf<S: Splitter>(ctx: &Ctx<'_, S>, here: &mut MaybeUninit<Slot>, slot: Slot) {
     here.write(slot);
-    for g in gaps {
-        g.write(Slot::GAP);
-    }
     if let Some(pr) = ctx.progress {
         pr.fetch_add(slot.count as usize, Ordering::Relaxed);
     }
@@ -577,7 +619,7 @@ impl<S: Splitter> Subtree<'_, '_, S> {
         let (mid, side_of) = match split {
             Some((axis, mid)) => (mid, orders[axis]),
             None if may_leaf || n == 1 => {
-                leaf(ctx, here, below, Slot { min, max, count: n as u32, index: first as u32, nodes: 1 });
+                leaf(ctx, here, Slot { min, max, count: n as u32, index: first as u32, nodes: 1 });
                 assert_eq!(order.len(), n, "a node's part of the leaf order holds its primitives");
                 for (o, &i) in order.iter_mut().zip(slice) {
                     o.write(self.ids[i as usize]);
@@ -609,12 +651,14 @@ impl<S: Splitter> Subtree<'_, '_, S> {
                 r[a] += !left as usize;
             }
         }
-        let right_slot = slot + 2 * mid;
         let (left_order, right_order) = order.split_at_mut(mid);
-        let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
         let left_orders = lefts.each_ref().map(|o| &o[..mid]);
         let right_orders = rights.each_ref().map(|o| &o[..n - mid]);
+        let left_slots = &mut below[..2 * mid - 1];
         let (l, lh) = self.node::<N>(left_orders, left_slice, left_order, first, left_slots, slot + 1, left_nb);
+        // Packed, as [`build_node`] below [`PARALLEL_SUBTREES`].
+        let right_slot = slot + 1 + l as usize;
+        let right_slots = &mut below[l as usize..];
         let (r, rh) =
             self.node::<N>(right_orders, right_slice, right_order, first + mid, right_slots, right_slot, right_nb);
         let (nodes, height) = (1 + l + r, 1 + lh.max(rh));
@@ -640,13 +684,13 @@ const PARALLEL_EMIT: u32 = 1 << 14;
 
 /// The finished tree: the slots, below the reshaped top when there is one.
 struct Shape<'a> {
-    slots: &'a [Slot],
+    slots: &'a Slots,
     top: Option<&'a Top>,
 }
 
 impl Shape<'_> {
     fn root(&self) -> At {
-        self.top.map_or(At::Slot(0, 0), Top::root)
+        self.top.map_or(At::Slot(SlotId::ROOT, 0), Top::root)
     }
 
     /// The node at `at` (`children`: where an inner node's pair lies, child-pair layout, or its
@@ -655,13 +699,16 @@ impl Shape<'_> {
     fn node(&self, at: At, children: usize) -> (Node, u32, Option<(At, At)>) {
         match at {
             At::Slot(s, shift) => {
-                let sl = &self.slots[s as usize];
-                if sl.nodes == 1 {
-                    let index = sl.index.wrapping_add(shift);
-                    (Node { min: sl.min, count: sl.count, max: sl.max, index }, 1, None)
-                } else {
-                    let node = Node { min: sl.min, count: 0, max: sl.max, index: children as u32 };
-                    (node, sl.nodes, Some((At::Slot(s + 1, shift), At::Slot(sl.index, shift))))
+                let sl = self.slots.get(s);
+                match self.slots.children(s) {
+                    None => {
+                        let index = sl.index.wrapping_add(shift);
+                        (Node { min: sl.min, count: sl.count, max: sl.max, index }, 1, None)
+                    }
+                    Some((l, r)) => {
+                        let node = Node { min: sl.min, count: 0, max: sl.max, index: children as u32 };
+                        (node, sl.nodes, Some((At::Slot(l, shift), At::Slot(r, shift))))
+                    }
                 }
             }
             At::Top(t) => {
