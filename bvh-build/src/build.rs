@@ -16,7 +16,7 @@ use std::time::Instant;
 pub const DEPTH_LIMIT: u32 = 64;
 
 /// Nodes with more triangles than this build their two subtrees in parallel.
-const PARALLEL_SUBTREES: usize = 4096;
+const PARALLEL_SUBTREES: usize = 1024;
 
 /// Wall time of the phases of one build, in milliseconds (`build_cpu --phases`): where the time
 /// goes that more threads cannot share. Measured on every build (a dozen clock reads).
@@ -135,18 +135,59 @@ impl PrimRef {
     }
 }
 
+/// The reference of triangle `t`, number `i`.
+#[inline(always)]
+fn prim_ref(t: &[glam::Vec3; 3], i: usize) -> PrimRef {
+    let (min, max) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+    let d = max - min;
+    PrimRef { min: min.into(), id: i as u32, max: max.into(), area: d.x * d.y + d.y * d.z + d.z * d.x }
+}
+
 /// The references of every triangle, in input order.
 pub fn prim_refs(positions: &[[glam::Vec3; 3]]) -> Vec<PrimRef> {
     use rayon::prelude::*;
-    positions
-        .par_iter()
-        .enumerate()
-        .map(|(i, t)| {
-            let (min, max) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
-            let d = max - min;
-            PrimRef { min: min.into(), id: i as u32, max: max.into(), area: d.x * d.y + d.y * d.z + d.z * d.x }
-        })
-        .collect()
+    positions.par_iter().enumerate().map(|(i, t)| prim_ref(t, i)).collect()
+}
+
+/// [`prim_refs`] and their bounds (the root's), in one pass by every thread that also checks
+/// every coordinate: `Err` with the first triangle that has one that is not finite.
+pub fn prim_refs_checked(positions: &[[glam::Vec3; 3]]) -> Result<(Vec<PrimRef>, NodeBounds), usize> {
+    use rayon::prelude::*;
+    const CHUNK: usize = 1 << 14;
+    let empty = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
+    let fill = |out: &mut [MaybeUninit<PrimRef>]| {
+        out.par_chunks_mut(CHUNK)
+            .zip(positions.par_chunks(CHUNK))
+            .enumerate()
+            .map(|(c, (out, tris))| {
+                assert_eq!(out.len(), tris.len(), "a chunk of references per chunk of triangles");
+                let (mut nb, mut finite) = (empty, true);
+                for (k, (o, t)) in out.iter_mut().zip(tris).enumerate() {
+                    // x * 0 is 0 for every finite x, NaN for infinities and NaN.
+                    finite &= t[0] * 0.0 + t[1] * 0.0 + t[2] * 0.0 == glam::Vec3::ZERO;
+                    let r = o.write(prim_ref(t, c * CHUNK + k));
+                    nb.aabb.grow(&r.aabb());
+                    nb.centroids.grow_point(r.centroid());
+                }
+                (nb, finite)
+            })
+            .reduce(
+                || (empty, true),
+                |a, b| {
+                    let nb =
+                        NodeBounds { aabb: a.0.aabb.union(&b.0.aabb), centroids: a.0.centroids.union(&b.0.centroids) };
+                    (nb, a.1 && b.1)
+                },
+            )
+    };
+    // SAFETY: `fill` pairs each chunk of the references with the chunk of triangles of the same
+    // length (asserted) and writes one reference per triangle.
+    let (refs, (root, finite)) = unsafe { written(positions.len(), fill) };
+    if !finite {
+        let t = positions.par_iter().position_first(|t| t.iter().any(|v| !v.is_finite()));
+        return Err(t.expect("a coordinate is not finite"));
+    }
+    Ok((refs, root))
 }
 
 /// Box and centroid box of a set of primitives.
@@ -350,8 +391,20 @@ pub fn build<S: Splitter>(
     progress: Option<&AtomicUsize>,
     escape: bool,
 ) -> BuiltTree {
-    let ctx = Ctx::new(splitter, costs, progress, PARALLEL_NODE);
-    build_with(refs, ctx, escape)
+    let root = bounds_parallel(refs);
+    build_bounded(refs, root, splitter, costs, progress, escape)
+}
+
+/// [`build`] given the bounds of `refs` ([`prim_refs_checked`]).
+pub fn build_bounded<S: Splitter>(
+    refs: &mut [PrimRef],
+    root: NodeBounds,
+    splitter: &S,
+    costs: Costs,
+    progress: Option<&AtomicUsize>,
+    escape: bool,
+) -> BuiltTree {
+    build_with(refs, root, Ctx::new(splitter, costs, progress, PARALLEL_NODE), escape)
 }
 
 impl<'a, S: Splitter> Ctx<'a, S> {
@@ -375,7 +428,7 @@ fn ms(from: Instant) -> f64 {
     from.elapsed().as_secs_f64() * 1e3
 }
 
-fn build_with<S: Splitter>(refs: &mut [PrimRef], mut ctx: Ctx<'_, S>, escape: bool) -> BuiltTree {
+fn build_with<S: Splitter>(refs: &mut [PrimRef], root: NodeBounds, mut ctx: Ctx<'_, S>, escape: bool) -> BuiltTree {
     use rayon::prelude::*;
     let n = refs.len();
     assert!(n > 0 && n < u32::MAX as usize / 2, "the compiler rejects empty and oversized scenes before building");
@@ -388,7 +441,6 @@ fn build_with<S: Splitter>(refs: &mut [PrimRef], mut ctx: Ctx<'_, S>, escape: bo
     } else {
         Vec::new()
     };
-    let root = bounds_parallel(refs);
     phases.setup = ms(t);
     ctx.started = Instant::now();
     let mut slots = Slots(Box::new_uninit_slice(2 * n - 1));
@@ -922,6 +974,11 @@ mod tests {
         build_ctx(tris, parallel_node, threads, true)
     }
 
+    fn build_refs<S: super::Splitter>(tris: &[[Vec3; 3]], ctx: super::Ctx<'_, S>) -> super::BuiltTree {
+        let (mut refs, root) = super::prim_refs_checked(tris).expect("finite triangles");
+        super::build_with(&mut refs, root, ctx, true)
+    }
+
     fn build_ctx(tris: &[[Vec3; 3]], parallel_node: usize, threads: usize, reshape_top: bool) -> super::BuiltTree {
         let costs =
             super::Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 8, depth_limit: super::DEPTH_LIMIT };
@@ -929,7 +986,7 @@ mod tests {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
         pool.install(|| {
             let ctx = super::Ctx { reshape_top, ..super::Ctx::new(&splitter, costs, None, parallel_node) };
-            super::build_with(&mut super::prim_refs(tris), ctx, true)
+            super::build_refs(tris, ctx)
         })
     }
 
@@ -964,7 +1021,7 @@ mod tests {
         fn both<S: super::Splitter>(tris: &[[Vec3; 3]], splitter: &S, costs: super::Costs, what: &str) {
             let build = |presorted| {
                 let ctx = super::Ctx { presorted, ..super::Ctx::new(splitter, costs, None, super::PARALLEL_NODE) };
-                super::build_with(&mut super::prim_refs(tris), ctx, true)
+                super::build_refs(tris, ctx)
             };
             let (sorting, presorted) = (build(false), build(true));
             check_shape(Tree::child_pair(&presorted.nodes), tris.len() as u32).expect("valid tree");
