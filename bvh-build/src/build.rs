@@ -352,6 +352,9 @@ struct Ctx<'a, S: Splitter> {
     progress: Option<&'a AtomicUsize>,
     /// [`PARALLEL_NODE`] outside tests.
     parallel_node: usize,
+    /// [`PARALLEL_SUBTREES`] outside tests, which compare the packed placement below it with
+    /// the gapped one above ([`Slots`]).
+    parallel_subtrees: usize,
     /// Whether subtrees are reinserted in the top of the finished tree ([`crate::top`]); always
     /// outside tests.
     reshape_top: bool,
@@ -414,6 +417,7 @@ impl<'a, S: Splitter> Ctx<'a, S> {
             costs,
             progress,
             parallel_node,
+            parallel_subtrees: PARALLEL_SUBTREES,
             reshape_top: true,
             presorted: true,
             parallel_ns: AtomicU64::new(0),
@@ -589,7 +593,7 @@ fn build_node<S: Splitter>(
         std::mem::swap(&mut p.refs, &mut p.spare);
     }
     let (left_p, right_p) = p.split_at(mid);
-    let ((l, lh), (r, rh), right_slot) = if n > PARALLEL_SUBTREES {
+    let ((l, lh), (r, rh), right_slot) = if n > ctx.parallel_subtrees {
         let right_slot = slot + 2 * mid;
         let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
         let left = || build_node(ctx, left_p, first, left_slots, slot + 1, split.left, depth + 1);
@@ -986,7 +990,7 @@ mod tests {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
         pool.install(|| {
             let ctx = super::Ctx { reshape_top, ..super::Ctx::new(&splitter, costs, None, parallel_node) };
-            super::build_refs(tris, ctx)
+            build_refs(tris, ctx)
         })
     }
 
@@ -1021,7 +1025,7 @@ mod tests {
         fn both<S: super::Splitter>(tris: &[[Vec3; 3]], splitter: &S, costs: super::Costs, what: &str) {
             let build = |presorted| {
                 let ctx = super::Ctx { presorted, ..super::Ctx::new(splitter, costs, None, super::PARALLEL_NODE) };
-                super::build_refs(tris, ctx)
+                build_refs(tris, ctx)
             };
             let (sorting, presorted) = (build(false), build(true));
             check_shape(Tree::child_pair(&presorted.nodes), tris.len() as u32).expect("valid tree");
@@ -1106,6 +1110,60 @@ mod tests {
             assert_eq!(one.nodes, many.nodes, "{threads} threads");
             assert_eq!(one.order, many.order, "{threads} threads");
             assert_eq!(one.escape, many.escape, "{threads} threads");
+        }
+    }
+
+    #[test]
+    fn packed_and_gapped_subtrees_give_the_same_tree() {
+        // Every subtree gapped (built in parallel from two primitives on), packed below the
+        // default size, and packed throughout: the same nodes, leaf order and escape layout,
+        // with and without the reinsertion in the top (which reads the slots too).
+        let costs =
+            super::Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 8, depth_limit: super::DEPTH_LIMIT };
+        let splitter = crate::binned::BinnedSah { bins: 16, costs };
+        for (what, tris) in [("soup on a floor", soup_on_floor(40_000)), ("room", soup_in_a_room(5_000))] {
+            for reshape_top in [false, true] {
+                let build = |parallel_subtrees| {
+                    let ctx = super::Ctx {
+                        parallel_subtrees,
+                        reshape_top,
+                        ..super::Ctx::new(&splitter, costs, None, super::PARALLEL_NODE)
+                    };
+                    build_refs(&tris, ctx)
+                };
+                let gapped = build(1);
+                check_shape(Tree::child_pair(&gapped.nodes), tris.len() as u32).expect("valid tree");
+                for parallel_subtrees in [super::PARALLEL_SUBTREES, usize::MAX] {
+                    let packed = build(parallel_subtrees);
+                    let case = format!("{what}, packed below {parallel_subtrees}, top {reshape_top}");
+                    assert_eq!(gapped.nodes, packed.nodes, "{case}");
+                    assert_eq!(gapped.order, packed.order, "{case}");
+                    assert_eq!(gapped.escape, packed.escape, "{case}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_checked_references_are_the_references_and_their_bounds() {
+        let mut tris = soup_on_floor(50_000);
+        // Finite extremes pass the check.
+        tris[17][1] = Vec3::splat(f32::MAX);
+        tris[18][2] = Vec3::new(f32::MIN, 0.0, -0.0);
+        let (refs, root) = super::prim_refs_checked(&tris).expect("finite");
+        let plain = super::prim_refs(&tris);
+        let bits = |p: &super::PrimRef| (p.min.map(f32::to_bits), p.id, p.max.map(f32::to_bits), p.area.to_bits());
+        assert!(refs.len() == plain.len() && refs.iter().zip(&plain).all(|(a, b)| bits(a) == bits(b)));
+        let nb = super::bounds_of(&plain);
+        assert_eq!((root.aabb, root.centroids), (nb.aabb, nb.centroids));
+        // The first triangle with a coordinate that is not finite, wherever it lies.
+        for (at, bad) in [(0, f32::NAN), (16_383, f32::INFINITY), (16_384, f32::NEG_INFINITY), (49_999, f32::NAN)] {
+            for corner in 0..3 {
+                let mut t = tris.clone();
+                t[at][corner][corner] = bad;
+                t[49_999][0].x = f32::INFINITY;
+                assert_eq!(super::prim_refs_checked(&t).err(), Some(at), "{bad} at {at}, corner {corner}");
+            }
         }
     }
 
