@@ -292,16 +292,17 @@ pub(crate) struct Slot {
 
 /// The built tree, one slot per node. A subtree of `c` primitives owns `2c - 1` slots from its
 /// root's on (as many as it can have nodes), its left subtree's next. Above
-/// [`PARALLEL_SUBTREES`] primitives the right subtree's start `2 x left primitives` slots
-/// further, so that both are built at once; below, a subtree's nodes are packed depth-first at
-/// the start of its slots and the rest are never written. A leaf takes one slot of the `2c - 1`
+/// [`PARALLEL_SUBTREES`] primitives the right subtree's start after all the slots the left one
+/// owns, so that both are built at once; below, a subtree's nodes are packed depth-first at the
+/// start of its slots (the right subtree right after the left one's nodes) and the rest are
+/// never written. A leaf takes one slot of the `2c - 1`
 /// its `c` primitives own, so about half the slots stay unwritten: they are never faulted in
 /// either (a million triangles: 72 MB of slots, about 40 of them nodes), and the layouts read
 /// the nodes packed.
 pub(crate) struct Slots(Box<[MaybeUninit<Slot>]>);
 
-/// A written slot of one [`Slots`]: made only by [`Slots::root`] and [`Slots::children`], which
-/// is what lets [`Slots::get`] read it. (Every `SlotId` of a build lives in its `build_with` call,
+/// A written slot of one [`Slots`]: made only as [`SlotId::ROOT`] and by [`Slots::children`],
+/// which is what lets [`Slots::get`] read it. (Every `SlotId` of a build lives in its `build_with` call,
 /// beside the one `Slots` it came from.)
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct SlotId(u32);
@@ -805,12 +806,13 @@ fn child_pair(shape: &Shape<'_>) -> Vec<Node> {
 /// part below a leaf child empty (asserted; [`written`] relies on it).
 fn pairs(shape: &Shape<'_>, (l, r): (At, At), count: u32, out: &mut [MaybeUninit<Node>], base: usize) {
     assert_eq!(out.len() + 1, count as usize, "a subtree's part holds its nodes");
-    let left_count = shape.nodes(l);
+    // The left child's pair comes right after this one, whatever its size.
+    let left_base = base + 2;
+    let (ln, left_count, lk) = shape.node(l, left_base);
     let left_below = left_count as usize - 1;
     let (pair, below) = out.split_at_mut(2);
     let (left_out, right_out) = below.split_at_mut(left_below);
-    let (left_base, right_base) = (base + 2, base + 2 + left_below);
-    let (ln, _, lk) = shape.node(l, left_base);
+    let right_base = left_base + left_below;
     let (rn, right_count, rk) = shape.node(r, right_base);
     pair[0].write(ln);
     pair[1].write(rn);
