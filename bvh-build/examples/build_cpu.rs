@@ -4,7 +4,10 @@
 //! CPU time is what to compare on a machine shared with other work: wall time there depends on
 //! how much of the cores the process gets, CPU time much less.
 //!
-//! `cargo run --release -p bvh-build --example build_cpu -- SCENE [RUNS] [BINS]`
+//! With `--phases`, also the median wall time of each phase of the build ([`bvh_build::build::Phases`]):
+//! where the time goes that more threads do not shorten.
+//!
+//! `cargo run --release -p bvh-build --example build_cpu -- SCENE [RUNS] [BINS] [--phases]`
 
 use bvh_build::import::{ImportOptions, load};
 use bvh_format::BuildParams;
@@ -25,8 +28,10 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn main() {
-    let mut args = std::env::args().skip(1);
-    let usage = "usage: build_cpu SCENE [RUNS] [BINS]";
+    let all: Vec<String> = std::env::args().skip(1).collect();
+    let phases = all.iter().any(|a| a == "--phases");
+    let mut args = all.into_iter().filter(|a| a != "--phases");
+    let usage = "usage: build_cpu SCENE [RUNS] [BINS] [--phases]";
     let fail = |e: &dyn std::fmt::Display| -> ! {
         eprintln!("build_cpu: {e}");
         std::process::exit(2);
@@ -40,12 +45,15 @@ fn main() {
     let s = load(std::path::Path::new(&scene), &ImportOptions::default()).unwrap_or_else(|e| fail(&e));
     let p = BuildParams { bins, ..BuildParams::default() };
     let tree = bvh_build::build_tree(&s.positions, &p).unwrap_or_else(|e| fail(&e));
-    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+    let (mut wall, mut cpu, mut parts) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..runs {
         let (c0, t0) = (cpu_ns(), Instant::now());
-        drop(bvh_build::build_tree(&s.positions, &p));
+        let built = bvh_build::build_tree(&s.positions, &p);
+        let ph = built.as_ref().map(|t| t.phases).unwrap_or_default();
+        drop(built);
         wall.push(t0.elapsed().as_secs_f64() * 1e3);
         cpu.push((cpu_ns() - c0) as f64 / 1e6);
+        parts.push(ph);
     }
     // FNV-1a over the nodes' bytes and the leaf order.
     let bytes = tree
@@ -63,4 +71,18 @@ fn main() {
         median(wall),
         median(cpu),
     );
+    if phases {
+        let m = |f: fn(&bvh_build::build::Phases) -> f64| median(parts.iter().map(f).collect());
+        println!(
+            "  phases, medians (ms): setup {:.2}, tree {:.2} (parallel splits: {} nodes, {:.2} summed, the last done at {:.2}), top {:.2}, layouts {:.2}, release {:.2}",
+            m(|p| p.setup),
+            m(|p| p.tree),
+            parts[0].parallel_split_count,
+            m(|p| p.parallel_splits),
+            m(|p| p.parallel_until),
+            m(|p| p.top),
+            m(|p| p.layouts),
+            m(|p| p.release),
+        );
+    }
 }

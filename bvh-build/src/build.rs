@@ -6,7 +6,9 @@ use crate::sweep::{PRESORTED_MAX, Presorted, bounds_at, presorted_split};
 use crate::top::{At, Top, top_units};
 use bvh_format::Node;
 use glam::Vec3A;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::mem::MaybeUninit;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::time::Instant;
 
 /// Nodes deeper than this are split at the object median instead of by SAH, which bounds the
 /// depth of any tree by `DEPTH_LIMIT + log2(triangles)`: SAH can peel one triangle at a time off
@@ -14,7 +16,32 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 pub const DEPTH_LIMIT: u32 = 64;
 
 /// Nodes with more triangles than this build their two subtrees in parallel.
-const PARALLEL_SUBTREES: usize = 4096;
+const PARALLEL_SUBTREES: usize = 1024;
+
+/// Wall time of the phases of one build, in milliseconds (`build_cpu --phases`): where the time
+/// goes that more threads cannot share. Measured on every build (a dozen clock reads).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Phases {
+    /// Checks of the input, primitive references, buffers and the root's bounds.
+    pub setup: f64,
+    /// The recursion, from the root's split to the last leaf.
+    pub tree: f64,
+    /// Of [`Phases::tree`]: the splits of nodes above [`PARALLEL_NODE`] (every thread bins and
+    /// partitions them), their wall times summed: near the root they run one at a time, further
+    /// down a few side by side.
+    pub parallel_splits: f64,
+    /// How many nodes were split so.
+    pub parallel_split_count: u32,
+    /// Of [`Phases::tree`]: when the last of those splits ended, from the start of the recursion;
+    /// after it only subtrees of at most [`PARALLEL_NODE`] primitives are left.
+    pub parallel_until: f64,
+    /// The reinsertion in the top ([`crate::top`]), the leaf order renumbered included.
+    pub top: f64,
+    /// Writing the node layouts.
+    pub layouts: f64,
+    /// Freeing the build's buffers (the kernel unmaps the large ones, on the calling thread).
+    pub release: f64,
+}
 
 /// An axis-aligned box.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -108,18 +135,59 @@ impl PrimRef {
     }
 }
 
+/// The reference of triangle `t`, number `i`.
+#[inline(always)]
+fn prim_ref(t: &[glam::Vec3; 3], i: usize) -> PrimRef {
+    let (min, max) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+    let d = max - min;
+    PrimRef { min: min.into(), id: i as u32, max: max.into(), area: d.x * d.y + d.y * d.z + d.z * d.x }
+}
+
 /// The references of every triangle, in input order.
 pub fn prim_refs(positions: &[[glam::Vec3; 3]]) -> Vec<PrimRef> {
     use rayon::prelude::*;
-    positions
-        .par_iter()
-        .enumerate()
-        .map(|(i, t)| {
-            let (min, max) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
-            let d = max - min;
-            PrimRef { min: min.into(), id: i as u32, max: max.into(), area: d.x * d.y + d.y * d.z + d.z * d.x }
-        })
-        .collect()
+    positions.par_iter().enumerate().map(|(i, t)| prim_ref(t, i)).collect()
+}
+
+/// [`prim_refs`] and their bounds (the root's), in one pass by every thread that also checks
+/// every coordinate: `Err` with the first triangle that has one that is not finite.
+pub fn prim_refs_checked(positions: &[[glam::Vec3; 3]]) -> Result<(Vec<PrimRef>, NodeBounds), usize> {
+    use rayon::prelude::*;
+    const CHUNK: usize = 1 << 14;
+    let empty = NodeBounds { aabb: Aabb::EMPTY, centroids: Aabb::EMPTY };
+    let fill = |out: &mut [MaybeUninit<PrimRef>]| {
+        out.par_chunks_mut(CHUNK)
+            .zip(positions.par_chunks(CHUNK))
+            .enumerate()
+            .map(|(c, (out, tris))| {
+                assert_eq!(out.len(), tris.len(), "a chunk of references per chunk of triangles");
+                let (mut nb, mut finite) = (empty, true);
+                for (k, (o, t)) in out.iter_mut().zip(tris).enumerate() {
+                    // x * 0 is 0 for every finite x, NaN for infinities and NaN.
+                    finite &= t[0] * 0.0 + t[1] * 0.0 + t[2] * 0.0 == glam::Vec3::ZERO;
+                    let r = o.write(prim_ref(t, c * CHUNK + k));
+                    nb.aabb.grow(&r.aabb());
+                    nb.centroids.grow_point(r.centroid());
+                }
+                (nb, finite)
+            })
+            .reduce(
+                || (empty, true),
+                |a, b| {
+                    let nb =
+                        NodeBounds { aabb: a.0.aabb.union(&b.0.aabb), centroids: a.0.centroids.union(&b.0.centroids) };
+                    (nb, a.1 && b.1)
+                },
+            )
+    };
+    // SAFETY: `fill` pairs each chunk of the references with the chunk of triangles of the same
+    // length (asserted) and writes one reference per triangle.
+    let (refs, (root, finite)) = unsafe { written(positions.len(), fill) };
+    if !finite {
+        let t = positions.par_iter().position_first(|t| t.iter().any(|v| !v.is_finite()));
+        return Err(t.expect("a coordinate is not finite"));
+    }
+    Ok((refs, root))
 }
 
 /// Box and centroid box of a set of primitives.
@@ -206,10 +274,9 @@ pub trait Splitter: Sync {
 /// busy. It is a size, not a count of threads, so that the tree does not depend on the machine.
 pub const PARALLEL_NODE: usize = 1 << 15;
 
-/// One node of the build, in a gapped depth-first array: a subtree of `c` primitives owns `2c - 1`
-/// slots, its root first, its left subtree next, and its right subtree at `index`.
+/// One node of the build, in the slots of [`Slots`].
 #[repr(C)]
-#[derive(Clone, Copy, bytemuck::Zeroable)]
+#[derive(Clone, Copy)]
 pub(crate) struct Slot {
     pub(crate) min: [f32; 3],
     pub(crate) max: [f32; 3],
@@ -223,12 +290,61 @@ pub(crate) struct Slot {
     pub(crate) nodes: u32,
 }
 
+/// The built tree, one slot per node. A subtree of `c` primitives owns `2c - 1` slots from its
+/// root's on (as many as it can have nodes), its left subtree's next. Above
+/// [`PARALLEL_SUBTREES`] primitives the right subtree's start after all the slots the left one
+/// owns, so that both are built at once; below, a subtree's nodes are packed depth-first at the
+/// start of its slots (the right subtree right after the left one's nodes) and the rest are
+/// never written. A leaf takes one slot of the `2c - 1`
+/// its `c` primitives own, so about half the slots stay unwritten: they are never faulted in
+/// either (a million triangles: 72 MB of slots, about 40 of them nodes), and the layouts read
+/// the nodes packed.
+pub(crate) struct Slots(Box<[MaybeUninit<Slot>]>);
+
+/// A written slot of one [`Slots`]: made only as [`SlotId::ROOT`] and by [`Slots::children`],
+/// which is what lets [`Slots::get`] read it. (Every `SlotId` of a build lives in its `build_with` call,
+/// beside the one `Slots` it came from.)
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct SlotId(u32);
+
+impl SlotId {
+    /// The root's slot: the first.
+    pub(crate) const ROOT: SlotId = SlotId(0);
+}
+
+impl Slots {
+    /// The slot's node.
+    #[inline(always)]
+    pub(crate) fn get(&self, s: SlotId) -> &Slot {
+        // SAFETY: `build_node` writes the root's slot (a tree has a root) and, for every inner
+        // node it writes, the slots of both children (the left at the next slot, the right at
+        // `index`) before its own; a `SlotId` is the root or a child of a written inner slot.
+        unsafe { self.0[s.0 as usize].assume_init_ref() }
+    }
+
+    /// An inner node's children, `None` for a leaf.
+    #[inline(always)]
+    pub(crate) fn children(&self, s: SlotId) -> Option<(SlotId, SlotId)> {
+        let sl = self.get(s);
+        (sl.nodes > 1).then_some((SlotId(s.0 + 1), SlotId(sl.index)))
+    }
+
+    /// The first primitive (in the build's leaf order) of the subtree at `s`.
+    pub(crate) fn first_primitive(&self, mut s: SlotId) -> u32 {
+        while let Some((left, _)) = self.children(s) {
+            s = left;
+        }
+        self.get(s).index
+    }
+}
+
 /// A finished tree: child-pair nodes, the escape-pointer layout when asked for, and for each
 /// leaf-order slot the input triangle it holds.
 pub struct BuiltTree {
     pub nodes: Vec<Node>,
     pub escape: Option<Vec<Node>>,
     pub order: Vec<u32>,
+    pub phases: Phases,
 }
 
 struct Ctx<'a, S: Splitter> {
@@ -237,12 +353,36 @@ struct Ctx<'a, S: Splitter> {
     progress: Option<&'a AtomicUsize>,
     /// [`PARALLEL_NODE`] outside tests.
     parallel_node: usize,
+    /// [`PARALLEL_SUBTREES`] outside tests, which compare the packed placement below it with
+    /// the gapped one above ([`Slots`]).
+    parallel_subtrees: usize,
     /// Whether subtrees are reinserted in the top of the finished tree ([`crate::top`]); always
     /// outside tests.
     reshape_top: bool,
     /// Whether small swept subtrees are built from one sorted order per axis
     /// ([`build_presorted`]); always outside tests, which compare it with a sort per node.
     presorted: bool,
+    /// The parallel splits' wall time summed, and when the last ended ([`Phases`]), in ns from
+    /// `started`.
+    parallel_ns: AtomicU64,
+    parallel_count: AtomicUsize,
+    parallel_until: AtomicU64,
+    started: Instant,
+}
+
+/// A vector of `len` elements, each written by `fill` instead of zeroed first: `vec![x; n]` or a
+/// zeroed allocation writes every byte on the calling thread (`calloc` clears memory the
+/// allocator recycles, most buffers of a build below glibc's 32 MiB mmap threshold), a serial
+/// part the other threads wait for, where the build's own threads write each element anyway.
+///
+/// # Safety
+/// `fill` must write every element of the slice it is given, or panic.
+unsafe fn written<T, R>(len: usize, fill: impl FnOnce(&mut [MaybeUninit<T>]) -> R) -> (Vec<T>, R) {
+    let mut v = Vec::with_capacity(len);
+    let r = fill(&mut v.spare_capacity_mut()[..len]);
+    // SAFETY: the caller's contract: `fill` returned, so it wrote all `len` elements.
+    unsafe { v.set_len(len) };
+    (v, r)
 }
 
 /// Builds a tree over `refs` (used as scratch space: their order afterwards means nothing) with
@@ -255,36 +395,115 @@ pub fn build<S: Splitter>(
     progress: Option<&AtomicUsize>,
     escape: bool,
 ) -> BuiltTree {
-    let ctx = Ctx { splitter, costs, progress, parallel_node: PARALLEL_NODE, reshape_top: true, presorted: true };
-    build_with(refs, ctx, escape)
+    let root = bounds_parallel(refs);
+    build_bounded(refs, root, splitter, costs, progress, escape)
 }
 
-fn build_with<S: Splitter>(refs: &mut [PrimRef], ctx: Ctx<'_, S>, escape: bool) -> BuiltTree {
+/// [`build`] given the bounds of `refs` ([`prim_refs_checked`]).
+pub fn build_bounded<S: Splitter>(
+    refs: &mut [PrimRef],
+    root: NodeBounds,
+    splitter: &S,
+    costs: Costs,
+    progress: Option<&AtomicUsize>,
+    escape: bool,
+) -> BuiltTree {
+    build_with(refs, root, Ctx::new(splitter, costs, progress, PARALLEL_NODE), escape)
+}
+
+impl<'a, S: Splitter> Ctx<'a, S> {
+    fn new(splitter: &'a S, costs: Costs, progress: Option<&'a AtomicUsize>, parallel_node: usize) -> Self {
+        Ctx {
+            splitter,
+            costs,
+            progress,
+            parallel_node,
+            parallel_subtrees: PARALLEL_SUBTREES,
+            reshape_top: true,
+            presorted: true,
+            parallel_ns: AtomicU64::new(0),
+            parallel_count: AtomicUsize::new(0),
+            parallel_until: AtomicU64::new(0),
+            started: Instant::now(),
+        }
+    }
+}
+
+fn ms(from: Instant) -> f64 {
+    from.elapsed().as_secs_f64() * 1e3
+}
+
+fn build_with<S: Splitter>(refs: &mut [PrimRef], root: NodeBounds, mut ctx: Ctx<'_, S>, escape: bool) -> BuiltTree {
     use rayon::prelude::*;
     let n = refs.len();
     assert!(n > 0 && n < u32::MAX as usize / 2, "the compiler rejects empty and oversized scenes before building");
-    // Zeroed allocations come from the allocator as untouched pages, which the threads then fault
-    // in where they first write; `vec![x; n]` of a struct would write every byte on this thread
-    // first (hundreds of MiB for a million triangles, a serial part the cores cannot share).
-    let mut slots: Vec<Slot> = bytemuck::zeroed_vec(2 * n - 1);
-    let mut order = vec![0u32; n];
-    // The second buffer that large nodes are partitioned into; small trees never need it.
-    let mut spare: Vec<PrimRef> = if n > ctx.parallel_node { bytemuck::zeroed_vec(n) } else { Vec::new() };
-    let root = bounds_parallel(refs);
-    let _ = build_node(&ctx, Prims { refs, spare: &mut spare, order: &mut order }, 0, &mut slots, 0, root, 0);
+    let mut phases = Phases::default();
+    let t = Instant::now();
+    // The second buffer that large nodes are partitioned into (small trees never need it), in
+    // safe code an initialised one: zeroed by every thread ([`written`] says why not `calloc`).
+    let mut spare: Vec<PrimRef> = if n > ctx.parallel_node {
+        (0..n).into_par_iter().with_min_len(1 << 14).map(|_| bytemuck::Zeroable::zeroed()).collect()
+    } else {
+        Vec::new()
+    };
+    phases.setup = ms(t);
+    ctx.started = Instant::now();
+    let mut slots = Slots(Box::new_uninit_slice(2 * n - 1));
+    // SAFETY: `build_node` writes every element of its part of the leaf order (its leaves'
+    // primitives; the children's parts split at `mid`).
+    let mut order = unsafe {
+        written(n, |order| build_node(&ctx, Prims { refs, spare: &mut spare, order }, 0, &mut slots.0, 0, root, 0)).0
+    };
+    phases.tree = ms(ctx.started);
+    phases.parallel_splits = ctx.parallel_ns.load(Ordering::Relaxed) as f64 * 1e-6;
+    phases.parallel_split_count = ctx.parallel_count.load(Ordering::Relaxed) as u32;
+    phases.parallel_until = ctx.parallel_until.load(Ordering::Relaxed) as f64 * 1e-6;
+    let t = Instant::now();
     drop(spare);
+    phases.release = ms(t);
+    let t = Instant::now();
     let mut top = None;
     if ctx.reshape_top {
         let mut t = Top::extract(&slots, n, top_units(n));
         if t.optimise() {
-            order = t.prepare(&slots, &order);
+            order = renumber(&t.prepare(&slots), &order);
             top = Some(t);
         }
     }
+    phases.top = ms(t);
+    let t = Instant::now();
     let shape = Shape { slots: &slots, top: top.as_ref() };
     let (nodes, escape) = rayon::join(|| child_pair(&shape), || escape.then(|| depth_first(&shape)));
+    phases.layouts = ms(t);
     debug_assert!(order.par_iter().all(|&i| (i as usize) < n));
-    BuiltTree { nodes, escape, order }
+    let t = Instant::now();
+    drop((slots, top));
+    phases.release += ms(t);
+    BuiltTree { nodes, escape, order, phases }
+}
+
+/// The leaf order after the reinsertion: `order`'s ranges `(first, count)` of `units` one after
+/// the other, copied by every thread.
+fn renumber(units: &[(u32, u32)], order: &[u32]) -> Vec<u32> {
+    use rayon::prelude::*;
+    let copy = |out: &mut [MaybeUninit<u32>]| {
+        let mut parts = Vec::with_capacity(units.len());
+        let mut rest = out;
+        for &(first, count) in units {
+            let (part, r) = rest.split_at_mut(count as usize);
+            parts.push((part, &order[first as usize..(first + count) as usize]));
+            rest = r;
+        }
+        assert!(rest.is_empty(), "the units hold every primitive");
+        parts.into_par_iter().for_each(|(to, from)| {
+            for (t, &f) in to.iter_mut().zip(from) {
+                t.write(f);
+            }
+        });
+    };
+    // SAFETY: `copy` splits the buffer into one part per unit, as long as the unit's range of
+    // `order` (which `zip` then copies whole), and asserts that nothing is left over.
+    unsafe { written(order.len(), copy).0 }
 }
 
 fn bounds_parallel(refs: &[PrimRef]) -> NodeBounds {
@@ -300,7 +519,7 @@ fn bounds_parallel(refs: &[PrimRef]) -> NodeBounds {
 struct Prims<'a> {
     refs: &'a mut [PrimRef],
     spare: &'a mut [PrimRef],
-    order: &'a mut [u32],
+    order: &'a mut [MaybeUninit<u32>],
 }
 
 impl<'a> Prims<'a> {
@@ -319,7 +538,7 @@ fn build_node<S: Splitter>(
     ctx: &Ctx<'_, S>,
     mut p: Prims<'_>,
     first: usize,
-    slots: &mut [Slot],
+    slots: &mut [MaybeUninit<Slot>],
     slot: usize,
     bounds: NodeBounds,
     depth: u32,
@@ -344,7 +563,12 @@ fn build_node<S: Splitter>(
         if may_leaf { None } else { Some(median_split(p.refs, &bounds)) }
     } else {
         let s = if n > ctx.parallel_node {
-            ctx.splitter.split_parallel(p.refs, p.spare, &bounds, may_leaf)
+            let t = Instant::now();
+            let s = ctx.splitter.split_parallel(p.refs, p.spare, &bounds, may_leaf);
+            ctx.parallel_ns.fetch_add(t.elapsed().as_nanos() as u64, Ordering::Relaxed);
+            ctx.parallel_count.fetch_add(1, Ordering::Relaxed);
+            ctx.parallel_until.fetch_max(ctx.started.elapsed().as_nanos() as u64, Ordering::Relaxed);
+            s
         } else {
             ctx.splitter.split(p.refs, &bounds, may_leaf)
         };
@@ -355,17 +579,12 @@ fn build_node<S: Splitter>(
         }
     };
     let (here, below) = slots.split_first_mut().expect("a subtree owns at least one slot");
-    here.min = bounds.aabb.min.into();
-    here.max = bounds.aabb.max.into();
+    let (min, max) = (bounds.aabb.min.into(), bounds.aabb.max.into());
     let Some(split) = split else {
-        here.count = n as u32;
-        here.index = first as u32;
-        here.nodes = 1;
+        leaf(ctx, here, Slot { min, max, count: n as u32, index: first as u32, nodes: 1 });
+        assert_eq!(p.order.len(), n, "a node's part of the leaf order holds its primitives");
         for (o, r) in p.order.iter_mut().zip(p.refs.iter()) {
-            *o = r.id;
-        }
-        if let Some(pr) = ctx.progress {
-            pr.fetch_add(n, Ordering::Relaxed);
+            o.write(r.id);
         }
         return (1, 0);
     };
@@ -374,16 +593,32 @@ fn build_node<S: Splitter>(
     if split.in_spare {
         std::mem::swap(&mut p.refs, &mut p.spare);
     }
-    let right_slot = slot + 2 * mid;
-    here.index = right_slot as u32;
     let (left_p, right_p) = p.split_at(mid);
-    let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
-    let left = || build_node(ctx, left_p, first, left_slots, slot + 1, split.left, depth + 1);
-    let right = || build_node(ctx, right_p, first + mid, right_slots, right_slot, split.right, depth + 1);
-    let ((l, lh), (r, rh)) = if n > PARALLEL_SUBTREES { rayon::join(left, right) } else { (left(), right()) };
-    here.nodes = 1 + l + r;
-    here.count = 1 + lh.max(rh);
-    (here.nodes, here.count)
+    let ((l, lh), (r, rh), right_slot) = if n > ctx.parallel_subtrees {
+        let right_slot = slot + 2 * mid;
+        let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
+        let left = || build_node(ctx, left_p, first, left_slots, slot + 1, split.left, depth + 1);
+        let right = || build_node(ctx, right_p, first + mid, right_slots, right_slot, split.right, depth + 1);
+        let (l, r) = rayon::join(left, right);
+        (l, r, right_slot)
+    } else {
+        // Packed: the right subtree right after the left one's nodes ([`Slots`]).
+        let l = build_node(ctx, left_p, first, &mut below[..2 * mid - 1], slot + 1, split.left, depth + 1);
+        let right_slot = slot + 1 + l.0 as usize;
+        let r = build_node(ctx, right_p, first + mid, &mut below[l.0 as usize..], right_slot, split.right, depth + 1);
+        (l, r, right_slot)
+    };
+    let (nodes, height) = (1 + l + r, 1 + lh.max(rh));
+    here.write(Slot { min, max, count: height, index: right_slot as u32, nodes });
+    (nodes, height)
+}
+
+/// Writes a leaf's slot and counts its primitives as placed.
+fn leaf<S: Splitter>(ctx: &Ctx<'_, S>, here: &mut MaybeUninit<Slot>, slot: Slot) {
+    here.write(slot);
+    if let Some(pr) = ctx.progress {
+        pr.fetch_add(slot.count as usize, Ordering::Relaxed);
+    }
 }
 
 /// [`build_node`] for a subtree of at most `N` primitives that the splitter sweeps all of
@@ -395,9 +630,9 @@ fn build_node<S: Splitter>(
 fn build_presorted<S: Splitter, const N: usize>(
     ctx: &Ctx<'_, S>,
     refs: &[PrimRef],
-    order: &mut [u32],
+    order: &mut [MaybeUninit<u32>],
     first: usize,
-    slots: &mut [Slot],
+    slots: &mut [MaybeUninit<Slot>],
     slot: usize,
     bounds: NodeBounds,
 ) -> (u32, u32) {
@@ -424,9 +659,9 @@ impl<S: Splitter> Subtree<'_, '_, S> {
         &self,
         orders: [&[u8]; 3],
         slice: &[u8],
-        order: &mut [u32],
+        order: &mut [MaybeUninit<u32>],
         first: usize,
-        slots: &mut [Slot],
+        slots: &mut [MaybeUninit<Slot>],
         slot: usize,
         bounds: NodeBounds,
     ) -> (u32, u32) {
@@ -435,21 +670,16 @@ impl<S: Splitter> Subtree<'_, '_, S> {
         let may_leaf = n <= ctx.costs.max_leaf_size;
         let split = if n == 1 { None } else { presorted_split::<N>(&ctx.costs, self.boxes, orders, &bounds, may_leaf) };
         let (here, below) = slots.split_first_mut().expect("a subtree owns at least one slot");
-        here.min = bounds.aabb.min.into();
-        here.max = bounds.aabb.max.into();
+        let (min, max) = (bounds.aabb.min.into(), bounds.aabb.max.into());
         // No split: a leaf, or, for a node too large for one whose centroids all coincide, the
         // middle of its slice (as `median_split` does without a centroid extent).
         let (mid, side_of) = match split {
             Some((axis, mid)) => (mid, orders[axis]),
             None if may_leaf || n == 1 => {
-                here.count = n as u32;
-                here.index = first as u32;
-                here.nodes = 1;
+                leaf(ctx, here, Slot { min, max, count: n as u32, index: first as u32, nodes: 1 });
+                assert_eq!(order.len(), n, "a node's part of the leaf order holds its primitives");
                 for (o, &i) in order.iter_mut().zip(slice) {
-                    *o = self.ids[i as usize];
-                }
-                if let Some(pr) = ctx.progress {
-                    pr.fetch_add(n, Ordering::Relaxed);
+                    o.write(self.ids[i as usize]);
                 }
                 return (1, 0);
             }
@@ -478,18 +708,19 @@ impl<S: Splitter> Subtree<'_, '_, S> {
                 r[a] += !left as usize;
             }
         }
-        let right_slot = slot + 2 * mid;
-        here.index = right_slot as u32;
         let (left_order, right_order) = order.split_at_mut(mid);
-        let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
         let left_orders = lefts.each_ref().map(|o| &o[..mid]);
         let right_orders = rights.each_ref().map(|o| &o[..n - mid]);
+        let left_slots = &mut below[..2 * mid - 1];
         let (l, lh) = self.node::<N>(left_orders, left_slice, left_order, first, left_slots, slot + 1, left_nb);
+        // Packed, as [`build_node`] below [`PARALLEL_SUBTREES`].
+        let right_slot = slot + 1 + l as usize;
+        let right_slots = &mut below[l as usize..];
         let (r, rh) =
             self.node::<N>(right_orders, right_slice, right_order, first + mid, right_slots, right_slot, right_nb);
-        here.nodes = 1 + l + r;
-        here.count = 1 + lh.max(rh);
-        (here.nodes, here.count)
+        let (nodes, height) = (1 + l + r, 1 + lh.max(rh));
+        here.write(Slot { min, max, count: height, index: right_slot as u32, nodes });
+        (nodes, height)
     }
 }
 
@@ -510,13 +741,13 @@ const PARALLEL_EMIT: u32 = 1 << 14;
 
 /// The finished tree: the slots, below the reshaped top when there is one.
 struct Shape<'a> {
-    slots: &'a [Slot],
+    slots: &'a Slots,
     top: Option<&'a Top>,
 }
 
 impl Shape<'_> {
     fn root(&self) -> At {
-        self.top.map_or(At::Slot(0, 0), Top::root)
+        self.top.map_or(At::Slot(SlotId::ROOT, 0), Top::root)
     }
 
     /// The node at `at` (`children`: where an inner node's pair lies, child-pair layout, or its
@@ -525,13 +756,16 @@ impl Shape<'_> {
     fn node(&self, at: At, children: usize) -> (Node, u32, Option<(At, At)>) {
         match at {
             At::Slot(s, shift) => {
-                let sl = &self.slots[s as usize];
-                if sl.nodes == 1 {
-                    let index = sl.index.wrapping_add(shift);
-                    (Node { min: sl.min, count: sl.count, max: sl.max, index }, 1, None)
-                } else {
-                    let node = Node { min: sl.min, count: 0, max: sl.max, index: children as u32 };
-                    (node, sl.nodes, Some((At::Slot(s + 1, shift), At::Slot(sl.index, shift))))
+                let sl = self.slots.get(s);
+                match self.slots.children(s) {
+                    None => {
+                        let index = sl.index.wrapping_add(shift);
+                        (Node { min: sl.min, count: sl.count, max: sl.max, index }, 1, None)
+                    }
+                    Some((l, r)) => {
+                        let node = Node { min: sl.min, count: 0, max: sl.max, index: children as u32 };
+                        (node, sl.nodes, Some((At::Slot(l, shift), At::Slot(r, shift))))
+                    }
                 }
             }
             At::Top(t) => {
@@ -552,38 +786,43 @@ impl Shape<'_> {
 /// contiguous, which lets subtrees be written in parallel into their own parts of the array.
 fn child_pair(shape: &Shape<'_>) -> Vec<Node> {
     let root = shape.root();
-    let mut nodes: Vec<Node> = bytemuck::zeroed_vec(shape.nodes(root) as usize);
-    let (first, below) = nodes.split_first_mut().expect("a tree has a root");
-    let (node, _, kids) = shape.node(root, 1);
-    *first = node;
-    if let Some(kids) = kids {
-        pairs(shape, kids, shape.nodes(root), below, 1);
-    }
-    nodes
+    let count = shape.nodes(root);
+    let write = |nodes: &mut [MaybeUninit<Node>]| {
+        let (first, below) = nodes.split_first_mut().expect("a tree has a root");
+        let (node, _, kids) = shape.node(root, 1);
+        first.write(node);
+        match kids {
+            Some(kids) => pairs(shape, kids, count, below, 1),
+            None => assert!(below.is_empty(), "a leaf has no nodes below it"),
+        }
+    };
+    // SAFETY: `pairs` writes every node of the part it is given ([`pairs`] asserts the sizes).
+    unsafe { written(count as usize, write).0 }
 }
 
 /// Writes the nodes below an inner node of `count` nodes whose children are `kids` into `out`,
 /// which starts at node `base`: its pair, then everything below its left child, then everything
-/// below its right child.
-fn pairs(shape: &Shape<'_>, (l, r): (At, At), count: u32, out: &mut [Node], base: usize) {
-    let left_count = shape.nodes(l);
+/// below its right child. Writes every node of `out`: its length must be `count - 1`, and the
+/// part below a leaf child empty (asserted; [`written`] relies on it).
+fn pairs(shape: &Shape<'_>, (l, r): (At, At), count: u32, out: &mut [MaybeUninit<Node>], base: usize) {
+    assert_eq!(out.len() + 1, count as usize, "a subtree's part holds its nodes");
+    // The left child's pair comes right after this one, whatever its size.
+    let left_base = base + 2;
+    let (ln, left_count, lk) = shape.node(l, left_base);
     let left_below = left_count as usize - 1;
     let (pair, below) = out.split_at_mut(2);
     let (left_out, right_out) = below.split_at_mut(left_below);
-    let (left_base, right_base) = (base + 2, base + 2 + left_below);
-    let (ln, _, lk) = shape.node(l, left_base);
+    let right_base = left_base + left_below;
     let (rn, right_count, rk) = shape.node(r, right_base);
-    pair[0] = ln;
-    pair[1] = rn;
-    let mut left = || {
-        if let Some(k) = lk {
-            pairs(shape, k, left_count, left_out, left_base)
-        }
+    pair[0].write(ln);
+    pair[1].write(rn);
+    let mut left = || match lk {
+        Some(k) => pairs(shape, k, left_count, left_out, left_base),
+        None => assert!(left_out.is_empty(), "a leaf has no nodes below it"),
     };
-    let mut right = || {
-        if let Some(k) = rk {
-            pairs(shape, k, right_count, right_out, right_base)
-        }
+    let mut right = || match rk {
+        Some(k) => pairs(shape, k, right_count, right_out, right_base),
+        None => assert!(right_out.is_empty(), "a leaf has no nodes below it"),
     };
     if count > PARALLEL_EMIT {
         rayon::join(left, right);
@@ -597,15 +836,17 @@ fn pairs(shape: &Shape<'_>, (l, r): (At, At), count: u32, out: &mut [Node], base
 /// past its subtree.
 fn depth_first(shape: &Shape<'_>) -> Vec<Node> {
     let root = shape.root();
-    let mut nodes: Vec<Node> = bytemuck::zeroed_vec(shape.nodes(root) as usize);
-    preorder(shape, root, &mut nodes, 0);
-    nodes
+    // SAFETY: `preorder` writes every node of the part it is given (it asserts the sizes).
+    unsafe { written(shape.nodes(root) as usize, |nodes| preorder(shape, root, nodes, 0)).0 }
 }
 
-fn preorder(shape: &Shape<'_>, at: At, out: &mut [Node], base: usize) {
+/// Writes the subtree at `at` into `out`, every node of it: its length must be the subtree's
+/// node count (asserted; [`written`] relies on it).
+fn preorder(shape: &Shape<'_>, at: At, out: &mut [MaybeUninit<Node>], base: usize) {
     let count = shape.nodes(at);
+    assert_eq!(out.len(), count as usize, "a subtree's part holds its nodes");
     let (node, _, kids) = shape.node(at, base + count as usize);
-    out[0] = node;
+    out[0].write(node);
     let Some((l, r)) = kids else { return };
     let left_n = shape.nodes(l) as usize;
     let (left_out, right_out) = out[1..].split_at_mut(left_n);
@@ -739,15 +980,19 @@ mod tests {
         build_ctx(tris, parallel_node, threads, true)
     }
 
+    fn build_refs<S: super::Splitter>(tris: &[[Vec3; 3]], ctx: super::Ctx<'_, S>) -> super::BuiltTree {
+        let (mut refs, root) = super::prim_refs_checked(tris).expect("finite triangles");
+        super::build_with(&mut refs, root, ctx, true)
+    }
+
     fn build_ctx(tris: &[[Vec3; 3]], parallel_node: usize, threads: usize, reshape_top: bool) -> super::BuiltTree {
         let costs =
             super::Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 8, depth_limit: super::DEPTH_LIMIT };
         let splitter = crate::binned::BinnedSah { bins: 16, costs };
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
         pool.install(|| {
-            let ctx =
-                super::Ctx { splitter: &splitter, costs, progress: None, parallel_node, reshape_top, presorted: true };
-            super::build_with(&mut super::prim_refs(tris), ctx, true)
+            let ctx = super::Ctx { reshape_top, ..super::Ctx::new(&splitter, costs, None, parallel_node) };
+            build_refs(tris, ctx)
         })
     }
 
@@ -781,15 +1026,8 @@ mod tests {
         use crate::sweep::SweepSah;
         fn both<S: super::Splitter>(tris: &[[Vec3; 3]], splitter: &S, costs: super::Costs, what: &str) {
             let build = |presorted| {
-                let ctx = super::Ctx {
-                    splitter,
-                    costs,
-                    progress: None,
-                    parallel_node: super::PARALLEL_NODE,
-                    reshape_top: true,
-                    presorted,
-                };
-                super::build_with(&mut super::prim_refs(tris), ctx, true)
+                let ctx = super::Ctx { presorted, ..super::Ctx::new(splitter, costs, None, super::PARALLEL_NODE) };
+                build_refs(tris, ctx)
             };
             let (sorting, presorted) = (build(false), build(true));
             check_shape(Tree::child_pair(&presorted.nodes), tris.len() as u32).expect("valid tree");
@@ -874,6 +1112,60 @@ mod tests {
             assert_eq!(one.nodes, many.nodes, "{threads} threads");
             assert_eq!(one.order, many.order, "{threads} threads");
             assert_eq!(one.escape, many.escape, "{threads} threads");
+        }
+    }
+
+    #[test]
+    fn packed_and_gapped_subtrees_give_the_same_tree() {
+        // Every subtree gapped (built in parallel from two primitives on), packed below the
+        // default size, and packed throughout: the same nodes, leaf order and escape layout,
+        // with and without the reinsertion in the top (which reads the slots too).
+        let costs =
+            super::Costs { traversal: 1.0, intersection: 1.0, max_leaf_size: 8, depth_limit: super::DEPTH_LIMIT };
+        let splitter = crate::binned::BinnedSah { bins: 16, costs };
+        for (what, tris) in [("soup on a floor", soup_on_floor(40_000)), ("room", soup_in_a_room(5_000))] {
+            for reshape_top in [false, true] {
+                let build = |parallel_subtrees| {
+                    let ctx = super::Ctx {
+                        parallel_subtrees,
+                        reshape_top,
+                        ..super::Ctx::new(&splitter, costs, None, super::PARALLEL_NODE)
+                    };
+                    build_refs(&tris, ctx)
+                };
+                let gapped = build(1);
+                check_shape(Tree::child_pair(&gapped.nodes), tris.len() as u32).expect("valid tree");
+                for parallel_subtrees in [super::PARALLEL_SUBTREES, usize::MAX] {
+                    let packed = build(parallel_subtrees);
+                    let case = format!("{what}, packed below {parallel_subtrees}, top {reshape_top}");
+                    assert_eq!(gapped.nodes, packed.nodes, "{case}");
+                    assert_eq!(gapped.order, packed.order, "{case}");
+                    assert_eq!(gapped.escape, packed.escape, "{case}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_checked_references_are_the_references_and_their_bounds() {
+        let mut tris = soup_on_floor(50_000);
+        // Finite extremes pass the check.
+        tris[17][1] = Vec3::splat(f32::MAX);
+        tris[18][2] = Vec3::new(f32::MIN, 0.0, -0.0);
+        let (refs, root) = super::prim_refs_checked(&tris).expect("finite");
+        let plain = super::prim_refs(&tris);
+        let bits = |p: &super::PrimRef| (p.min.map(f32::to_bits), p.id, p.max.map(f32::to_bits), p.area.to_bits());
+        assert!(refs.len() == plain.len() && refs.iter().zip(&plain).all(|(a, b)| bits(a) == bits(b)));
+        let nb = super::bounds_of(&plain);
+        assert_eq!((root.aabb, root.centroids), (nb.aabb, nb.centroids));
+        // The first triangle with a coordinate that is not finite, wherever it lies.
+        for (at, bad) in [(0, f32::NAN), (16_383, f32::INFINITY), (16_384, f32::NEG_INFINITY), (49_999, f32::NAN)] {
+            for corner in 0..3 {
+                let mut t = tris.clone();
+                t[at][corner][corner] = bad;
+                t[49_999][0].x = f32::INFINITY;
+                assert_eq!(super::prim_refs_checked(&t).err(), Some(at), "{bad} at {at}, corner {corner}");
+            }
         }
     }
 

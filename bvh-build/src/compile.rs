@@ -77,7 +77,7 @@ fn tree_with(
     progress: Option<&AtomicUsize>,
     escape: bool,
 ) -> Result<build::BuiltTree, BuildError> {
-    use rayon::prelude::*;
+    let started = std::time::Instant::now();
     check_params(p)?;
     if positions.is_empty() {
         return Err(BuildError::Empty);
@@ -85,22 +85,26 @@ fn tree_with(
     if positions.len() >= (u32::MAX / 2) as usize {
         return Err(BuildError::TooLarge(positions.len()));
     }
-    if let Some(t) = positions.par_iter().position_first(|t| t.iter().any(|v| !v.is_finite())) {
-        return Err(BuildError::NonFinite { triangle: t });
-    }
-    let mut refs = build::prim_refs(positions);
+    let (mut refs, root) = build::prim_refs_checked(positions).map_err(|t| BuildError::NonFinite { triangle: t })?;
     let costs = Costs {
         traversal: p.traversal_cost as f64,
         intersection: p.intersection_cost as f64,
         max_leaf_size: p.max_leaf_size as usize,
         depth_limit: build::DEPTH_LIMIT,
     };
-    Ok(match p.strategy {
+    let checked = started.elapsed().as_secs_f64() * 1e3;
+    let mut tree = match p.strategy {
         Strategy::Binned => {
-            build::build(&mut refs, &BinnedSah { bins: p.bins as usize, costs }, costs, progress, escape)
+            build::build_bounded(&mut refs, root, &BinnedSah { bins: p.bins as usize, costs }, costs, progress, escape)
         }
-        Strategy::Sweep => build::build(&mut refs, &SweepSah { costs }, costs, progress, escape),
-    })
+        Strategy::Sweep => build::build_bounded(&mut refs, root, &SweepSah { costs }, costs, progress, escape),
+    };
+    // The checks and the primitive references are set-up too.
+    tree.phases.setup += checked;
+    let t = std::time::Instant::now();
+    drop(refs);
+    tree.phases.release += t.elapsed().as_secs_f64() * 1e3;
+    Ok(tree)
 }
 
 /// Compiles a scene into the file's in-memory form (validated).

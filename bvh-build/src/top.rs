@@ -17,7 +17,7 @@
 //! the built tree, not on the number of threads. Only the reinsertion's search is pruned (from
 //! the cost of putting the node back), not its choice: the result is that of trying every place.
 
-use crate::build::{Aabb, Slot};
+use crate::build::{Aabb, SlotId, Slots};
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
@@ -43,7 +43,7 @@ struct TNode {
     /// Children of an inner treelet node; `NONE` for a unit.
     kids: [u32; 2],
     /// A unit's slot, first primitive (in the build's leaf order) and primitive count.
-    slot: u32,
+    slot: SlotId,
     first: u32,
     count: u32,
     /// Height of the whole tree below this node (a leaf's is 0).
@@ -94,46 +94,47 @@ impl Ord for Open {
 /// leaves' triangle ranges (nonzero below a reshaped top), or an inner node of the reshaped top.
 #[derive(Clone, Copy)]
 pub(crate) enum At {
-    Slot(u32, u32),
+    Slot(SlotId, u32),
     Top(u32),
 }
 
 impl Top {
     /// Cuts the tree in `slots` (over `n` primitives) into at most `units` subtrees, opening the
     /// inner node with the largest box first.
-    pub(crate) fn extract(slots: &[Slot], n: usize, units: usize) -> Top {
-        let unit = |s: usize, first: usize, count: usize, parent: u32| {
-            let bbox = Aabb { min: slots[s].min.into(), max: slots[s].max.into() };
+    pub(crate) fn extract(slots: &Slots, n: usize, units: usize) -> Top {
+        let unit = |s: SlotId, first: usize, count: usize, parent: u32| {
+            let sl = slots.get(s);
+            let bbox = Aabb { min: sl.min.into(), max: sl.max.into() };
             // An inner slot keeps its height where a leaf keeps its count.
-            let height = if slots[s].nodes == 1 { 0 } else { slots[s].count };
+            let height = if sl.nodes == 1 { 0 } else { sl.count };
             TNode {
                 bbox,
                 area: bbox.half_area(),
                 parent,
                 kids: [NONE; 2],
-                slot: s as u32,
+                slot: s,
                 first: first as u32,
                 count: count as u32,
                 height,
             }
         };
-        let mut nodes = vec![unit(0, 0, n, NONE)];
+        let mut nodes = vec![unit(SlotId::ROOT, 0, n, NONE)];
         let mut open = BinaryHeap::new();
-        if slots[0].nodes > 1 {
+        if slots.children(SlotId::ROOT).is_some() {
             open.push(Open(nodes[0].area, 0));
         }
         let mut count = 1;
         while count < units {
             let Some(Open(_, id)) = open.pop() else { break };
             let t = nodes[id as usize];
-            let (s, r) = (t.slot as usize, slots[t.slot as usize].index as usize);
-            // A subtree of c primitives owns 2c - 1 slots, so the left one's count is half the gap.
-            let mid = (r - s) / 2;
+            let (l, r) = slots.children(t.slot).expect("only inner nodes are opened");
+            // The right subtree's primitives follow the left one's in the leaf order.
             let (first, total) = (t.first as usize, t.count as usize);
-            for (slot, f, c) in [(s + 1, first, mid), (r, first + mid, total - mid)] {
+            let mid = slots.first_primitive(r) as usize - first;
+            for (slot, f, c) in [(l, first, mid), (r, first + mid, total - mid)] {
                 let k = nodes.len() as u32;
                 nodes.push(unit(slot, f, c, id));
-                if slots[slot].nodes > 1 {
+                if slots.children(slot).is_some() {
                     open.push(Open(nodes[k as usize].area, k));
                 }
             }
@@ -262,21 +263,21 @@ impl Top {
     }
 
     /// Counts each treelet node's subtree in the finished tree and gives each unit its place in
-    /// the new leaf order (units depth-first, left first); returns `order` permuted to match.
-    pub(crate) fn prepare(&mut self, slots: &[Slot], order: &[u32]) -> Vec<u32> {
+    /// the new leaf order (units depth-first, left first); returns the units' ranges of the
+    /// build's leaf order `(first, count)` in the new order, which the caller copies.
+    pub(crate) fn prepare(&mut self, slots: &Slots) -> Vec<(u32, u32)> {
         self.subtree = vec![0; self.nodes.len()];
         self.shift = vec![0; self.nodes.len()];
-        let mut new_order = vec![0u32; order.len()];
+        let mut ranges = Vec::new();
         let mut next = 0u32;
         // Post-order by an explicit stack: (node, children done).
         let mut stack = vec![(self.root, false)];
         while let Some((t, done)) = stack.pop() {
             let n = self.nodes[t as usize];
             if n.is_unit() {
-                self.subtree[t as usize] = slots[n.slot as usize].nodes;
+                self.subtree[t as usize] = slots.get(n.slot).nodes;
                 self.shift[t as usize] = next.wrapping_sub(n.first);
-                let (from, to) = (n.first as usize, next as usize);
-                new_order[to..to + n.count as usize].copy_from_slice(&order[from..from + n.count as usize]);
+                ranges.push((n.first, n.count));
                 next += n.count;
             } else if done {
                 self.subtree[t as usize] = 1 + self.subtree[n.kids[0] as usize] + self.subtree[n.kids[1] as usize];
@@ -286,8 +287,7 @@ impl Top {
                 stack.push((n.kids[0], false));
             }
         }
-        debug_assert_eq!(next as usize, order.len());
-        new_order
+        ranges
     }
 
     pub(crate) fn root(&self) -> At {
@@ -328,7 +328,7 @@ mod tests {
                 area: bbox.half_area(),
                 parent: NONE,
                 kids: [NONE; 2],
-                slot: 0,
+                slot: SlotId::ROOT,
                 first: 0,
                 count: 1,
                 height,
@@ -347,7 +347,7 @@ mod tests {
                 area: bbox.half_area(),
                 parent: NONE,
                 kids: [a, b],
-                slot: 0,
+                slot: SlotId::ROOT,
                 first: 0,
                 count: 0,
                 height,

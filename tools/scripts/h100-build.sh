@@ -15,8 +15,9 @@
 #     target/release/examples/build_cpu target/release/bvhc .bin/ && strip .bin/*
 # (.bin/build_cpu is optional: without it the thread-scaling section, scaling.txt, is skipped.)
 # Optionally the build to compare with (before.md, two-before.md), from a worktree of main before
-# the change: `cargo build --release -p bvh-build --features compare --example build_report` there,
-# and its binary copied to .bin/build_report_before.
+# the change: `cargo build --release -p bvh-build --features compare --example build_report --example build_cpu`
+# there, and its binaries copied to .bin/build_report_before and .bin/build_cpu_before (the
+# latter: scaling.txt runs both, alternately).
 # The scenes are tracked files under scenes/ (million.toml places dragon.glb and two bunny.glb,
 # 17 MiB), so the working tree carries them; the one generated on the host is room_big.toml, the
 # room with its glass sphere at 1024 x 512 segments (1,047,514 triangles), into $OUT.
@@ -26,8 +27,11 @@
 # the earlier build), build.md (all threads, every builder), before.md (all threads, 16 bins and
 # bvh with the earlier build), others.md (16 and 64 bins and the sweep on the other scenes),
 # others-before.md (the same with the earlier build: its sweep is the plain greedy one, without
-# the reinsertion in the top), scaling.txt, profile.txt, phases.txt, compile.txt, host.txt, log.txt.
-# Expected run time: about 5 minutes with RUNS=7 (the full sweep of million and forest, a second
+# the reinsertion in the top), scaling.txt (build_cpu --phases at 1 to 16 threads: wall and CPU
+# time and the wall time of each phase of the build), profile.txt, phases.txt, compile.txt,
+# host.txt, log.txt. At the end everything but log.txt is packed into $OUT/h100-build.tgz (the
+# device tool returns few files): `tar xzf h100-build.tgz` to unpack.
+# Expected run time: about 6 minutes with RUNS=7 (the full sweep of million and forest, a second
 # or two per build, is a third of it); RUNS=5 for a shorter run.
 set -euo pipefail
 OUT=${OUT:-out/h100-build}
@@ -90,12 +94,19 @@ if [ -x .bin/build_report_before ]; then
 fi
 
 if [ -x .bin/build_cpu ]; then
-  log "== build time against threads: wall and CPU time of all threads (medians of 15 builds) =="
+  log "== build time against threads: wall and CPU time of all threads, wall time per phase (medians of 15 builds) =="
   # Where the small scene stops scaling: CPU time far above the 1-thread figure means threads
-  # spinning or waiting (rayon, page faults), wall time flat while CPU time stays means serial parts.
+  # spinning or waiting (rayon, page faults), wall time flat while CPU time stays means serial
+  # parts; the phase line says which (setup, the top's parallel splits and the rest of the
+  # recursion, the reinsertion, the layouts, freeing the buffers). With .bin/build_cpu_before,
+  # the earlier build's line (no phases) before each of this build's, alternately.
   for s in bunny.toml million.toml; do
     for threads in 1 2 4 8 16 "$(nproc)"; do
-      RAYON_NUM_THREADS=$threads .bin/build_cpu "scenes/$s" 15
+      if [ -x .bin/build_cpu_before ]; then
+        echo -n "before: "
+        RAYON_NUM_THREADS=$threads .bin/build_cpu_before "scenes/$s" 15
+      fi
+      RAYON_NUM_THREADS=$threads .bin/build_cpu "scenes/$s" 15 --phases
     done
   done | tee "$OUT/scaling.txt"
 fi
@@ -132,3 +143,7 @@ for threads in "$(nproc)" 2; do
 done | tee "$OUT/compile.txt"
 rm -f "$OUT/scene.bvh"
 log "done"
+# One archive of every output but the log (the device tool returns a limited number of files).
+tar czf /tmp/h100-build.tgz -C "$OUT" --exclude=log.txt .
+find "$OUT" -mindepth 1 -maxdepth 1 ! -name log.txt -exec rm -rf {} +
+mv /tmp/h100-build.tgz "$OUT/h100-build.tgz"
