@@ -128,7 +128,7 @@ pub enum Simd {
     /// One lane at a time: any CPU.
     Portable,
     /// A node's boxes or a leaf's triangles per sequence of AVX2-encoded instructions: 256-bit
-    /// for the 8-wide BVH, 128-bit for the 4-wide one.
+    /// for the 8-wide BVH, 128-bit for the 4-wide one (and POPCNT for the work counts).
     Avx2,
     /// AVX-512 (F, VL, DQ): the near and far planes of all 8 children in one 16-lane register,
     /// mask registers and compress instructions for the children hit; the leaf test is AVX2's.
@@ -160,9 +160,7 @@ impl Simd {
                 // POPCNT comes with AVX2 on every CPU that has it (Intel since Haswell, AMD since
                 // Excavator); checked all the same, since the traversal is compiled with it.
                 Simd::Avx2 => has!("avx2") && has!("popcnt"),
-                Simd::Avx512 => {
-                    Simd::Avx2.supported() && has!("avx512f") && has!("avx512vl") && has!("avx512dq")
-                }
+                Simd::Avx512 => Simd::Avx2.supported() && has!("avx512f") && has!("avx512vl") && has!("avx512dq"),
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
@@ -938,8 +936,8 @@ pub(crate) mod avx2 {
                     }
                     let second = mask.trailing_zeros() as usize;
                     if mask & (mask - 1) == 0 {
-                        // Two children, the most common case of several: the insertion sort's
-                        // order below without its array (the farther pushed, on a tie the lower slot).
+                        // Two children: the insertion sort's order below without its array (the
+                        // farther pushed, on a tie the lower slot).
                         let (push, enter) = if near[first] < near[second] { (second, first) } else { (first, second) };
                         stack.push((node.child[push], near[push]));
                         cur = node.child[enter];
