@@ -128,7 +128,7 @@ pub enum Simd {
     /// One lane at a time: any CPU.
     Portable,
     /// A node's boxes or a leaf's triangles per sequence of AVX2-encoded instructions: 256-bit
-    /// for the 8-wide BVH, 128-bit for the 4-wide one.
+    /// for the 8-wide BVH, 128-bit for the 4-wide one (and POPCNT for the work counts).
     Avx2,
     /// AVX-512 (F, VL, DQ): the near and far planes of all 8 children in one 16-lane register,
     /// mask registers and compress instructions for the children hit; the leaf test is AVX2's.
@@ -157,8 +157,10 @@ impl Simd {
             use std::arch::is_x86_feature_detected as has;
             match self {
                 Simd::Portable => true,
-                Simd::Avx2 => has!("avx2"),
-                Simd::Avx512 => has!("avx2") && has!("avx512f") && has!("avx512vl") && has!("avx512dq"),
+                // POPCNT comes with AVX2 on every CPU that has it (Intel since Haswell, AMD since
+                // Excavator); checked all the same, since the traversal is compiled with it.
+                Simd::Avx2 => has!("avx2") && has!("popcnt"),
+                Simd::Avx512 => Simd::Avx2.supported() && has!("avx512f") && has!("avx512vl") && has!("avx512dq"),
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
@@ -599,8 +601,6 @@ pub(crate) mod avx2 {
         fn min(self, o: Self) -> Self;
         fn and(self, o: Self) -> Self;
         fn or(self, o: Self) -> Self;
-        /// `!self & o`.
-        fn andnot(self, o: Self) -> Self;
         fn cmp<const P: i32>(self, o: Self) -> Self;
         /// The lanes' sign bits.
         fn bits(self) -> u32;
@@ -613,7 +613,7 @@ pub(crate) mod avx2 {
         ($v:ty, $n:literal, $vi:ty, $set1:ident, $setzero:ident, $loadu:ident, $storeu:ident,
          $loadu_si:ident, $set1_epi32:ident, $cmpeq_epi32:ident, $castsi_ps:ident,
          $add:ident, $sub:ident, $mul:ident, $div:ident, $max:ident, $min:ident, $and:ident,
-         $or:ident, $andnot:ident, $cmp:ident, $movemask:ident) => {
+         $or:ident, $cmp:ident, $movemask:ident) => {
             impl Vector for $v {
                 const N: usize = $n;
                 #[inline(always)]
@@ -677,10 +677,6 @@ pub(crate) mod avx2 {
                     unsafe { $or(self, o) }
                 }
                 #[inline(always)]
-                fn andnot(self, o: Self) -> Self {
-                    unsafe { $andnot(self, o) }
-                }
-                #[inline(always)]
                 fn cmp<const P: i32>(self, o: Self) -> Self {
                     unsafe { $cmp::<P>(self, o) }
                 }
@@ -694,12 +690,12 @@ pub(crate) mod avx2 {
     vector! {
         __m128, 4, __m128i, _mm_set1_ps, _mm_setzero_ps, _mm_loadu_ps, _mm_storeu_ps, _mm_loadu_si128, _mm_set1_epi32,
         _mm_cmpeq_epi32, _mm_castsi128_ps, _mm_add_ps, _mm_sub_ps, _mm_mul_ps, _mm_div_ps, _mm_max_ps, _mm_min_ps,
-        _mm_and_ps, _mm_or_ps, _mm_andnot_ps, _mm_cmp_ps, _mm_movemask_ps
+        _mm_and_ps, _mm_or_ps, _mm_cmp_ps, _mm_movemask_ps
     }
     vector! {
         __m256, 8, __m256i, _mm256_set1_ps, _mm256_setzero_ps, _mm256_loadu_ps, _mm256_storeu_ps, _mm256_loadu_si256,
         _mm256_set1_epi32, _mm256_cmpeq_epi32, _mm256_castsi256_ps, _mm256_add_ps, _mm256_sub_ps, _mm256_mul_ps,
-        _mm256_div_ps, _mm256_max_ps, _mm256_min_ps, _mm256_and_ps, _mm256_or_ps, _mm256_andnot_ps, _mm256_cmp_ps,
+        _mm256_div_ps, _mm256_max_ps, _mm256_min_ps, _mm256_and_ps, _mm256_or_ps, _mm256_cmp_ps,
         _mm256_movemask_ps
     }
 
@@ -875,7 +871,7 @@ pub(crate) mod avx2 {
     /// an axis the ray is parallel to) goes as the first operand of `max`/`min`, which then return
     /// the second: the axis is ignored, as the scalar test ignores it (its other distance is then
     /// infinite or NaN, and ignored alike).
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     pub fn trace<const ANY: bool, T: TriangleTest, V: Vector, const W: usize>(
         bvh: &WideBvh<W>,
         start: u32,
@@ -890,7 +886,6 @@ pub(crate) mod avx2 {
         let far_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { a } else { 3 + a });
         let zero = V::zero();
         let slack = V::splat(T_SLACK);
-        let sign = V::splat(-0.0);
         let t_min_v = V::splat(t_min);
         let mut best = Found { t: t_max, tri, w1: 0.0, w2: 0.0, sum: 1.0 };
         let mut found = false;
@@ -907,8 +902,11 @@ pub(crate) mod avx2 {
                 let far = dist(&b[far_plane[0]], &r, 0).min(t_best);
                 let far = dist(&b[far_plane[1]], &r, 1).min(far);
                 let far = dist(&b[far_plane[2]], &r, 2).min(far);
-                // `may_hold(near, far)`: near <= far + |far| * T_SLACK.
-                let ok = near.cmp::<_CMP_LE_OQ>(far.add(sign.andnot(far).mul(slack)));
+                // `may_hold(near, far)`: near <= far + |far| * T_SLACK, bit for bit without the
+                // `|far|`: `near` is 0 or more (the `max` with 0 above drops NaN), so where `far`
+                // is negative both sides are below `near` (`far + far * T_SLACK` too), and where
+                // it is 0 or more (-0 included, whose sum compares equal) `far` is `|far|`.
+                let ok = near.cmp::<_CMP_LE_OQ>(far.add(far.mul(slack)));
                 let mut mask = ok.bits() & node.valid;
                 cost.nodes += node.valid.count_ones();
                 if mask != 0 {
@@ -934,6 +932,15 @@ pub(crate) mod avx2 {
                             mask &= mask - 1;
                         }
                         cur = node.child[first];
+                        continue;
+                    }
+                    let second = mask.trailing_zeros() as usize;
+                    if mask & (mask - 1) == 0 {
+                        // Two children: the insertion sort's order below without its array (the
+                        // farther pushed, on a tie the lower slot).
+                        let (push, enter) = if near[first] < near[second] { (second, first) } else { (first, second) };
+                        stack.push((node.child[push], near[push]));
+                        cur = node.child[enter];
                         continue;
                     }
                     // Nearest first: the others go on the stack farthest first.
@@ -1008,7 +1015,7 @@ mod avx512 {
     /// bit, NaN and zeros included (the second operand wins on NaN and on equality in both). The
     /// children hit are packed together with compress instructions, in slot order; the nearest is
     /// entered and the others go on the stack farthest first, the order of the AVX2 traversal.
-    #[target_feature(enable = "avx2,avx512f,avx512vl,avx512dq")]
+    #[target_feature(enable = "avx2,popcnt,avx512f,avx512vl,avx512dq")]
     pub fn trace<const ANY: bool, T: TriangleTest>(
         bvh: &Bvh8,
         start: u32,
@@ -1044,11 +1051,9 @@ mod avx512 {
                 }
                 let near = _mm512_castps512_ps256(acc);
                 let far = _mm256_xor_ps(_mm512_extractf32x8_ps::<1>(acc), sign);
-                // `may_hold(near, far)`: near <= far + |far| * T_SLACK.
-                let ok = _mm256_cmp_ps_mask::<_CMP_LE_OQ>(
-                    near,
-                    _mm256_add_ps(far, _mm256_mul_ps(_mm256_andnot_ps(sign, far), slack)),
-                );
+                // `may_hold(near, far)`: near <= far + |far| * T_SLACK, as the AVX2 traversal
+                // writes it without the `|far|` (`near` is 0 or more).
+                let ok = _mm256_cmp_ps_mask::<_CMP_LE_OQ>(near, _mm256_add_ps(far, _mm256_mul_ps(far, slack)));
                 let mask = ok as u32 & node.valid;
                 cost.nodes += node.valid.count_ones();
                 if mask != 0 {

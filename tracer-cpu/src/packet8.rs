@@ -21,7 +21,7 @@
 //! a lane that passes a box passes every box around it (the rounded distances are monotonic in
 //! the planes), so it passes every test the ordered traversal puts on its way.
 
-use crate::bvh8::Bvh8;
+use crate::bvh8::{Bvh8, Simd};
 use crate::geometry::{MollerTrumbore, TriangleTest, Watertight};
 use crate::lanes::TraceLanes;
 use crate::packet::{Entry, Rays, Results};
@@ -32,9 +32,10 @@ use render_spec::Intersect;
 /// faster than 0, 4 and 6 on the bunny, the dragon and the million-triangle scene).
 pub const SPARSE: u32 = 2;
 
-/// Whether this CPU runs wide packets (AVX2, as [`crate::packet`]).
+/// Whether this CPU runs wide packets (AVX2, as [`crate::packet`], and the single-ray AVX2
+/// traversal's POPCNT, which finish the sparse lanes).
 pub fn available() -> bool {
-    crate::packet::available()
+    crate::packet::available() && Simd::Avx2.supported()
 }
 
 /// Closest hits (`ANY == false`, `t_min` 0) or occlusion (`ANY == true`) of the valid lanes of
