@@ -60,9 +60,10 @@ impl Rays {
         Ray::new(v(&self.origin), v(&self.dir))
     }
 
-    /// Valid lanes.
+    /// Valid lanes (one 8-byte read: a bool is 0 or 1).
+    #[inline]
     pub fn count(&self) -> usize {
-        self.valid.iter().filter(|&&v| v).count()
+        u64::from_le_bytes(self.valid.map(u8::from)).count_ones() as usize
     }
 }
 
@@ -511,14 +512,15 @@ pub(crate) mod avx2 {
             }
         }
 
-        let (hit, tri) = (to_array(hit_any), to_array_i(best_tri));
+        let tri = to_array_i(best_tri);
         let (nn, nt) = (to_array_i(n_nodes), to_array_i(n_tris));
         let inv = _mm256_div_ps(splat(1.0), best_sum);
         let (best_u, best_v) = (mul(best_w1, inv), mul(best_w2, inv));
-        let mut out = Results { t: to_array(best_t), u: to_array(best_u), v: to_array(best_v), ..Results::default() };
+        let hit = crate::wide::bools_of(hit_any);
+        let mut out =
+            Results { hit, t: to_array(best_t), u: to_array(best_u), v: to_array(best_v), ..Results::default() };
         // A loop, not `array::from_fn`: its closure would not be compiled for AVX2 nor inlined.
         for i in 0..LANES {
-            out.hit[i] = hit[i].to_bits() != 0;
             out.tri[i] = tri[i] as u32;
             out.cost[i] = Cost { nodes: nn[i] as u32, tris: nt[i] as u32 };
         }
