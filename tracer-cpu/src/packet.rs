@@ -14,11 +14,12 @@ use glam::Vec3;
 /// Lanes of a packet.
 pub use crate::wide::LANES;
 
-/// Whether this CPU runs the packet path.
+/// Whether this CPU runs the packet path (and the renderer's AVX2 shading, which also counts
+/// lanes with POPCNT: every CPU with AVX2 has it).
 pub fn available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::arch::is_x86_feature_detected!("avx2")
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("popcnt")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -60,10 +61,13 @@ impl Rays {
         Ray::new(v(&self.origin), v(&self.dir))
     }
 
-    /// Valid lanes (one 8-byte read: a bool is 0 or 1).
+    /// Valid lanes: the sum of the eight bytes (each 0 or 1) read as one word, which the
+    /// multiplication adds up in its top byte (no byte's sum passes 8: nothing carries). One
+    /// 8-byte read, which the single store of [`crate::wide::bools_of`] forwards; and two
+    /// instructions where `count_ones` without POPCNT took a dozen.
     #[inline]
     pub fn count(&self) -> usize {
-        u64::from_le_bytes(self.valid.map(u8::from)).count_ones() as usize
+        (u64::from_le_bytes(self.valid.map(u8::from)).wrapping_mul(0x0101_0101_0101_0101) >> 56) as usize
     }
 }
 

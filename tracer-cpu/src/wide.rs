@@ -1036,8 +1036,28 @@ mod tests {
         }
     }
 
+    /// Every one of the 256 masks of eight lanes out of a comparison and back: the bools, the
+    /// count (also [`crate::packet::Rays::count`] of those bools), the triangles kept.
+    fn masks_round_trip<L: Lanes>() {
+        let tri: [u32; LANES] = std::array::from_fn(|i| 0x8000_0001 + 77 * i as u32);
+        for bits in 0u32..256 {
+            let want: [bool; LANES] = std::array::from_fn(|i| bits >> i & 1 != 0);
+            // A comparison's mask (and a NaN lane that compares false).
+            let x = L::from_fn(|i| if want[i] { 1.0 } else if i % 2 == 0 { 0.0 } else { f32::NAN });
+            let m = x.gt(L::splat(0.5));
+            assert_eq!(L::bools(m), want, "{bits:08b}");
+            assert_eq!(L::bools(L::mask(want)), want, "{bits:08b}");
+            assert_eq!(L::count(m), bits.count_ones() as usize);
+            let rays = crate::packet::Rays { valid: want, ..Default::default() };
+            assert_eq!(rays.count(), bits.count_ones() as usize);
+            let kept = L::keep_u32(m, &tri);
+            assert_eq!(kept, std::array::from_fn(|i| if want[i] { tri[i] } else { 0 }), "{bits:08b}");
+        }
+    }
+
     #[test]
     fn portable_lanes_match_one_ray_bit_for_bit() {
+        masks_round_trip::<F8>();
         all_formulas::<F8>();
         reflections_like_one_ray::<F8>();
         quantize_like_one_ray::<F8>();
@@ -1049,6 +1069,7 @@ mod tests {
     #[test]
     fn avx_lanes_match_one_ray_bit_for_bit() {
         assert!(crate::packet::available(), "this test needs a CPU with AVX2");
+        masks_round_trip::<Avx8>();
         all_formulas::<Avx8>();
         reflections_like_one_ray::<Avx8>();
         quantize_like_one_ray::<Avx8>();
