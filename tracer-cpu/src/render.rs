@@ -1063,11 +1063,11 @@ mod tests {
         }
     }
 
-    /// The image with AVX lanes is the image with plain arrays (the path of CPUs without AVX2),
-    /// for every way of tracing the rays, and does not depend on the tiles.
     /// `block_xy` converts as `as f32` does, beyond 2^24 too, where floats skip integers.
     fn block_coordinates<L: Lanes>() {
-        for (x0, y0) in [(0, 0), (5, 7), ((1 << 24) - 2, (1 << 24) + 1), ((1 << 28) - 4, 3), ((1 << 31) - 8, (1 << 30) + 5)] {
+        for (x0, y0) in
+            [(0, 0), (5, 7), ((1 << 24) - 2, (1 << 24) + 1), ((1 << 28) - 4, 3), ((1 << 31) - 8, (1 << 30) + 5)]
+        {
             let (x, y) = L::block_xy(x0, y0);
             for i in 0..LANES as u32 {
                 let want = ((x0 + i % 4) as usize as f32, (y0 + i / 4) as usize as f32);
@@ -1116,6 +1116,8 @@ mod tests {
         }
     }
 
+    /// The image with AVX lanes is the image with plain arrays (the path of CPUs without AVX2),
+    /// for every way of tracing the rays, and does not depend on the tiles.
     #[test]
     fn both_lane_types_render_the_same_image() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/room.toml");

@@ -160,8 +160,7 @@ impl<'a> Shading<'a> {
         };
         (0..LANES)
             .filter(|&i| {
-                rays.valid[i]
-                    && test(&self.triangles.triangle(tri[i]), &rays.ray(i), 0.0, rays.t_max[i]).is_some()
+                rays.valid[i] && test(&self.triangles.triangle(tri[i]), &rays.ray(i), 0.0, rays.t_max[i]).is_some()
             })
             .count() as u64
     }

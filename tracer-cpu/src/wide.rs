@@ -1043,7 +1043,15 @@ mod tests {
         for bits in 0u32..256 {
             let want: [bool; LANES] = std::array::from_fn(|i| bits >> i & 1 != 0);
             // A comparison's mask (and a NaN lane that compares false).
-            let x = L::from_fn(|i| if want[i] { 1.0 } else if i % 2 == 0 { 0.0 } else { f32::NAN });
+            let x = L::from_fn(|i| {
+                if want[i] {
+                    1.0
+                } else if i % 2 == 0 {
+                    0.0
+                } else {
+                    f32::NAN
+                }
+            });
             let m = x.gt(L::splat(0.5));
             assert_eq!(L::bools(m), want, "{bits:08b}");
             assert_eq!(L::bools(L::mask(want)), want, "{bits:08b}");
