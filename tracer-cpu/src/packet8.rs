@@ -825,14 +825,14 @@ mod avx2 {
             finish_alone::<ANY, T>(bvh, rays, bvh.root, infinite, &mut st, single);
         }
 
-        let (hit, tri) = (store(st.hit_any), store_i(st.best.tri));
+        let tri = store_i(st.best.tri);
         let (nn, nt) = (store_i(st.n_nodes), store_i(st.n_tris));
         let inv = _mm256_div_ps(splat(1.0), st.best.sum);
         let (u, v) = (_mm256_mul_ps(st.best.w1, inv), _mm256_mul_ps(st.best.w2, inv));
-        let mut out = Results { t: store(st.best.t), u: store(u), v: store(v), ..Results::default() };
+        let hit = crate::wide::bools_of(st.hit_any);
+        let mut out = Results { hit, t: store(st.best.t), u: store(u), v: store(v), ..Results::default() };
         // A loop, not `array::from_fn`: its closure would not be compiled for AVX2 nor inlined.
         for i in 0..LANES {
-            out.hit[i] = hit[i].to_bits() != 0;
             out.tri[i] = tri[i] as u32;
             out.cost[i] = Cost { nodes: nn[i] as u32 + st.alone[i].nodes, tris: nt[i] as u32 + st.alone[i].tris };
         }

@@ -9,7 +9,7 @@ use crate::packet::{LANES, Rays, Results};
 use crate::shade;
 use crate::traverse::{self, Stack};
 use crate::vertices::{Indexed, Triangles};
-use crate::whitted::{Seeds, Shading};
+use crate::whitted::{Block, Seeds, Shading};
 use crate::wide::{F8, Lanes, V3};
 use bvh_format::{Node, SceneFile, Triangle};
 use rayon::prelude::*;
@@ -821,16 +821,17 @@ fn render_band<T: TraceLanes>(
 ) -> RayCounts {
     #[cfg(target_arch = "x86_64")]
     if avx && crate::packet::available() {
-        // SAFETY: the CPU has AVX2 (checked just above).
+        // SAFETY: the CPU has AVX2 and POPCNT (checked just above).
         return unsafe { render_band_avx2(sh, frame, samples, lanes, band, w, columns) };
     }
     render_band_in::<F8, T>(sh, frame, samples, lanes, band, w, columns)
 }
 
 /// [`render_band`] compiled for AVX2, so that every lane operation of the shading is one
-/// instruction.
+/// instruction, and with POPCNT, which every CPU with AVX2 has (`packet::available` checks
+/// both): without it a count of lanes took a dozen instructions, about 10 per pixel.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,popcnt")]
 fn render_band_avx2<T: TraceLanes>(
     sh: &Shading<'_>,
     frame: &Frame,
@@ -855,7 +856,8 @@ fn render_band_in<L: Lanes, T: TraceLanes>(
     columns: usize,
 ) -> RayCounts {
     let rows = band.rgb.len() / w;
-    let mut rays = RayCounts::default();
+    // The blocks' rays are added up in here, and their AOVs kept (see `Shading::shade`).
+    let mut out = Block::default();
     let (y0, h) = (band.y0, band.y0 + rows);
     // Each block's primary rays are made before the block ahead of it is traced: their square
     // roots and divisions then run beside that block's work instead of holding up its own first
@@ -869,13 +871,13 @@ fn render_band_in<L: Lanes, T: TraceLanes>(
         if let Some((nx, ny)) = next {
             primary = primary_block::<L>(frame, w, h, nx, y0 + ny, samples[0]);
         }
-        rays = rays + block::<L, T>(sh, frame, samples, lanes, band, w, rows, bx, dy, this);
+        block::<L, T>(sh, frame, samples, lanes, band, w, rows, bx, dy, this, &mut out);
         match next {
             Some(n) => at = n,
             None => break,
         }
     }
-    rays
+    out.rays
 }
 
 /// The block after the one at (`bx`, `dy`) in a band of `rows` rows of `w` pixels: the next to
@@ -918,13 +920,10 @@ fn primary_block<L: Lanes>(
     sample: (f32, f32),
 ) -> (Rays, Seeds, L, L) {
     let lane_xy = |i: usize| (x0 + i % 4, y0 + i / 4);
-    let mut primary = Rays::default();
-    for i in 0..LANES {
-        let (x, y) = lane_xy(i);
-        primary.valid[i] = x < w && y < h;
-    }
+    let mut primary = Rays { valid: inside(x0, y0, w, h), ..Rays::default() };
     primary.origin = V3::<L>::splat(frame.eye).to_arrays();
-    let (x, y) = (L::from_fn(|i| lane_xy(i).0 as f32), L::from_fn(|i| lane_xy(i).1 as f32));
+    // At most 2^28 pixels: coordinates below 2^31.
+    let (x, y) = L::block_xy(x0 as u32, y0 as u32);
     primary.t_max = [f32::INFINITY; LANES];
     primary.dir = directions(frame, x, y, sample).to_arrays();
     // Row-major pixel indices in the image (at most 2^28 pixels: no overflow).
@@ -932,12 +931,25 @@ fn primary_block<L: Lanes>(
     (primary, seeds, x, y)
 }
 
+/// The lanes of the 4 x 2 block at (`x0`, `y0`) inside an image `w` pixels wide whose rows end at
+/// `h`, made in a register: stored byte by byte, the first 8-byte read of them (the packet's live
+/// lanes) waited for the bytes to reach the cache instead of being forwarded from the stores.
+#[inline(always)]
+fn inside(x0: usize, y0: usize, w: usize, h: usize) -> [bool; LANES] {
+    // One byte of 1 per column inside the image, in both rows; then the rows inside it.
+    let columns = 0x0101_0101u64 >> (8 * (x0 + 4).saturating_sub(w).min(4));
+    let row = |dy: usize| if y0 + dy < h { columns << (32 * dy) } else { 0 };
+    // SAFETY: every byte is 0 or 1, a valid bool; lane i is byte i (little-endian x86-64 and
+    // others alike: `to_le_bytes` orders them).
+    unsafe { std::mem::transmute::<[u8; LANES], [bool; LANES]>((row(0) | row(1)).to_le_bytes()) }
+}
+
 /// Traces and shades the 4 x 2 block whose top-left pixel is (`bx`, `dy`) in the band at every
 /// sample position, writing its pixels: the colour is the sum of the samples' linear colours in
 /// their order times the f32 reciprocal of their number (a GPU multiplies exactly, where its
 /// division may be off by ulps), then quantised; the distance, normal and triangle AOVs
 /// are the first sample's, the cost AOVs the sum over all. `primary` is [`primary_block`]'s
-/// for the block's first sample. Returns its rays.
+/// for the block's first sample. Adds its rays to `out.rays`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn block<L: Lanes, T: TraceLanes>(
@@ -951,10 +963,14 @@ fn block<L: Lanes, T: TraceLanes>(
     bx: usize,
     dy: usize,
     (mut primary, mut seeds, x, y): (Rays, Seeds, L, L),
-) -> RayCounts {
+    out: &mut Block,
+) {
     let lane_xy = |i: usize| (bx + i % 4, dy + i / 4);
-    let mut out = sh.block::<L, T>(&primary, &seeds, lanes);
-    let mut colour = V3::<L>::from_arrays(&out.colour);
+    if sh.aovs() {
+        let rays = out.rays;
+        *out = Block { rays, ..Block::default() };
+    }
+    let mut colour = sh.shade::<L, T>(&primary, &seeds, lanes, out);
     for (k, &sample) in samples.iter().enumerate().skip(1) {
         primary.dir = directions(frame, x, y, sample).to_arrays();
         seeds.sample = k as u32;
@@ -975,7 +991,7 @@ fn block<L: Lanes, T: TraceLanes>(
             let p = (dy + r) * w + bx;
             band.rgb[p..p + 4].as_flattened_mut().copy_from_slice(&row[..12]);
         }
-        return out.rays;
+        return;
     }
     for i in 0..LANES {
         if !primary.valid[i] {
@@ -994,7 +1010,6 @@ fn block<L: Lanes, T: TraceLanes>(
             a.tris[p] = out.cost[i].tris;
         }
     }
-    out.rays
 }
 
 #[cfg(test)]
@@ -1030,8 +1045,7 @@ mod tests {
             for (w, h) in [(1, 1), (97, 61), (16384, 3), (3, 70000)] {
                 let frame = cam.frame(w, h).unwrap();
                 for (bx, by) in [(0, 0), (w.saturating_sub(4), h.saturating_sub(2)), (w / 2, h / 3)] {
-                    let x = L::from_fn(|i| (bx + i as u32 % 4) as f32);
-                    let y = L::from_fn(|i| (by + i as u32 / 4) as f32);
+                    let (x, y) = L::block_xy(bx, by);
                     for sample in render_spec::accuracy::sample_positions(9).chain([(0.5, 0.5)]) {
                         let d = directions(&frame, x, y, sample).to_arrays();
                         let got: [[f32; 3]; LANES] = std::array::from_fn(|i| [d[0][i], d[1][i], d[2][i]]);
@@ -1049,8 +1063,40 @@ mod tests {
         }
     }
 
-    /// The image with AVX lanes is the image with plain arrays (the path of CPUs without AVX2),
-    /// for every way of tracing the rays, and does not depend on the tiles.
+    /// `block_xy` converts as `as f32` does, beyond 2^24 too, where floats skip integers.
+    fn block_coordinates<L: Lanes>() {
+        for (x0, y0) in
+            [(0, 0), (5, 7), ((1 << 24) - 2, (1 << 24) + 1), ((1 << 28) - 4, 3), ((1 << 31) - 8, (1 << 30) + 5)]
+        {
+            let (x, y) = L::block_xy(x0, y0);
+            for i in 0..LANES as u32 {
+                let want = ((x0 + i % 4) as usize as f32, (y0 + i / 4) as usize as f32);
+                assert_eq!((x.to_array()[i as usize], y.to_array()[i as usize]), want, "{x0}, {y0}, lane {i}");
+            }
+        }
+    }
+
+    #[test]
+    fn block_coordinates_are_the_pixels_as_floats() {
+        block_coordinates::<F8>();
+        #[cfg(target_arch = "x86_64")]
+        if crate::packet::available() {
+            block_coordinates::<crate::wide::Avx8>();
+        }
+    }
+
+    #[test]
+    fn lanes_inside_the_image_are_the_pixels_inside_it() {
+        for (w, h) in [(1, 1), (3, 2), (4, 1), (5, 3), (8, 4), (13, 7)] {
+            for x0 in 0..w + 2 {
+                for y0 in 0..h + 2 {
+                    let want: [bool; LANES] = std::array::from_fn(|i| x0 + i % 4 < w && y0 + i / 4 < h);
+                    assert_eq!(inside(x0, y0, w, h), want, "block ({x0}, {y0}) of {w} x {h}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn next_block_visits_the_blocks_of_a_band_in_tile_order() {
         for (w, rows) in [(1, 1), (3, 2), (4, 2), (61, 6), (64, 8), (1922, 2), (13, 7)] {
@@ -1070,6 +1116,8 @@ mod tests {
         }
     }
 
+    /// The image with AVX lanes is the image with plain arrays (the path of CPUs without AVX2),
+    /// for every way of tracing the rays, and does not depend on the tiles.
     #[test]
     fn both_lane_types_render_the_same_image() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/room.toml");

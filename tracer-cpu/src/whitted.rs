@@ -150,7 +150,7 @@ impl<'a> Shading<'a> {
     /// Of the `valid` lanes of `rays`, leaving triangles `tri`, those that their own triangle
     /// meets in `(0, t_max]` with the frame's test; zero unless counting was asked for.
     #[inline(always)]
-    fn count_self_hits(&self, rays: &Rays, tri: &[usize; LANES]) -> u64 {
+    fn count_self_hits(&self, rays: &Rays, tri: &[u32; LANES]) -> u64 {
         if !self.self_hits {
             return 0;
         }
@@ -160,8 +160,7 @@ impl<'a> Shading<'a> {
         };
         (0..LANES)
             .filter(|&i| {
-                rays.valid[i]
-                    && test(&self.triangles.triangle(tri[i] as u32), &rays.ray(i), 0.0, rays.t_max[i]).is_some()
+                rays.valid[i] && test(&self.triangles.triangle(tri[i]), &rays.ray(i), 0.0, rays.t_max[i]).is_some()
             })
             .count() as u64
     }
@@ -171,17 +170,39 @@ impl<'a> Shading<'a> {
     /// for AVX2 where the CPU has it.
     #[inline(always)]
     pub(crate) fn block<L: Lanes, T: TraceLanes>(&self, primary: &Rays, seeds: &Seeds, lanes: &mut T) -> Block {
+        let mut out = Block::default();
+        out.colour = self.shade::<L, T>(primary, seeds, lanes, &mut out).to_arrays();
+        out
+    }
+
+    /// Whether the frame fills [`Block`]'s AOV fields (`t`, `normal`, `prim`, `cost`).
+    pub(crate) fn aovs(&self) -> bool {
+        self.aovs
+    }
+
+    /// [`Self::block`] into `out`, which the renderer keeps from block to block: adds the rays
+    /// to `out.rays` and the costs to `out.cost`, sets `t`, `normal` and `prim` where a lane hits
+    /// (all with AOVs only: else only `rays` is touched), and returns the colour in registers.
+    /// A fresh [`Block`] per block was built, zeroed and copied out through memory (about 50
+    /// instructions of a block's 1,450 outside the traversal in bunny Whitted frames).
+    #[inline(always)]
+    pub(crate) fn shade<L: Lanes, T: TraceLanes>(
+        &self,
+        primary: &Rays,
+        seeds: &Seeds,
+        lanes: &mut T,
+        out: &mut Block,
+    ) -> V3<L> {
         let scene = self.scene;
         let zero = L::splat(0.0);
         let background = V3::<L>::splat(self.background);
-        let mut out = Block::default();
         let mut colour = V3::<L>::zero();
         // The stage's rays by reference: a copy of the caller's block (its arrays 8 bytes off the
         // 32 of the stores that wrote them) stalled on store forwarding, 5% of a Whitted frame.
         let mut secondary: Rays;
         let mut rays = primary;
         let mut hits = lanes.closest_in(Stage::Primary, rays, self.intersect);
-        out.rays.primary = rays.count() as u64;
+        out.rays.primary += rays.count() as u64;
         let mut weight = L::splat(1.0);
         for depth in 0u32.. {
             // The surfaces hit; a miss adds the background and ends the path.
@@ -203,7 +224,7 @@ impl<'a> Shading<'a> {
                 out.normal = V3::select(hit, s.shading, V3::zero()).to_arrays();
                 for i in 0..LANES {
                     if hit_lanes[i] {
-                        out.prim[i] = scene.input_index[tri[i]];
+                        out.prim[i] = scene.input_index[tri[i] as usize];
                     }
                 }
             }
@@ -215,12 +236,12 @@ impl<'a> Shading<'a> {
                     break;
                 }
                 Mode::Ao(ao) => {
-                    let open = self.unoccluded::<L, T>(ao, &s, (hit_lanes, &tri), seeds, lanes, &mut out);
+                    let open = self.unoccluded::<L, T>(ao, &s, (hit_lanes, &tri), seeds, lanes, out);
                     colour = V3::select(hit, V3::new(open, open, open), colour);
                     break;
                 }
                 Mode::Diffuse => {
-                    let light = self.diffuse_light::<L, T>(&s, (hit_lanes, &tri), seeds, lanes, &mut out);
+                    let light = self.diffuse_light::<L, T>(&s, (hit_lanes, &tri), seeds, lanes, out);
                     colour = V3::select(hit, kd.mul_each(light), colour);
                     break;
                 }
@@ -287,8 +308,7 @@ impl<'a> Shading<'a> {
             out.rays.self_hits.secondary += self.count_self_hits(rays, &tri);
             hits = lanes.closest_in(Stage::Secondary, rays, self.intersect);
         }
-        out.colour = colour.to_arrays();
-        out
+        colour
     }
 }
 
@@ -309,14 +329,14 @@ impl Shading<'_> {
         rays: &Rays,
         hits: &Results,
         hit: [bool; LANES],
-    ) -> (SurfaceOf<L>, [usize; LANES], [usize; LANES]) {
-        let tri: [usize; LANES] = std::array::from_fn(|i| if hit[i] { hits.tri[i] as usize } else { 0 });
+    ) -> (SurfaceOf<L>, [u32; LANES], [usize; LANES]) {
+        let tri = L::keep_u32(L::mask(hit), &hits.tri);
         let (origin, dir) = (V3::<L>::from_arrays(&rays.origin), V3::<L>::from_arrays(&rays.dir));
         // The corners as stored, eight lanes per gather; the edges as `shade::edges` takes them.
         let ([p0, p1, p2], material) = match self.triangles {
-            Triangles::Expanded(t) => corners::<L>(std::array::from_fn(|i| &t[tri[i]])),
+            Triangles::Expanded(t) => corners::<L>(std::array::from_fn(|i| &t[tri[i] as usize])),
             Triangles::Indexed(t) => {
-                let local: [Triangle; LANES] = std::array::from_fn(|i| t.triangle(tri[i] as u32));
+                let local: [Triangle; LANES] = std::array::from_fn(|i| t.triangle(tri[i]));
                 corners::<L>(std::array::from_fn(|i| &local[i]))
             }
         };
@@ -329,7 +349,7 @@ impl Shading<'_> {
         let scene = self.scene;
         let mut normals = [[[0.0f32; 4]; 3]; LANES];
         for i in 0..LANES {
-            if let Some(n) = scene.vertex_normals(tri[i]) {
+            if let Some(n) = scene.vertex_normals(tri[i] as usize) {
                 for (pad, n) in normals[i].iter_mut().zip(n) {
                     *pad = [n[0], n[1], n[2], 0.0];
                 }
@@ -397,7 +417,7 @@ impl Shading<'_> {
         &self,
         ao: Ao,
         s: &SurfaceOf<L>,
-        (hit, tri): ([bool; LANES], &[usize; LANES]),
+        (hit, tri): ([bool; LANES], &[u32; LANES]),
         seeds: &Seeds,
         lanes: &mut T,
         out: &mut Block,
@@ -425,7 +445,7 @@ impl Shading<'_> {
     fn diffuse_light<L: Lanes, T: TraceLanes>(
         &self,
         s: &SurfaceOf<L>,
-        (hit, tri): ([bool; LANES], &[usize; LANES]),
+        (hit, tri): ([bool; LANES], &[u32; LANES]),
         seeds: &Seeds,
         lanes: &mut T,
         out: &mut Block,

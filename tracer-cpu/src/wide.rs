@@ -131,6 +131,19 @@ pub trait Lanes: Real {
         }
         V3::from_arrays(&o)
     }
+    /// `a` in the lanes where `m` holds, else 0.
+    #[inline(always)]
+    fn keep_u32(m: Self::Mask, a: &[u32; LANES]) -> [u32; LANES] {
+        let m = Self::bools(m);
+        std::array::from_fn(|i| if m[i] { a[i] } else { 0 })
+    }
+    /// The pixel coordinates of a 4 x 2 block whose top-left pixel is (`x0`, `y0`), as floats:
+    /// `x0 + i % 4` and `y0 + i / 4` in lane `i` (integers below 2^31, rounded to the nearest
+    /// float as `as f32` rounds them).
+    #[inline(always)]
+    fn block_xy(x0: u32, y0: u32) -> (Self, Self) {
+        (Self::from_fn(|i| (x0 + i as u32 % 4) as f32), Self::from_fn(|i| (y0 + i as u32 / 4) as f32))
+    }
     /// The four components of a 16-byte row per lane (a triangle's corner with its padding word,
     /// a material's row).
     #[inline(always)]
@@ -456,7 +469,7 @@ impl<L: Lanes> V3<L> {
 }
 
 #[cfg(target_arch = "x86_64")]
-pub(crate) use avx::Avx8;
+pub(crate) use avx::{Avx8, bools_of};
 
 /// Lanes in AVX registers. Only code compiled for AVX2 and entered after `packet::available()`
 /// may use them: each operation is an AVX intrinsic.
@@ -472,6 +485,23 @@ mod avx {
     /// All ones in the lanes where the condition holds.
     #[derive(Clone, Copy, Debug)]
     pub struct AvxMask(__m256);
+
+    /// The lanes whose sign bit is set in `m` (what `_mm256_movemask_ps` reads), as 8 bools
+    /// made in a register and stored at once. Written byte by byte, they stalled the next
+    /// 8-byte read of them (a packet's live lanes, [`crate::packet::Rays::count`], a mask of the
+    /// hits): a load that spans several stores is not forwarded from them and waits until they
+    /// reach the cache, at each stage of every block.
+    #[inline(always)]
+    pub(crate) fn bools_of(m: __m256) -> [bool; LANES] {
+        // SAFETY: register arithmetic on a CPU with AVX2 (see the module's documentation); the
+        // eight bytes are each 0 or 1, valid bools.
+        unsafe {
+            let ones = _mm256_srai_epi32(_mm256_castps_si256(m), 31);
+            let words = _mm_packs_epi32(_mm256_castsi256_si128(ones), _mm256_extracti128_si256(ones, 1));
+            let bytes = _mm_and_si128(_mm_packs_epi16(words, words), _mm_set1_epi8(1));
+            std::mem::transmute::<u64, [bool; LANES]>(_mm_cvtsi128_si64(bytes) as u64)
+        }
+    }
 
     // SAFETY (every `unsafe` block below): register arithmetic on a CPU with AVX2, which the
     // callers of these types guarantee (see the type's documentation).
@@ -671,8 +701,7 @@ mod avx {
         }
         #[inline(always)]
         fn bools(m: AvxMask) -> [bool; LANES] {
-            let bits = unsafe { _mm256_movemask_ps(m.0) };
-            std::array::from_fn(|i| bits >> i & 1 != 0)
+            bools_of(m.0)
         }
         /// `offset_origin`'s integer step and float step, 8-wide.
         #[inline(always)]
@@ -714,6 +743,26 @@ mod avx {
         fn gather3(v: [&[f32; 4]; LANES]) -> V3<Self> {
             let [x, y, z, _] = Self::gather4(v);
             V3::new(x, y, z)
+        }
+        /// One load, an and and one store instead of a branch or a select per lane.
+        #[inline(always)]
+        fn keep_u32(m: AvxMask, a: &[u32; LANES]) -> [u32; LANES] {
+            let mut out = [0u32; LANES];
+            unsafe {
+                let kept = _mm256_and_si256(_mm256_loadu_si256(a.as_ptr().cast()), _mm256_castps_si256(m.0));
+                _mm256_storeu_si256(out.as_mut_ptr().cast(), kept);
+            }
+            out
+        }
+        /// Two integer additions and conversions instead of 16 scalar conversions and inserts.
+        #[inline(always)]
+        fn block_xy(x0: u32, y0: u32) -> (Self, Self) {
+            debug_assert!(x0 < 1 << 31 && y0 < 1 << 31);
+            unsafe {
+                let x = _mm256_add_epi32(_mm256_set1_epi32(x0 as i32), _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3));
+                let y = _mm256_add_epi32(_mm256_set1_epi32(y0 as i32), _mm256_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1));
+                (Avx8(_mm256_cvtepi32_ps(x)), Avx8(_mm256_cvtepi32_ps(y)))
+            }
         }
         /// Eight 4-float loads and a transpose instead of 32 single-float inserts.
         #[inline(always)]
@@ -987,8 +1036,36 @@ mod tests {
         }
     }
 
+    /// Every one of the 256 masks of eight lanes out of a comparison and back: the bools, the
+    /// count (also [`crate::packet::Rays::count`] of those bools), the triangles kept.
+    fn masks_round_trip<L: Lanes>() {
+        let tri: [u32; LANES] = std::array::from_fn(|i| 0x8000_0001 + 77 * i as u32);
+        for bits in 0u32..256 {
+            let want: [bool; LANES] = std::array::from_fn(|i| bits >> i & 1 != 0);
+            // A comparison's mask (and a NaN lane that compares false).
+            let x = L::from_fn(|i| {
+                if want[i] {
+                    1.0
+                } else if i % 2 == 0 {
+                    0.0
+                } else {
+                    f32::NAN
+                }
+            });
+            let m = x.gt(L::splat(0.5));
+            assert_eq!(L::bools(m), want, "{bits:08b}");
+            assert_eq!(L::bools(L::mask(want)), want, "{bits:08b}");
+            assert_eq!(L::count(m), bits.count_ones() as usize);
+            let rays = crate::packet::Rays { valid: want, ..Default::default() };
+            assert_eq!(rays.count(), bits.count_ones() as usize);
+            let kept = L::keep_u32(m, &tri);
+            assert_eq!(kept, std::array::from_fn(|i| if want[i] { tri[i] } else { 0 }), "{bits:08b}");
+        }
+    }
+
     #[test]
     fn portable_lanes_match_one_ray_bit_for_bit() {
+        masks_round_trip::<F8>();
         all_formulas::<F8>();
         reflections_like_one_ray::<F8>();
         quantize_like_one_ray::<F8>();
@@ -1000,6 +1077,7 @@ mod tests {
     #[test]
     fn avx_lanes_match_one_ray_bit_for_bit() {
         assert!(crate::packet::available(), "this test needs a CPU with AVX2");
+        masks_round_trip::<Avx8>();
         all_formulas::<Avx8>();
         reflections_like_one_ray::<Avx8>();
         quantize_like_one_ray::<Avx8>();
