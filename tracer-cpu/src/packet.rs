@@ -158,16 +158,10 @@ pub(crate) mod avx2 {
         unsafe { _mm256_set1_ps(v) }
     }
 
-    #[target_feature(enable = "avx2")]
-    pub(crate) fn lanes(f: impl Fn(usize) -> f32) -> __m256 {
-        let a: [f32; LANES] = std::array::from_fn(f);
-        // SAFETY: `a` holds 8 floats.
-        unsafe { _mm256_loadu_ps(a.as_ptr()) }
-    }
-
     /// The packet of `rays` splatted, with `Ray::new`'s reciprocal 8-wide (the same correctly
     /// rounded division), and the lanes still looking: the valid ones.
     #[target_feature(enable = "avx2")]
+    #[inline]
     pub(crate) fn packet_of(rays: &Rays) -> (Packet, __m256) {
         let load = |a: &[f32; LANES]| {
             // SAFETY: `a` holds 8 floats.
@@ -177,7 +171,10 @@ pub(crate) mod avx2 {
         let d = [load(&rays.dir[0]), load(&rays.dir[1]), load(&rays.dir[2])];
         let one = splat(1.0);
         let inv = [_mm256_div_ps(one, d[0]), _mm256_div_ps(one, d[1]), _mm256_div_ps(one, d[2])];
-        let alive = lanes(|i| if rays.valid[i] { f32::from_bits(u32::MAX) } else { 0.0 });
+        // The 8 `bool`s (bytes 0 or 1) widened to ints, then all bits set where 1.
+        // SAFETY: `valid` holds 8 bytes.
+        let valid = _mm256_cvtepu8_epi32(unsafe { _mm_loadl_epi64(rays.valid.as_ptr().cast()) });
+        let alive = _mm256_castsi256_ps(_mm256_cmpgt_epi32(valid, _mm256_setzero_si256()));
         (Packet { o, d, inv }, alive)
     }
 
