@@ -242,7 +242,7 @@ pub(crate) mod avx2 {
     /// [`geometry::edge_function`](crate::geometry::edge_function) on 8 lanes, same operations.
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn edge_function(a: &[__m256; 3], b: &[__m256; 3], d: &[__m256; 3]) -> __m256 {
+    pub(crate) fn edge_function(a: &[__m256; 3], b: &[__m256; 3], d: &[__m256; 3]) -> __m256 {
         let e = [sub(a[0], b[0]), sub(a[1], b[1]), sub(a[2], b[2])];
         let s = [add(a[0], b[0]), add(a[1], b[1]), add(a[2], b[2])];
         let c = [
@@ -276,6 +276,22 @@ pub(crate) mod avx2 {
         t_min: __m256,
         t_max: __m256,
     ) -> [__m256; 5] {
+        let all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+        intersect_in(tri, n, pk, all, t_min, t_max).unwrap_or([_mm256_setzero_ps(); 5])
+    }
+
+    /// [`intersect_with_normal`] for the lanes of `mv`: `None`, before the division, where none
+    /// of them is inside the triangle's edges (the other lanes' results are not used).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(crate) fn intersect_in(
+        tri: &Triangle,
+        n: [f32; 3],
+        pk: &Packet,
+        mv: __m256,
+        t_min: __m256,
+        t_max: __m256,
+    ) -> Option<[__m256; 5]> {
         let (o, d) = (&pk.o, &pk.d);
         // Written out, not in closures: a closure does not inherit AVX2, so its lane operations
         // would not inline.
@@ -295,16 +311,20 @@ pub(crate) mod avx2 {
             _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(w1, zero)),
             _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
         );
+        let inside = _mm256_and_ps(_mm256_or_ps(positive, negative), mv);
+        if _mm256_movemask_ps(inside) == 0 {
+            return None;
+        }
         let sum = add(add(w0, w1), w2);
         let n = [splat(n[0]), splat(n[1]), splat(n[2])];
         let den = add(add(mul(n[0], d[0]), mul(n[1], d[1])), mul(n[2], d[2]));
         let t = _mm256_div_ps(add(add(mul(n[0], a0[0]), mul(n[1], a0[1])), mul(n[2], a0[2])), den);
-        let mut m = _mm256_or_ps(positive, negative);
+        let mut m = inside;
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(sum, zero));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(den, zero));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, t_min));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
-        [m, t, w1, w2, sum]
+        Some([m, t, w1, w2, sum])
     }
 
     /// [`geometry::intersect_moller_trumbore`](crate::geometry::intersect_moller_trumbore) with

@@ -101,7 +101,7 @@ mod avx2 {
     use crate::geometry::Hit;
     use crate::geometry::{Cost, TriangleTest};
     use crate::packet::avx2::{
-        Best, Packet, add, any, count, intersect_with_normal, keep, may_hold, mul, packet_of, splat, sub, test,
+        Best, Packet, add, any, count, intersect_in, keep, may_hold, mul, packet_of, splat, sub, test,
     };
     use crate::packet::{Entry, LANES, Rays, Results};
     use crate::traverse::Stack;
@@ -457,24 +457,24 @@ mod avx2 {
 
     /// The single-ray test of all 8 children of `b` ([`crate::bvh8`]'s AVX2 traversal's) for
     /// the lane `i` (in every lane of it): the children it enters.
-    #[target_feature(enable = "avx2")]
-    #[inline]
+    /// Always inlined (without AVX2 of its own, as [`smallest4`]): left to LLVM, the walk called it.
+    #[inline(always)]
     fn one_lane(b: &[[f32; WIDTH]; 6], pk: &Packet, i: __m256i, f: &Frustum, t_best: __m256) -> u32 {
-        let load = |r: &[f32; WIDTH]| {
-            // SAFETY: `r` holds 8 floats.
-            unsafe { _mm256_loadu_ps(r.as_ptr()) }
-        };
-        let o = [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.o[a], i));
-        let inv = [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.inv[a], i));
-        let d = |p: usize, a: usize| mul(sub(load(&b[p]), o[a]), inv[a]);
-        let (np, fp) = (&f.near_plane, &f.far_plane);
-        let near = _mm256_max_ps(d(np[0], 0), _mm256_setzero_ps());
-        let near = _mm256_max_ps(d(np[1], 1), near);
-        let near = _mm256_max_ps(d(np[2], 2), near);
-        let far = _mm256_min_ps(d(fp[0], 0), t_best);
-        let far = _mm256_min_ps(d(fp[1], 1), far);
-        let far = _mm256_min_ps(d(fp[2], 2), far);
-        _mm256_movemask_ps(may_hold(near, far)) as u32
+        // SAFETY: loads of 8 floats and register arithmetic under the caller's AVX2.
+        unsafe {
+            let o = [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.o[a], i));
+            let inv = [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.inv[a], i));
+            let (np, fp) = (&f.near_plane, &f.far_plane);
+            let d0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[np[0]].as_ptr()), o[0]), inv[0]);
+            let d1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[np[1]].as_ptr()), o[1]), inv[1]);
+            let d2 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[np[2]].as_ptr()), o[2]), inv[2]);
+            let near = _mm256_max_ps(d2, _mm256_max_ps(d1, _mm256_max_ps(d0, _mm256_setzero_ps())));
+            let e0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[fp[0]].as_ptr()), o[0]), inv[0]);
+            let e1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[fp[1]].as_ptr()), o[1]), inv[1]);
+            let e2 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[fp[2]].as_ptr()), o[2]), inv[2]);
+            let far = _mm256_min_ps(e2, _mm256_min_ps(e1, _mm256_min_ps(e0, t_best)));
+            _mm256_movemask_ps(may_hold(near, far)) as u32
+        }
     }
 
     /// What the walk of every group of lanes updates.
@@ -588,8 +588,10 @@ mod avx2 {
                 },
                 None if T::KIND == Intersect::Watertight => {
                     let n = [n[0][l], n[1][l], n[2][l]];
-                    let found = intersect_with_normal(&block.triangle(l), n, pk, _mm256_setzero_ps(), st.best.t);
-                    keep(found, i, mv, &mut st.best)
+                    match intersect_in(&block.triangle(l), n, pk, mv, _mm256_setzero_ps(), st.best.t) {
+                        Some(found) => keep(found, i, mv, &mut st.best),
+                        None => continue,
+                    }
                 }
                 None => test::<T>(&block.triangle(l), i, pk, mv, &mut st.best),
             };
