@@ -242,7 +242,7 @@ pub(crate) mod avx2 {
     /// [`geometry::edge_function`](crate::geometry::edge_function) on 8 lanes, same operations.
     #[target_feature(enable = "avx2")]
     #[inline]
-    pub(crate) fn edge_function(a: &[__m256; 3], b: &[__m256; 3], d: &[__m256; 3]) -> __m256 {
+    fn edge_function(a: &[__m256; 3], b: &[__m256; 3], d: &[__m256; 3]) -> __m256 {
         let e = [sub(a[0], b[0]), sub(a[1], b[1]), sub(a[2], b[2])];
         let s = [add(a[0], b[0]), add(a[1], b[1]), add(a[2], b[2])];
         let c = [

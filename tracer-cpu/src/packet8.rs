@@ -11,8 +11,9 @@
 //! triangles reach it and the lanes do not share an origin, one lane at a time against all its
 //! triangles (the single-ray block test). Where all lanes share an origin (primary rays) the
 //! part of the triangle test that does not depend on the direction is computed once per block,
-//! 8 triangles at a time. A subtree reached by at most [`SPARSE`] live lanes is finished one ray
-//! at a time on the wide BVH's single-ray traversal.
+//! 8 triangles at a time. A triangle test stops before its division where no lane is inside the
+//! triangle's edges (most triangles of a block, for every lane). A subtree reached by at most
+//! [`SPARSE`] live lanes is finished one ray at a time on the wide BVH's single-ray traversal.
 //!
 //! Every lane computes what the scalar path computes (the slab test and the triangle tests of
 //! [`crate::packet`], operation by operation), so the hits are bit for bit the ordered traversal's
@@ -418,7 +419,12 @@ mod avx2 {
                 None => {
                     let a = smallest4([lo(o[0]), lo(o[1]), lo(o[2]), lo(inv[0])]);
                     let b = smallest4([hi(o[0]), hi(o[1]), hi(o[2]), hi(inv[0])]);
-                    ([0, 1, 2].map(|k| lane(a, SMALLEST4[k])), [0, 1, 2].map(|k| neg_lane(b, SMALLEST4[k])), lane(a, SMALLEST4[3]), neg_lane(b, SMALLEST4[3]))
+                    (
+                        [0, 1, 2].map(|k| lane(a, SMALLEST4[k])),
+                        [0, 1, 2].map(|k| neg_lane(b, SMALLEST4[k])),
+                        lane(a, SMALLEST4[3]),
+                        neg_lane(b, SMALLEST4[3]),
+                    )
                 }
             };
             let inv_lo = [a, lane(c, SMALLEST4[0]), lane(c, SMALLEST4[1])];
@@ -512,7 +518,8 @@ mod avx2 {
             m &= m - 1;
             let ray = rays.ray(i);
             let mut cost = Cost::default();
-            let found = bvh.trace_from::<ANY, T>(Simd::Avx2, start, &ray, 0.0, (t[i], tri[i] as u32), single, &mut cost);
+            let found =
+                bvh.trace_from::<ANY, T>(Simd::Avx2, start, &ray, 0.0, (t[i], tri[i] as u32), single, &mut cost);
             nodes[i] += cost.nodes as i32;
             tris[i] += cost.tris as i32;
             if let Some(f) = found {
