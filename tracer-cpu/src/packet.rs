@@ -163,16 +163,10 @@ pub(crate) mod avx2 {
         unsafe { _mm256_set1_ps(v) }
     }
 
-    #[target_feature(enable = "avx2")]
-    pub(crate) fn lanes(f: impl Fn(usize) -> f32) -> __m256 {
-        let a: [f32; LANES] = std::array::from_fn(f);
-        // SAFETY: `a` holds 8 floats.
-        unsafe { _mm256_loadu_ps(a.as_ptr()) }
-    }
-
     /// The packet of `rays` splatted, with `Ray::new`'s reciprocal 8-wide (the same correctly
     /// rounded division), and the lanes still looking: the valid ones.
     #[target_feature(enable = "avx2")]
+    #[inline]
     pub(crate) fn packet_of(rays: &Rays) -> (Packet, __m256) {
         let load = |a: &[f32; LANES]| {
             // SAFETY: `a` holds 8 floats.
@@ -182,7 +176,10 @@ pub(crate) mod avx2 {
         let d = [load(&rays.dir[0]), load(&rays.dir[1]), load(&rays.dir[2])];
         let one = splat(1.0);
         let inv = [_mm256_div_ps(one, d[0]), _mm256_div_ps(one, d[1]), _mm256_div_ps(one, d[2])];
-        let alive = lanes(|i| if rays.valid[i] { f32::from_bits(u32::MAX) } else { 0.0 });
+        // The 8 `bool`s (bytes 0 or 1) widened to ints, then all bits set where 1.
+        // SAFETY: `valid` holds 8 bytes.
+        let valid = _mm256_cvtepu8_epi32(unsafe { _mm_loadl_epi64(rays.valid.as_ptr().cast()) });
+        let alive = _mm256_castsi256_ps(_mm256_cmpgt_epi32(valid, _mm256_setzero_si256()));
         (Packet { o, d, inv }, alive)
     }
 
@@ -284,6 +281,22 @@ pub(crate) mod avx2 {
         t_min: __m256,
         t_max: __m256,
     ) -> [__m256; 5] {
+        let all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+        intersect_in(tri, n, pk, all, t_min, t_max).unwrap_or([_mm256_setzero_ps(); 5])
+    }
+
+    /// [`intersect_with_normal`] for the lanes of `mv`: `None`, before the division, where none
+    /// of them is inside the triangle's edges (the other lanes' results are not used).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(crate) fn intersect_in(
+        tri: &Triangle,
+        n: [f32; 3],
+        pk: &Packet,
+        mv: __m256,
+        t_min: __m256,
+        t_max: __m256,
+    ) -> Option<[__m256; 5]> {
         let (o, d) = (&pk.o, &pk.d);
         // Written out, not in closures: a closure does not inherit AVX2, so its lane operations
         // would not inline.
@@ -303,16 +316,20 @@ pub(crate) mod avx2 {
             _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(w1, zero)),
             _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
         );
+        let inside = _mm256_and_ps(_mm256_or_ps(positive, negative), mv);
+        if _mm256_movemask_ps(inside) == 0 {
+            return None;
+        }
         let sum = add(add(w0, w1), w2);
         let n = [splat(n[0]), splat(n[1]), splat(n[2])];
         let den = add(add(mul(n[0], d[0]), mul(n[1], d[1])), mul(n[2], d[2]));
         let t = _mm256_div_ps(add(add(mul(n[0], a0[0]), mul(n[1], a0[1])), mul(n[2], a0[2])), den);
-        let mut m = _mm256_or_ps(positive, negative);
+        let mut m = inside;
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(sum, zero));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(den, zero));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, t_min));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
-        [m, t, w1, w2, sum]
+        Some([m, t, w1, w2, sum])
     }
 
     /// [`geometry::intersect_moller_trumbore`](crate::geometry::intersect_moller_trumbore) with
