@@ -26,7 +26,7 @@
 //!   --clock wall|cpu    time passes by the wall clock, or by the CPU time of the process's
 //!                       threads (rays per CPU-second; for a machine shared with other work,
 //!                       where waiting for a core would otherwise count) [default: wall]
-//!   --out PATH          also write the Markdown here
+//!   --out PATH          also write the Markdown here (- for none, as the ray report)
 //! ```
 
 #[path = "../benches/rayset/mod.rs"]
@@ -110,7 +110,10 @@ fn parse_args() -> Result<Options, String> {
                     .collect::<Result<_, _>>()?
             }
             "--reps" => o.reps = value()?.parse().map_err(|_| "--reps takes a number")?,
-            "--out" => o.out = Some(PathBuf::from(value()?)),
+            "--out" => {
+                let v = value()?;
+                o.out = (v != "-").then(|| PathBuf::from(v));
+            }
             "--clock" => {
                 o.clock = match value()?.as_str() {
                     "wall" => rayset::Clock::Wall,
