@@ -200,7 +200,15 @@ impl BinnedSah {
     /// `bounds` holds both sets' boxes (`6 K + 1`), `counts` the first set's counts (`3 K + 1`) and
     /// `second_c` room for the second's (`3 K`): a large node's chunks each count into their own
     /// `counts` while their boxes gather in one `bounds` per thread ([`BinnedSah::split_parallel`]).
-    fn bin_into(&self, prims: &[PrimRef], grid: &Grid, k: usize, bounds: &mut [Aabb], counts: &mut [u32], second_c: &mut [u32]) {
+    fn bin_into(
+        &self,
+        prims: &[PrimRef],
+        grid: &Grid,
+        k: usize,
+        bounds: &mut [Aabb],
+        counts: &mut [u32],
+        second_c: &mut [u32],
+    ) {
         let (first_b, second_b) = bounds.split_at_mut(3 * k + 1);
         let first_c = counts;
         let (axes_b, large_b) = first_b.split_at_mut(3 * k);

@@ -451,9 +451,8 @@ fn build_with<S: Splitter>(refs: &mut [PrimRef], root: NodeBounds, mut ctx: Ctx<
     let mut slots = Slots(Box::new_uninit_slice(2 * n - 1));
     // SAFETY: `build_node` writes every element of its part of the leaf order (its leaves'
     // primitives; the children's parts split at `mid`).
-    let mut order = unsafe {
-        written(n, |order| build_top(&ctx, Prims { refs, spare: &mut spare, order }, &mut slots.0, root)).0
-    };
+    let mut order =
+        unsafe { written(n, |order| build_top(&ctx, Prims { refs, spare: &mut spare, order }, &mut slots.0, root)).0 };
     phases.tree = ms(ctx.started);
     phases.parallel_splits = ctx.parallel_ns.load(Ordering::Relaxed) as f64 * 1e-6;
     phases.parallel_split_count = ctx.parallel_count.load(Ordering::Relaxed) as u32;
