@@ -1204,7 +1204,8 @@ mod tests {
     fn parallel_splits_of_large_nodes_build_the_serial_tree() {
         for tris in [soup(40_000), soup_on_floor(40_000)] {
             // 64: nearly every inner node above the sweep's size takes the parallel path, across
-            // many chunks of its binning and partition.
+            // many chunks of its binning and partition, and those above PARALLEL_SUBTREES are
+            // split before any subtree is built (build_top) where the serial build recurses.
             let serial = build_parallel(&tris, usize::MAX, 1);
             let parallel = build_parallel(&tris, 64, 3);
             for t in [&serial, &parallel] {
