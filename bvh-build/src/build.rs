@@ -33,7 +33,7 @@ pub struct Phases {
     /// How many nodes were split so.
     pub parallel_split_count: u32,
     /// Of [`Phases::tree`]: when the last of those splits ended, from the start of the recursion;
-    /// after it only subtrees of at most [`PARALLEL_NODE`] primitives are left.
+    /// the subtrees of at most [`PARALLEL_NODE`] primitives are built after it ([`build_top`]).
     pub parallel_until: f64,
     /// The reinsertion in the top ([`crate::top`]), the leaf order renumbered included.
     pub top: f64,
