@@ -34,6 +34,11 @@ struct Bins {
 }
 
 impl Bins {
+    /// Empty bins, `len` of them.
+    fn new(len: usize) -> Bins {
+        Bins { bounds: vec![Aabb::EMPTY; len], counts: vec![0; len] }
+    }
+
     /// Makes room for `len` bins and empties the first `clear` of them.
     fn reset(&mut self, len: usize, clear: usize) {
         if self.bounds.len() < len {
@@ -196,21 +201,9 @@ impl BinnedSah {
     /// for the previous one's update of that bin to come back from memory; two sets halve those
     /// chains. The sets are summed into the first at the end (min, max and counts are exact in
     /// any order, so the bins do not depend on this).
-    ///
-    /// `bounds` holds both sets' boxes (`6 K + 1`), `counts` the first set's counts (`3 K + 1`) and
-    /// `second_c` room for the second's (`3 K`): a large node's chunks each count into their own
-    /// `counts` while their boxes gather in one `bounds` per thread ([`BinnedSah::split_parallel`]).
-    fn bin_into(
-        &self,
-        prims: &[PrimRef],
-        grid: &Grid,
-        k: usize,
-        bounds: &mut [Aabb],
-        counts: &mut [u32],
-        second_c: &mut [u32],
-    ) {
-        let (first_b, second_b) = bounds.split_at_mut(3 * k + 1);
-        let first_c = counts;
+    fn bin_into(&self, prims: &[PrimRef], grid: &Grid, k: usize, bins: &mut Bins) {
+        let (first_b, second_b) = bins.bounds.split_at_mut(3 * k + 1);
+        let (first_c, second_c) = bins.counts.split_at_mut(3 * k + 1);
         let (axes_b, large_b) = first_b.split_at_mut(3 * k);
         let (axes_c, large_c) = first_c.split_at_mut(3 * k);
         let (large_b, large_c) = (&mut large_b[0], &mut large_c[0]);
@@ -322,8 +315,7 @@ impl BinnedSah {
         let grid = Grid::new(nb, k)?;
         // The second set is cleared by bin_into when used.
         bins.reset(bin_len(k), 3 * k + 1);
-        let (counts, second_c) = bins.counts.split_at_mut(3 * k + 1);
-        self.bin_into(prims, &grid, k, &mut bins.bounds, counts, second_c);
+        self.bin_into(prims, &grid, k, bins);
         let choice = self.choose(bins, k, prims.len(), nb, may_leaf, || small_bounds(prims, grid.big))?;
         let (mut left, mut right) = choice.children();
         let mid = choice.left_count(&bins.counts, k);
@@ -494,44 +486,27 @@ impl Splitter for BinnedSah {
         }
         let k = self.bins_for(prims.len());
         let grid = Grid::new(nb, k)?;
-        // Each chunk counts into its own bins (the partition needs every chunk's counts), but the
-        // boxes, exact in any order, gather in one set per rayon fold and meet in a parallel
-        // reduction: a fresh set of boxes per chunk (49 KiB at 256 bins, zeroed and then merged
-        // by one thread) cost a tenth of the binning, and its serial merge lay on the critical path.
-        let len = 3 * k + 1;
-        let mut chunk_counts = vec![0u32; prims.len().div_ceil(CHUNK) * len];
-        let bounds = prims
+        let chunks: Vec<Bins> = prims
             .par_chunks(CHUNK)
-            .zip(chunk_counts.par_chunks_mut(len))
-            .fold(
-                || (vec![Aabb::EMPTY; bin_len(k)], vec![0u32; 3 * k]),
-                |(mut bounds, mut second_c), (chunk, counts)| {
-                    self.bin_into(chunk, &grid, k, &mut bounds, counts, &mut second_c);
-                    (bounds, second_c)
-                },
-            )
-            .map(|(mut bounds, _)| {
-                bounds.truncate(len);
-                bounds
+            .map(|chunk| {
+                let mut bins = Bins::new(bin_len(k));
+                self.bin_into(chunk, &grid, k, &mut bins);
+                bins
             })
-            .reduce_with(|mut a, b| {
-                for (a, b) in a.iter_mut().zip(&b) {
-                    a.grow(b);
-                }
-                a
-            })
-            .expect("a large node has primitives");
-        let mut counts = vec![0u32; len];
-        for chunk in chunk_counts.chunks_exact(len) {
-            for (c, d) in counts.iter_mut().zip(chunk) {
-                *c += d;
+            .collect();
+        let mut bins = Bins::new(3 * k + 1);
+        for chunk in &chunks {
+            for (b, c) in bins.bounds.iter_mut().zip(&chunk.bounds) {
+                b.grow(c);
+            }
+            for (b, c) in bins.counts.iter_mut().zip(&chunk.counts) {
+                *b += c;
             }
         }
-        let bins = Bins { bounds, counts };
         let rest =
             || prims.par_chunks(CHUNK).map(|c| small_bounds(c, grid.big)).reduce(|| Aabb::EMPTY, |a, b| a.union(&b));
         let choice = self.choose(&bins, k, prims.len(), nb, may_leaf, rest)?;
-        let left_counts: Vec<usize> = chunk_counts.chunks_exact(len).map(|c| choice.left_count(c, k)).collect();
+        let left_counts: Vec<usize> = chunks.iter().map(|c| choice.left_count(&c.counts, k)).collect();
         let (mut left, mut right) = choice.children();
         (left.centroids, right.centroids) = scatter(prims, spare, &left_counts, |p, c| choice.goes_left(&grid, p, c));
         let mid = left_counts.iter().sum();

@@ -33,7 +33,7 @@ pub struct Phases {
     /// How many nodes were split so.
     pub parallel_split_count: u32,
     /// Of [`Phases::tree`]: when the last of those splits ended, from the start of the recursion;
-    /// the subtrees of at most [`PARALLEL_NODE`] primitives are built after it ([`build_top`]).
+    /// after it only subtrees of at most [`PARALLEL_NODE`] primitives are left.
     pub parallel_until: f64,
     /// The reinsertion in the top ([`crate::top`]), the leaf order renumbered included.
     pub top: f64,
@@ -451,8 +451,9 @@ fn build_with<S: Splitter>(refs: &mut [PrimRef], root: NodeBounds, mut ctx: Ctx<
     let mut slots = Slots(Box::new_uninit_slice(2 * n - 1));
     // SAFETY: `build_node` writes every element of its part of the leaf order (its leaves'
     // primitives; the children's parts split at `mid`).
-    let mut order =
-        unsafe { written(n, |order| build_top(&ctx, Prims { refs, spare: &mut spare, order }, &mut slots.0, root)).0 };
+    let mut order = unsafe {
+        written(n, |order| build_node(&ctx, Prims { refs, spare: &mut spare, order }, 0, &mut slots.0, 0, root, 0)).0
+    };
     phases.tree = ms(ctx.started);
     phases.parallel_splits = ctx.parallel_ns.load(Ordering::Relaxed) as f64 * 1e-6;
     phases.parallel_split_count = ctx.parallel_count.load(Ordering::Relaxed) as u32;
@@ -530,153 +531,6 @@ impl<'a> Prims<'a> {
     }
 }
 
-/// Whether [`build_node`] builds the subtree of `n` primitives at `depth` with
-/// [`build_presorted`]: a subtree that the depth limit cannot reach (each level takes at least
-/// one primitive off).
-fn presorts<S: Splitter>(ctx: &Ctx<'_, S>, n: usize, depth: u32) -> bool {
-    ctx.presorted && n >= 2 && n <= ctx.splitter.sweeps_up_to() && depth as usize + n <= ctx.costs.depth_limit as usize
-}
-
-/// The split of a node of [`build_node`] (not presorted), `None` for a leaf.
-fn node_split<S: Splitter>(ctx: &Ctx<'_, S>, p: &mut Prims<'_>, bounds: &NodeBounds, depth: u32) -> Option<Split> {
-    let n = p.refs.len();
-    let may_leaf = n <= ctx.costs.max_leaf_size;
-    if n == 1 {
-        None
-    } else if depth >= ctx.costs.depth_limit {
-        if may_leaf { None } else { Some(median_split(p.refs, bounds)) }
-    } else {
-        let s = if n > ctx.parallel_node {
-            let t = Instant::now();
-            let s = ctx.splitter.split_parallel(p.refs, p.spare, bounds, may_leaf);
-            ctx.parallel_ns.fetch_add(t.elapsed().as_nanos() as u64, Ordering::Relaxed);
-            ctx.parallel_count.fetch_add(1, Ordering::Relaxed);
-            ctx.parallel_until.fetch_max(ctx.started.elapsed().as_nanos() as u64, Ordering::Relaxed);
-            s
-        } else {
-            ctx.splitter.split(p.refs, bounds, may_leaf)
-        };
-        match s {
-            Some(s) => Some(s),
-            None if may_leaf => None,
-            None => Some(median_split(p.refs, bounds)),
-        }
-    }
-}
-
-/// The nodes above [`Ctx::parallel_node`] (and gapped, above [`Ctx::parallel_subtrees`]), split
-/// before any smaller subtree is built: [`split_top`] leaves those subtrees as `Rest`, built by
-/// every thread afterwards ([`build_top`]). Split inside one recursion with the subtrees, a large
-/// node's split waited for every thread that had joined its chunks, and a thread that had gone
-/// off to build a small subtree of some 30,000 primitives meanwhile held it for that long: on 16
-/// threads the large splits, the tree's critical path, ended at 45 of its 49 ms.
-enum Upper<'a> {
-    Rest {
-        p: Prims<'a>,
-        first: usize,
-        slots: &'a mut [MaybeUninit<Slot>],
-        slot: usize,
-        bounds: NodeBounds,
-        depth: u32,
-        /// Node count and height, once built.
-        built: (u32, u32),
-    },
-    Inner {
-        here: &'a mut MaybeUninit<Slot>,
-        bounds: Aabb,
-        right_slot: usize,
-        children: Box<(Upper<'a>, Upper<'a>)>,
-    },
-}
-
-/// [`build_node`] of the whole tree, its large nodes split first ([`Upper`]). The same splits in the
-/// same slots (above [`Ctx::parallel_subtrees`] a node's place does not depend on its subtrees),
-/// hence the same tree.
-fn build_top<S: Splitter>(
-    ctx: &Ctx<'_, S>,
-    p: Prims<'_>,
-    slots: &mut [MaybeUninit<Slot>],
-    bounds: NodeBounds,
-) -> (u32, u32) {
-    use rayon::prelude::*;
-    let mut top = split_top(ctx, p, 0, slots, 0, bounds, 0);
-    let mut rest = Vec::new();
-    rests(&mut top, &mut rest);
-    // Largest first, so that no large subtree starts last.
-    rest.sort_by_key(|t| match t {
-        Upper::Rest { p, .. } => std::cmp::Reverse(p.refs.len()),
-        Upper::Inner { .. } => unreachable!("rests collects only the subtrees left"),
-    });
-    rest.par_iter_mut().with_max_len(1).for_each(|t| {
-        if let Upper::Rest { p, first, slots, slot, bounds, depth, built } = &mut **t {
-            let p = Prims { refs: &mut *p.refs, spare: &mut *p.spare, order: &mut *p.order };
-            *built = build_node(ctx, p, *first, slots, *slot, *bounds, *depth);
-        }
-    });
-    finish(top)
-}
-
-/// Splits the large nodes of the subtree of `p` ([`Upper`]); the arguments are [`build_node`]'s.
-fn split_top<'a, S: Splitter>(
-    ctx: &Ctx<'_, S>,
-    mut p: Prims<'a>,
-    first: usize,
-    slots: &'a mut [MaybeUninit<Slot>],
-    slot: usize,
-    bounds: NodeBounds,
-    depth: u32,
-) -> Upper<'a> {
-    let n = p.refs.len();
-    let large = n > ctx.parallel_node && n > ctx.parallel_subtrees && !presorts(ctx, n, depth);
-    // A large leaf (only under a configured leaf size above PARALLEL_NODE) is left to build_node,
-    // which chooses it again.
-    let split = if large { node_split(ctx, &mut p, &bounds, depth) } else { None };
-    let Some(split) = split else {
-        return Upper::Rest { p, first, slots, slot, bounds, depth, built: (0, 0) };
-    };
-    let mid = split.mid;
-    debug_assert!(mid > 0 && mid < n);
-    if split.in_spare {
-        std::mem::swap(&mut p.refs, &mut p.spare);
-    }
-    let (left_p, right_p) = p.split_at(mid);
-    let (here, below) = slots.split_first_mut().expect("a subtree owns at least one slot");
-    let right_slot = slot + 2 * mid;
-    let (left_slots, right_slots) = below.split_at_mut(2 * mid - 1);
-    let children = rayon::join(
-        || split_top(ctx, left_p, first, left_slots, slot + 1, split.left, depth + 1),
-        || split_top(ctx, right_p, first + mid, right_slots, right_slot, split.right, depth + 1),
-    );
-    Upper::Inner { here, bounds: bounds.aabb, right_slot, children: Box::new(children) }
-}
-
-/// The subtrees [`split_top`] left, in `out`.
-fn rests<'t, 'a>(top: &'t mut Upper<'a>, out: &mut Vec<&'t mut Upper<'a>>) {
-    match top {
-        Upper::Rest { .. } => out.push(top),
-        Upper::Inner { children, .. } => {
-            let (l, r) = &mut **children;
-            rests(l, out);
-            rests(r, out);
-        }
-    }
-}
-
-/// Writes the large nodes' slots, their subtrees built; returns the node count and height.
-fn finish(top: Upper<'_>) -> (u32, u32) {
-    match top {
-        Upper::Rest { built, .. } => built,
-        Upper::Inner { here, bounds, right_slot, children } => {
-            let (l, r) = *children;
-            let ((l, lh), (r, rh)) = (finish(l), finish(r));
-            let (nodes, height) = (1 + l + r, 1 + lh.max(rh));
-            let (min, max) = (bounds.min.into(), bounds.max.into());
-            here.write(Slot { min, max, count: height, index: right_slot as u32, nodes });
-            (nodes, height)
-        }
-    }
-}
-
 /// Builds the subtree of `p.refs` into `slots` (its own part of the gapped array, starting at
 /// absolute slot `slot`); `first` is the index of its first primitive. Returns its node count and
 /// height.
@@ -690,14 +544,40 @@ fn build_node<S: Splitter>(
     depth: u32,
 ) -> (u32, u32) {
     let n = p.refs.len();
-    if presorts(ctx, n, depth) {
+    // A subtree that the depth limit cannot reach (each level takes at least one primitive off).
+    if ctx.presorted
+        && n >= 2
+        && n <= ctx.splitter.sweeps_up_to()
+        && depth as usize + n <= ctx.costs.depth_limit as usize
+    {
         return if n <= 16 {
             build_presorted::<S, 16>(ctx, p.refs, p.order, first, slots, slot, bounds)
         } else {
             build_presorted::<S, { PRESORTED_MAX }>(ctx, p.refs, p.order, first, slots, slot, bounds)
         };
     }
-    let split = node_split(ctx, &mut p, &bounds, depth);
+    let may_leaf = n <= ctx.costs.max_leaf_size;
+    let split = if n == 1 {
+        None
+    } else if depth >= ctx.costs.depth_limit {
+        if may_leaf { None } else { Some(median_split(p.refs, &bounds)) }
+    } else {
+        let s = if n > ctx.parallel_node {
+            let t = Instant::now();
+            let s = ctx.splitter.split_parallel(p.refs, p.spare, &bounds, may_leaf);
+            ctx.parallel_ns.fetch_add(t.elapsed().as_nanos() as u64, Ordering::Relaxed);
+            ctx.parallel_count.fetch_add(1, Ordering::Relaxed);
+            ctx.parallel_until.fetch_max(ctx.started.elapsed().as_nanos() as u64, Ordering::Relaxed);
+            s
+        } else {
+            ctx.splitter.split(p.refs, &bounds, may_leaf)
+        };
+        match s {
+            Some(s) => Some(s),
+            None if may_leaf => None,
+            None => Some(median_split(p.refs, &bounds)),
+        }
+    };
     let (here, below) = slots.split_first_mut().expect("a subtree owns at least one slot");
     let (min, max) = (bounds.aabb.min.into(), bounds.aabb.max.into());
     let Some(split) = split else {
@@ -1204,8 +1084,7 @@ mod tests {
     fn parallel_splits_of_large_nodes_build_the_serial_tree() {
         for tris in [soup(40_000), soup_on_floor(40_000)] {
             // 64: nearly every inner node above the sweep's size takes the parallel path, across
-            // many chunks of its binning and partition, and those above PARALLEL_SUBTREES are
-            // split before any subtree is built (build_top) where the serial build recurses.
+            // many chunks of its binning and partition.
             let serial = build_parallel(&tris, usize::MAX, 1);
             let parallel = build_parallel(&tris, 64, 3);
             for t in [&serial, &parallel] {
