@@ -57,6 +57,16 @@ log() { echo "[$(elapsed) s] $*" | tee -a "$OUT/log.txt" >&2; }
 for b in trace-cpu bvhc render_report; do
   [ -x "$BIN/$b" ] || { echo "missing $BIN/$b (see the top of $0)" >&2; exit 1; }
 done
+# A render_report built in one cargo call with ray_report (`--features embree`) links Embree: use
+# h100-simd.sh's copy of its libraries when carried, and say so before the first row fails.
+if [ -d .bin/embree/usr/lib/x86_64-linux-gnu ]; then
+  export LD_LIBRARY_PATH=$PWD/.bin/embree/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
+fi
+if ldd "$BIN/render_report" | grep -q 'not found'; then
+  echo "render_report cannot find its libraries (built with --features embree? see h100-simd.sh's header):" >&2
+  ldd "$BIN/render_report" | grep 'not found' >&2
+  exit 1
+fi
 
 for n in dragon bunny; do
   "$BIN/bvhc" compile "scenes/$n.toml" -o "$OUT/$n.bvh" >>"$OUT/log.txt" 2>&1 || { log "cannot compile $n"; exit 1; }
