@@ -406,8 +406,9 @@ fn advise_huge_pages<T>(buf: &mut [MaybeUninit<T>]) {
             fn madvise(addr: *mut std::ffi::c_void, len: usize, advice: std::ffi::c_int) -> std::ffi::c_int;
         }
         let (start, bytes) = (buf.as_mut_ptr() as usize, std::mem::size_of_val(buf));
-        // Smaller buffers hold no whole huge page worth the system call.
-        if bytes < 2 * HUGE {
+        // Only the large buffers: the smaller ones (the bunny's, a million triangles' leaf order)
+        // mostly come from the heap that glibc recycles, already backed.
+        if bytes < 8 * HUGE {
             return;
         }
         let (lo, hi) = (start.next_multiple_of(PAGE), (start + bytes) / PAGE * PAGE);
