@@ -387,10 +387,10 @@ unsafe fn written<T, R>(len: usize, fill: impl FnOnce(&mut [MaybeUninit<T>]) -> 
 }
 
 /// Asks Linux to back `buf` with transparent huge pages (2 MiB) where its memory has not been
-/// touched yet. Every build writes well over a hundred MiB of fresh memory (a million triangles:
-/// the references, the spare buffer, the slots, the leaf order and the layouts; glibc maps every
-/// buffer above 32 MiB afresh and unmaps it when freed), and with 4 KiB pages the kernel's fault
-/// handling took about a sixth of a build's CPU time; a huge page is one fault per 512 of them.
+/// touched yet. A build of a million triangles writes about 170 MB of fresh memory (the
+/// references, the spare buffer, the slots and the layouts; glibc maps every buffer above 32 MiB
+/// afresh and unmaps it when freed), and with 4 KiB pages the kernel's fault handling took about
+/// a sixth of its CPU time; a huge page is one fault per 512 of them.
 /// Embree advises its large allocations the same way. Only a hint: where huge pages are off
 /// (`/sys/kernel/mm/transparent_hugepage/enabled` set to `never`) or the call fails, nothing
 /// changes but the speed. The contents are not touched, so the buffer's state does not change.
@@ -489,7 +489,8 @@ fn build_with<S: Splitter>(refs: &mut [PrimRef], root: NodeBounds, mut ctx: Ctx<
     ctx.started = Instant::now();
     let mut slots = Slots(Box::new_uninit_slice(2 * n - 1));
     // The slots too, though about half of them are never written (huge pages clear those with
-    // the rest): 10 % less CPU time for million with them, 15 % with them and the full buffers.
+    // the rest): million's CPU time fell by 10 % with only the other buffers advised, by 17 %
+    // with the slots as well (docs/build-benchmark.md).
     advise_huge_pages(&mut slots.0);
     // SAFETY: `build_node` writes every element of its part of the leaf order (its leaves'
     // primitives; the children's parts split at `mid`).
