@@ -1,5 +1,6 @@
 //! Build time of one scene as wall time and as CPU time of every thread of the process (Linux:
-//! `/proc/self/task/*/schedstat`), medians of `RUNS` builds after one warm-up, and a hash of the
+//! `/proc/self/task/*/schedstat`), medians of `RUNS` builds after one warm-up (and the least CPU
+//! time: on a machine shared with other work, the build least disturbed by it), and a hash of the
 //! tree (child-pair nodes and leaf order) to tell whether a change to the builder changed the tree.
 //! CPU time is what to compare on a machine shared with other work: wall time there depends on
 //! how much of the cores the process gets, CPU time much less.
@@ -65,11 +66,12 @@ fn main() {
     let sah = bvh_format::tree::stats(bvh_format::Tree::child_pair(&tree.nodes), p.traversal_cost, p.intersection_cost)
         .sah_cost;
     println!(
-        "{scene}: {} triangles, {bins} bins, {} threads: wall median {:.1} ms, CPU median {:.1} ms ({runs} builds); SAH {sah:.4}, tree hash {hash:016x}",
+        "{scene}: {} triangles, {bins} bins, {} threads: wall median {:.1} ms, CPU median {:.1} ms (min {:.1}) ({runs} builds); SAH {sah:.4}, tree hash {hash:016x}",
         s.positions.len(),
         rayon::current_num_threads(),
         median(wall),
-        median(cpu),
+        median(cpu.clone()),
+        cpu.iter().copied().fold(f64::INFINITY, f64::min),
     );
     if phases {
         let m = |f: fn(&bvh_build::build::Phases) -> f64| median(parts.iter().map(f).collect());

@@ -50,6 +50,9 @@ fi
 {
   echo "host: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
   echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
+  # The build advises its large buffers to huge pages (bvh-build/src/build.rs): with `always` the
+  # earlier build had them too, with `never` neither has.
+  echo "transparent huge pages: $(cat /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null || echo unknown)"
   echo "date: $(date -u '+%Y-%m-%d %H:%M UTC'); git: $(git rev-parse --short HEAD 2>/dev/null || echo '?')"
 } | tee "$OUT/host.txt"
 exec > >(tee "$OUT/log.txt") 2>&1
