@@ -585,7 +585,7 @@ fn measure(
         .map(|c| {
             let mut record = Recorder { inner: OneByOne::new(wide), calls: Vec::new() };
             for &(x0, y0) in blocks.iter().skip(c).step_by(chunks) {
-                let (rays, seeds, ..) = primary_block::<F8>(&frame, w, h, x0, y0, sample);
+                let (rays, seeds, ..) = primary_block::<F8>(&frame, w, h, x0, y0, sample, sh.seeded());
                 sh.block::<F8, _>(&rays, &seeds, &mut record);
             }
             let mut single = Mixed::new(wide, None, [false; 5]);
@@ -859,19 +859,24 @@ fn render_band_in<L: Lanes, T: TraceLanes>(
     // The blocks' rays are added up in here, and their AOVs kept (see `Shading::shade`).
     let mut out = Block::default();
     let (y0, h) = (band.y0, band.y0 + rows);
+    let seeded = sh.seeded();
     // Each block's primary rays are made before the block ahead of it is traced: their square
     // roots and divisions then run beside that block's work instead of holding up its own first
     // traversal step (a tenth of the shading's samples in bunny Whitted frames where they were not).
-    let mut at = (0, 0);
-    let mut primary = primary_block::<L>(frame, w, h, 0, y0, samples[0]);
+    // They are made into the slot the block after next will not need, and the two slots trade
+    // places by reference: moved from one to the other, they were copied (about 22 instructions
+    // per block).
+    let mut a = primary_block::<L>(frame, w, h, 0, y0, samples[0], seeded);
+    let mut b = a;
+    let (mut this, mut ahead) = (&mut a, &mut b);
+    let mut at = (0, 0, 0);
     loop {
-        let (bx, dy) = at;
         let next = next_block(at, w, rows, columns);
-        let this = primary;
-        if let Some((nx, ny)) = next {
-            primary = primary_block::<L>(frame, w, h, nx, y0 + ny, samples[0]);
+        if let Some((nx, ny, _)) = next {
+            next_primary::<L>(ahead, frame, w, h, nx, y0 + ny, samples[0], seeded);
         }
-        block::<L, T>(sh, frame, samples, lanes, band, w, rows, bx, dy, this, &mut out);
+        block::<L, T>(sh, frame, samples, lanes, band, w, rows, at.0, at.1, this, &mut out);
+        std::mem::swap(&mut this, &mut ahead);
         match next {
             Some(n) => at = n,
             None => break,
@@ -880,18 +885,24 @@ fn render_band_in<L: Lanes, T: TraceLanes>(
     out.rays
 }
 
-/// The block after the one at (`bx`, `dy`) in a band of `rows` rows of `w` pixels: the next to
-/// the right in its tile of `columns` columns, else the first of the tile's next row of blocks,
-/// else the first of the next tile; `None` after the last.
+/// The block after the one at (`bx`, `dy`) of the tile whose first column is `x0`, in a band of
+/// `rows` rows of `w` pixels: the next to the right in its tile of `columns` columns, else the
+/// first of the tile's next row of blocks, else the first of the next tile, each with its tile's
+/// first column (carried along: found again from `bx`, it took a division per block); `None`
+/// after the last.
 #[inline(always)]
-fn next_block((bx, dy): (usize, usize), w: usize, rows: usize, columns: usize) -> Option<(usize, usize)> {
-    let x0 = bx / columns * columns;
+fn next_block(
+    (bx, dy, x0): (usize, usize, usize),
+    w: usize,
+    rows: usize,
+    columns: usize,
+) -> Option<(usize, usize, usize)> {
     if bx + 4 < (x0 + columns).min(w) {
-        Some((bx + 4, dy))
+        Some((bx + 4, dy, x0))
     } else if dy + 2 < rows {
-        Some((x0, dy + 2))
+        Some((x0, dy + 2, x0))
     } else if x0 + columns < w {
-        Some((x0 + columns, 0))
+        Some((x0 + columns, 0, x0 + columns))
     } else {
         None
     }
@@ -909,7 +920,9 @@ fn directions<L: Lanes>(frame: &Frame, x: L, y: L, (sx, sy): (f32, f32)) -> V3<L
 
 /// The primary rays at the sub-pixel point `sample` of the 4 x 2 block whose top-left pixel is
 /// (`x0`, `y0`) in an image `w` pixels wide, whose rows end at `h` (lanes past either edge are not
-/// valid), with the block's seeds and its lanes' pixel coordinates.
+/// valid), with the block's seeds (zero unless `seeded`: only the incoherent modes read them)
+/// and its lanes' pixel coordinates.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn primary_block<L: Lanes>(
     frame: &Frame,
@@ -918,17 +931,40 @@ fn primary_block<L: Lanes>(
     x0: usize,
     y0: usize,
     sample: (f32, f32),
+    seeded: bool,
 ) -> (Rays, Seeds, L, L) {
-    let lane_xy = |i: usize| (x0 + i % 4, y0 + i / 4);
-    let mut primary = Rays { valid: inside(x0, y0, w, h), ..Rays::default() };
-    primary.origin = V3::<L>::splat(frame.eye).to_arrays();
+    let rays = Rays { origin: V3::<L>::splat(frame.eye).to_arrays(), t_max: [f32::INFINITY; LANES], ..Rays::default() };
+    let mut block = (rays, Seeds::default(), L::splat(0.0), L::splat(0.0));
+    next_primary(&mut block, frame, w, h, x0, y0, sample, seeded);
+    block
+}
+
+/// [`primary_block`] of the block at (`x0`, `y0`) into `block`, a block of the same frame made by
+/// it: the origins (the eye) and `t_max` (+inf), which every block shares, are left as they are,
+/// and the rest is written in place (made apart and moved in, the whole block was copied).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn next_primary<L: Lanes>(
+    block: &mut (Rays, Seeds, L, L),
+    frame: &Frame,
+    w: usize,
+    h: usize,
+    x0: usize,
+    y0: usize,
+    sample: (f32, f32),
+    seeded: bool,
+) {
+    // Most blocks lie inside the image: all lanes valid without working them out.
+    block.0.valid = if x0 + 4 <= w && y0 + 2 <= h { [true; LANES] } else { inside(x0, y0, w, h) };
     // At most 2^28 pixels: coordinates below 2^31.
     let (x, y) = L::block_xy(x0 as u32, y0 as u32);
-    primary.t_max = [f32::INFINITY; LANES];
-    primary.dir = directions(frame, x, y, sample).to_arrays();
+    block.0.dir = directions(frame, x, y, sample).to_arrays();
     // Row-major pixel indices in the image (at most 2^28 pixels: no overflow).
-    let seeds = Seeds { pixel: std::array::from_fn(|i| (lane_xy(i).1 * w + lane_xy(i).0) as u32), sample: 0 };
-    (primary, seeds, x, y)
+    if seeded {
+        let lane_xy = |i: usize| (x0 + i % 4, y0 + i / 4);
+        block.1 = Seeds { pixel: std::array::from_fn(|i| (lane_xy(i).1 * w + lane_xy(i).0) as u32), sample: 0 };
+    }
+    (block.2, block.3) = (x, y);
 }
 
 /// The lanes of the 4 x 2 block at (`x0`, `y0`) inside an image `w` pixels wide whose rows end at
@@ -962,19 +998,20 @@ fn block<L: Lanes, T: TraceLanes>(
     rows: usize,
     bx: usize,
     dy: usize,
-    (mut primary, mut seeds, x, y): (Rays, Seeds, L, L),
+    (primary, seeds, x, y): &mut (Rays, Seeds, L, L),
     out: &mut Block,
 ) {
+    let (x, y) = (*x, *y);
     let lane_xy = |i: usize| (bx + i % 4, dy + i / 4);
     if sh.aovs() {
         let rays = out.rays;
         *out = Block { rays, ..Block::default() };
     }
-    let mut colour = sh.shade::<L, T>(&primary, &seeds, lanes, out);
+    let mut colour = sh.shade::<L, T>(primary, seeds, lanes, out);
     for (k, &sample) in samples.iter().enumerate().skip(1) {
         primary.dir = directions(frame, x, y, sample).to_arrays();
         seeds.sample = k as u32;
-        let more = sh.block::<L, T>(&primary, &seeds, lanes);
+        let more = sh.block::<L, T>(primary, seeds, lanes);
         colour = colour + V3::from_arrays(&more.colour);
         for i in 0..LANES {
             out.cost[i] += more.cost[i];
@@ -1107,10 +1144,12 @@ mod tests {
                         want.extend((x0..(x0 + columns).min(w)).step_by(4).map(|bx| (bx, dy)));
                     }
                 }
-                let mut got = vec![(0, 0)];
+                let mut got = vec![(0, 0, 0)];
                 while let Some(n) = next_block(*got.last().unwrap(), w, rows, columns) {
                     got.push(n);
                 }
+                assert!(got.iter().all(|&(bx, _, x0)| x0 == bx / columns * columns), "{w} x {rows}: tile starts");
+                let got: Vec<(usize, usize)> = got.into_iter().map(|(bx, dy, _)| (bx, dy)).collect();
                 assert_eq!(got, want, "{w} x {rows} in tiles {columns} wide");
             }
         }

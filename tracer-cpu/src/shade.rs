@@ -254,14 +254,13 @@ fn quantize<L: Lanes>(x: L) -> [i32; LANES] {
     scaled(x).trunc()
 }
 
-/// Clamped, scaled and offset into [0.5, 255.5], NaN to 0: what `as u8` truncates.
+/// Clamped, scaled and offset into [0.5, 255.5], NaN as 0: what `as u8` truncates to
+/// [`to_u8`]'s bytes (which turns NaN into 0). `max(x, 0)` (`x > 0 ? x : 0`) sends NaN to 0 and
+/// `min(x, 1)` clamps the rest: two instructions per channel where two comparisons and selects,
+/// and a third pair for NaN, took six.
 #[inline(always)]
 fn scaled<L: Lanes>(x: L) -> L {
-    let (zero, one) = (L::splat(0.0), L::splat(1.0));
-    let x = L::select(x.lt(zero), zero, x);
-    let x = L::select(x.gt(one), one, x);
-    let x = x * L::splat(255.0) + L::splat(0.5);
-    L::select(x.eq(x), x, zero)
+    x.max(L::splat(0.0)).min(L::splat(1.0)) * L::splat(255.0) + L::splat(0.5)
 }
 
 #[cfg(test)]

@@ -175,6 +175,11 @@ impl<'a> Shading<'a> {
         out
     }
 
+    /// Whether the mode reads [`Seeds`] (the incoherent modes' rays).
+    pub(crate) fn seeded(&self) -> bool {
+        matches!(self.mode, Mode::Ao(_) | Mode::Diffuse)
+    }
+
     /// Whether the frame fills [`Block`]'s AOV fields (`t`, `normal`, `prim`, `cost`).
     pub(crate) fn aovs(&self) -> bool {
         self.aovs

@@ -35,6 +35,9 @@ pub trait Real:
     /// `if self > o { self } else { o }`: `f32::max`, except that a tie of +0 and -0 gives `o`
     /// and a NaN `o` is kept.
     fn max(self, o: Self) -> Self;
+    /// `if self < o { self } else { o }` (what the x86 `min` instructions compute): a NaN `o`
+    /// is kept.
+    fn min(self, o: Self) -> Self;
     /// `render_spec::phong_pow` in the lanes of `m`, 1 elsewhere (none computed when no lane is live).
     fn powf_in(self, e: Self, m: Self::Mask) -> Self;
     fn lt(self, o: Self) -> Self::Mask;
@@ -67,6 +70,10 @@ impl Real for f32 {
     #[inline(always)]
     fn max(self, o: Self) -> Self {
         if self > o { self } else { o }
+    }
+    #[inline(always)]
+    fn min(self, o: Self) -> Self {
+        if self < o { self } else { o }
     }
     #[inline(always)]
     fn powf_in(self, e: Self, m: bool) -> Self {
@@ -294,6 +301,10 @@ impl Real for F8 {
     #[inline(always)]
     fn max(self, o: Self) -> Self {
         self.zip(o, <f32 as Real>::max)
+    }
+    #[inline(always)]
+    fn min(self, o: Self) -> Self {
+        self.zip(o, <f32 as Real>::min)
     }
     #[inline(always)]
     fn powf_in(self, e: Self, m: M8) -> Self {
@@ -581,6 +592,11 @@ mod avx {
         #[inline(always)]
         fn max(self, o: Self) -> Self {
             Avx8(unsafe { _mm256_max_ps(self.0, o.0) })
+        }
+        /// `minps(a, b)` is `a < b ? a : b`, exactly [`Real::min`].
+        #[inline(always)]
+        fn min(self, o: Self) -> Self {
+            Avx8(unsafe { _mm256_min_ps(self.0, o.0) })
         }
         /// `render_spec::phong_pow` eight lanes at a time: the same operations in the same order,
         /// its branches as selects (each IEEE operation rounds alike in a lane and in a scalar).
