@@ -11,8 +11,9 @@
 //! triangles reach it and the lanes do not share an origin, one lane at a time against all its
 //! triangles (the single-ray block test). Where all lanes share an origin (primary rays) the
 //! part of the triangle test that does not depend on the direction is computed once per block,
-//! 8 triangles at a time. A subtree reached by at most [`SPARSE`] live lanes is finished one ray
-//! at a time on the wide BVH's single-ray traversal.
+//! 8 triangles at a time. A triangle test stops before its division where no lane is inside the
+//! triangle's edges (most triangles of a block, for every lane). A subtree reached by at most
+//! [`SPARSE`] live lanes is finished one ray at a time on the wide BVH's single-ray traversal.
 //!
 //! Every lane computes what the scalar path computes (the slab test and the triangle tests of
 //! [`crate::packet`], operation by operation), so the hits are bit for bit the ordered traversal's
@@ -21,7 +22,7 @@
 //! a lane that passes a box passes every box around it (the rounded distances are monotonic in
 //! the planes), so it passes every test the ordered traversal puts on its way.
 
-use crate::bvh8::Bvh8;
+use crate::bvh8::{Bvh8, Simd};
 use crate::geometry::{MollerTrumbore, TriangleTest, Watertight};
 use crate::lanes::TraceLanes;
 use crate::packet::{Entry, Rays, Results};
@@ -32,9 +33,10 @@ use render_spec::Intersect;
 /// faster than 0, 4 and 6 on the bunny, the dragon and the million-triangle scene).
 pub const SPARSE: u32 = 2;
 
-/// Whether this CPU runs wide packets (AVX2, as [`crate::packet`]).
+/// Whether this CPU runs wide packets (AVX2, as [`crate::packet`], and the single-ray AVX2
+/// traversal's POPCNT, which finish the sparse lanes).
 pub fn available() -> bool {
-    crate::packet::available()
+    crate::packet::available() && Simd::Avx2.supported()
 }
 
 /// Closest hits (`ANY == false`, `t_min` 0) or occlusion (`ANY == true`) of the valid lanes of
@@ -101,52 +103,9 @@ mod avx2 {
     use crate::geometry::Hit;
     use crate::geometry::{Cost, TriangleTest};
     use crate::packet::avx2::{
-        Best, Packet, add, any, count, keep, may_hold, mul, packet_of, splat, sub, test,
+        Best, Packet, add, any, count, intersect_in, keep, may_hold, mul, packet_of, splat, sub, test,
     };
     use crate::packet::{Entry, LANES, Rays, Results};
-    use bvh_format::Triangle;
-    use crate::packet::avx2::edge_function;
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    fn intersect_with_normal(
-        tri: &Triangle,
-        n: [f32; 3],
-        pk: &Packet,
-        t_min: __m256,
-        t_max: __m256,
-    ) -> [__m256; 5] {
-        let (o, d) = (&pk.o, &pk.d);
-        // Written out, not in closures: a closure does not inherit AVX2, so its lane operations
-        // would not inline.
-        let (p0, p1, p2) = (tri.p0, tri.p1, tri.p2);
-        let a0 = [sub(splat(p0[0]), o[0]), sub(splat(p0[1]), o[1]), sub(splat(p0[2]), o[2])];
-        let a1 = [sub(splat(p1[0]), o[0]), sub(splat(p1[1]), o[1]), sub(splat(p1[2]), o[2])];
-        let a2 = [sub(splat(p2[0]), o[0]), sub(splat(p2[1]), o[1]), sub(splat(p2[2]), o[2])];
-        let w2 = edge_function(&a0, &a1, d);
-        let w0 = edge_function(&a1, &a2, d);
-        let w1 = edge_function(&a2, &a0, d);
-        let zero = _mm256_setzero_ps();
-        let positive = _mm256_and_ps(
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_GE_OQ>(w1, zero)),
-            _mm256_cmp_ps::<_CMP_GE_OQ>(w2, zero),
-        );
-        let negative = _mm256_and_ps(
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(w1, zero)),
-            _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
-        );
-        let sum = add(add(w0, w1), w2);
-        let n = [splat(n[0]), splat(n[1]), splat(n[2])];
-        let den = add(add(mul(n[0], d[0]), mul(n[1], d[1])), mul(n[2], d[2]));
-        let t = _mm256_div_ps(add(add(mul(n[0], a0[0]), mul(n[1], a0[1])), mul(n[2], a0[2])), den);
-        let mut m = _mm256_or_ps(positive, negative);
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(sum, zero));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(den, zero));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, t_min));
-        m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
-        [m, t, w1, w2, sum]
-    }
-
-
     use crate::traverse::Stack;
     use render_spec::Intersect;
     use std::arch::x86_64::*;
@@ -250,10 +209,17 @@ mod avx2 {
 
     /// The edge-consistent test of triangle `l` of the block `s` was made from, for lanes that
     /// all start at its origin: only the dot products with the lanes' directions and the
-    /// division run per lane. Returns what `packet`'s test returns.
+    /// division run per lane. Returns what `packet`'s test returns, or `None` where no lane of
+    /// `mv` is inside the triangle's edges (nothing further can hit).
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn intersect_shared_origin(s: &SharedOrigin, l: usize, d: &[__m256; 3], t_max: __m256) -> [__m256; 5] {
+    fn intersect_shared_origin(
+        s: &SharedOrigin,
+        l: usize,
+        d: &[__m256; 3],
+        mv: __m256,
+        t_max: __m256,
+    ) -> Option<[__m256; 5]> {
         let c = |k: usize| [s.cross[k][0][l], s.cross[k][1][l], s.cross[k][2][l]];
         let w0 = dot(d, c(0));
         let w1 = dot(d, c(1));
@@ -267,16 +233,21 @@ mod avx2 {
             _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(w1, zero)),
             _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
         );
+        // Most triangles of a block are missed by every lane: those end before the division.
+        let inside = _mm256_and_ps(_mm256_or_ps(positive, negative), mv);
+        if _mm256_movemask_ps(inside) == 0 {
+            return None;
+        }
         let sum = add(add(w0, w1), w2);
         let n = [s.n[0][l], s.n[1][l], s.n[2][l]];
         let den = add(add(mul(splat(n[0]), d[0]), mul(splat(n[1]), d[1])), mul(splat(n[2]), d[2]));
         let t = _mm256_div_ps(splat(s.dist[l]), den);
-        let mut m = _mm256_or_ps(positive, negative);
+        let mut m = inside;
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(sum, zero));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(den, zero));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, zero));
         m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
-        [m, t, w1, w2, sum]
+        Some([m, t, w1, w2, sum])
     }
 
     /// [`slab_signed`] for lanes that all start at `o`: `plane - origin` once, in scalar.
@@ -429,7 +400,7 @@ mod avx2 {
         /// The frustum of the lanes in `group` (bits) of `pk`, from its shared origin if any.
         #[target_feature(enable = "avx2")]
         #[inline]
-        fn new(pk: &Packet, shared: Option<[f32; 3]>, group: u32) -> Self {
+        fn new(pk: &Packet, shared: Option<[f32; 3]>, group: u32, negative: &[u32; 3]) -> Self {
             let m = mask_of(group);
             let (inf, neg) = (splat(f32::INFINITY), splat(-0.0));
             // The smallest of each vector's lanes in the group; the largest as the smallest
@@ -437,18 +408,29 @@ mod avx2 {
             let lo = |v: __m256| _mm256_blendv_ps(inf, v, m);
             let hi = |v: __m256| _mm256_blendv_ps(inf, _mm256_xor_ps(v, neg), m);
             let (o, inv) = (&pk.o, &pk.inv);
-            let a = smallest4([lo(o[0]), lo(o[1]), lo(o[2]), lo(inv[0])]);
-            let b = smallest4([hi(o[0]), hi(o[1]), hi(o[2]), hi(inv[0])]);
-            let c = smallest4([lo(inv[1]), lo(inv[2]), hi(inv[1]), hi(inv[2])]);
             let lane = |v: __m256, i: i32| _mm256_permutevar8x32_ps(v, _mm256_set1_epi32(i));
             let neg_lane = |v: __m256, i: i32| _mm256_xor_ps(lane(v, i), neg);
-            let (olo, ohi) = match shared {
-                Some(o) => (o.map(splat), o.map(splat)),
-                None => ([0, 1, 2].map(|k| lane(a, SMALLEST4[k])), [0, 1, 2].map(|k| neg_lane(b, SMALLEST4[k]))),
+            // With a shared origin only the 6 bounds of the reciprocals are needed.
+            let c = smallest4([lo(inv[1]), lo(inv[2]), hi(inv[1]), hi(inv[2])]);
+            let (olo, ohi, a, b) = match shared {
+                Some(o) => {
+                    let a = smallest4([lo(inv[0]), hi(inv[0]), lo(inv[0]), lo(inv[0])]);
+                    (o.map(splat), o.map(splat), lane(a, SMALLEST4[0]), neg_lane(a, SMALLEST4[1]))
+                }
+                None => {
+                    let a = smallest4([lo(o[0]), lo(o[1]), lo(o[2]), lo(inv[0])]);
+                    let b = smallest4([hi(o[0]), hi(o[1]), hi(o[2]), hi(inv[0])]);
+                    (
+                        [0, 1, 2].map(|k| lane(a, SMALLEST4[k])),
+                        [0, 1, 2].map(|k| neg_lane(b, SMALLEST4[k])),
+                        lane(a, SMALLEST4[3]),
+                        neg_lane(b, SMALLEST4[3]),
+                    )
+                }
             };
-            let inv_lo = [lane(a, SMALLEST4[3]), lane(c, SMALLEST4[0]), lane(c, SMALLEST4[1])];
-            let inv_hi = [neg_lane(b, SMALLEST4[3]), neg_lane(c, SMALLEST4[2]), neg_lane(c, SMALLEST4[3])];
-            let up: [bool; 3] = std::array::from_fn(|a| _mm256_movemask_ps(_mm256_and_ps(inv[a], m)) == 0);
+            let inv_lo = [a, lane(c, SMALLEST4[0]), lane(c, SMALLEST4[1])];
+            let inv_hi = [b, neg_lane(c, SMALLEST4[2]), neg_lane(c, SMALLEST4[3])];
+            let up: [bool; 3] = std::array::from_fn(|a| negative[a] & group == 0);
             Frustum {
                 near_plane: std::array::from_fn(|a| if up[a] { a } else { 3 + a }),
                 far_plane: std::array::from_fn(|a| if up[a] { 3 + a } else { a }),
@@ -482,24 +464,24 @@ mod avx2 {
 
     /// The single-ray test of all 8 children of `b` ([`crate::bvh8`]'s AVX2 traversal's) for
     /// the lane `i` (in every lane of it): the children it enters.
-    #[target_feature(enable = "avx2")]
-    #[inline]
+    /// Always inlined (without AVX2 of its own, as [`smallest4`]): left to LLVM, the walk called it.
+    #[inline(always)]
     fn one_lane(b: &[[f32; WIDTH]; 6], pk: &Packet, i: __m256i, f: &Frustum, t_best: __m256) -> u32 {
-        let load = |r: &[f32; WIDTH]| {
-            // SAFETY: `r` holds 8 floats.
-            unsafe { _mm256_loadu_ps(r.as_ptr()) }
-        };
-        let o = [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.o[a], i));
-        let inv = [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.inv[a], i));
-        let d = |p: usize, a: usize| mul(sub(load(&b[p]), o[a]), inv[a]);
-        let (np, fp) = (&f.near_plane, &f.far_plane);
-        let near = _mm256_max_ps(d(np[0], 0), _mm256_setzero_ps());
-        let near = _mm256_max_ps(d(np[1], 1), near);
-        let near = _mm256_max_ps(d(np[2], 2), near);
-        let far = _mm256_min_ps(d(fp[0], 0), t_best);
-        let far = _mm256_min_ps(d(fp[1], 1), far);
-        let far = _mm256_min_ps(d(fp[2], 2), far);
-        _mm256_movemask_ps(may_hold(near, far)) as u32
+        // SAFETY: loads of 8 floats and register arithmetic under the caller's AVX2.
+        unsafe {
+            let o = [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.o[a], i));
+            let inv = [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.inv[a], i));
+            let (np, fp) = (&f.near_plane, &f.far_plane);
+            let d0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[np[0]].as_ptr()), o[0]), inv[0]);
+            let d1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[np[1]].as_ptr()), o[1]), inv[1]);
+            let d2 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[np[2]].as_ptr()), o[2]), inv[2]);
+            let near = _mm256_max_ps(d2, _mm256_max_ps(d1, _mm256_max_ps(d0, _mm256_setzero_ps())));
+            let e0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[fp[0]].as_ptr()), o[0]), inv[0]);
+            let e1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[fp[1]].as_ptr()), o[1]), inv[1]);
+            let e2 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[fp[2]].as_ptr()), o[2]), inv[2]);
+            let far = _mm256_min_ps(e2, _mm256_min_ps(e1, _mm256_min_ps(e0, t_best)));
+            _mm256_movemask_ps(may_hold(near, far)) as u32
+        }
     }
 
     /// What the walk of every group of lanes updates.
@@ -509,7 +491,6 @@ mod avx2 {
         alive: __m256,
         n_nodes: __m256i,
         n_tris: __m256i,
-        alone: [Cost; LANES],
     }
 
     /// Lanes whose walk is finished one ray at a time, from `start` (the root or a subtree few
@@ -531,13 +512,17 @@ mod avx2 {
         let (mut t, mut tri) = (store(best.t), store_i(best.tri));
         let (mut w1, mut w2, mut sum, mut hit) = (store(best.w1), store(best.w2), store(best.sum), store(st.hit_any));
         let mut alive = store(st.alive);
+        let (mut nodes, mut tris) = (store_i(st.n_nodes), store_i(st.n_tris));
         let mut m = lanes;
         while m != 0 {
             let i = m.trailing_zeros() as usize;
             m &= m - 1;
             let ray = rays.ray(i);
+            let mut cost = Cost::default();
             let found =
-                bvh.trace_from::<ANY, T>(Simd::Avx2, start, &ray, 0.0, (t[i], tri[i] as u32), single, &mut st.alone[i]);
+                bvh.trace_from::<ANY, T>(Simd::Avx2, start, &ray, 0.0, (t[i], tri[i] as u32), single, &mut cost);
+            nodes[i] += cost.nodes as i32;
+            tris[i] += cost.tris as i32;
             if let Some(f) = found {
                 (t[i], tri[i], w1[i], w2[i], sum[i]) = (f.t, f.tri as i32, f.w1, f.w2, f.sum);
                 hit[i] = f32::from_bits(u32::MAX);
@@ -556,6 +541,9 @@ mod avx2 {
         };
         st.hit_any = load(&hit);
         st.alive = load(&alive);
+        // SAFETY: `nodes` and `tris` hold 8 ints.
+        (st.n_nodes, st.n_tris) =
+            unsafe { (_mm256_loadu_si256(nodes.as_ptr().cast()), _mm256_loadu_si256(tris.as_ptr().cast())) };
     }
 
     /// Tests the triangles of `block` against the lanes in `lanes`, keeping their hits (and for
@@ -586,18 +574,32 @@ mod avx2 {
             (Intersect::Watertight, None) => (None, normals(block).map(store)),
             _ => (None, [[0.0; WIDTH]; 3]),
         };
-        for l in 0..WIDTH {
+        if !ANY {
+            // Every lane of `lanes` tests every triangle of the block.
+            st.n_tris = _mm256_add_epi32(
+                st.n_tris,
+                _mm256_and_si256(_mm256_castps_si256(mv), _mm256_set1_epi32(full.count_ones() as i32)),
+            );
+        }
+        let mut left = full;
+        while left != 0 {
+            let l = left.trailing_zeros() as usize;
+            left &= left - 1;
             let i = block.index[l];
-            if i == u32::MAX {
-                continue;
+            if ANY {
+                st.n_tris = count(st.n_tris, mv);
             }
-            st.n_tris = count(st.n_tris, mv);
             let win = match &pre {
-                Some(s) => keep(intersect_shared_origin(s, l, &pk.d, st.best.t), i, mv, &mut st.best),
+                Some(s) => match intersect_shared_origin(s, l, &pk.d, mv, st.best.t) {
+                    Some(found) => keep(found, i, mv, &mut st.best),
+                    None => continue,
+                },
                 None if T::KIND == Intersect::Watertight => {
                     let n = [n[0][l], n[1][l], n[2][l]];
-                    let found = intersect_with_normal(&block.triangle(l), n, pk, _mm256_setzero_ps(), st.best.t);
-                    keep(found, i, mv, &mut st.best)
+                    match intersect_in(&block.triangle(l), n, pk, mv, _mm256_setzero_ps(), st.best.t) {
+                        Some(found) => keep(found, i, mv, &mut st.best),
+                        None => continue,
+                    }
                 }
                 None => test::<T>(&block.triangle(l), i, pk, mv, &mut st.best),
             };
@@ -698,11 +700,12 @@ mod avx2 {
         pk: &Packet,
         shared: Option<[f32; 3]>,
         group: u32,
+        negative: &[u32; 3],
         st: &mut State,
         items: &mut Items<'_>,
         single: &mut Stack,
     ) {
-        let f = Frustum::new(pk, shared, group);
+        let f = Frustum::new(pk, shared, group, negative);
         let (np, fp) = (&f.near_plane, &f.far_plane);
         let group_v = mask_of(group);
         let mut t_far = largest(st.best.t, _mm256_and_ps(group_v, st.alive));
@@ -833,7 +836,6 @@ mod avx2 {
             alive,
             n_nodes: _mm256_setzero_si256(),
             n_tris: _mm256_setzero_si256(),
-            alone: [Cost::default(); LANES],
         };
         let valid = _mm256_movemask_ps(alive) as u32;
         // The origin, where every valid lane starts at the same point (primary rays).
@@ -861,22 +863,22 @@ mod avx2 {
             let i = left.trailing_zeros();
             let same = (0..3).fold(left, |m, a| m & !(negative[a] ^ (0u32.wrapping_sub(negative[a] >> i & 1))));
             left &= !same;
-            walk::<ANY, T>(bvh, rays, &pk, shared, same, &mut st, &mut items, single);
+            walk::<ANY, T>(bvh, rays, &pk, shared, same, &negative, &mut st, &mut items, single);
         }
         if infinite != 0 {
             finish_alone::<ANY, T>(bvh, rays, bvh.root, infinite, &mut st, single);
         }
 
-        let (hit, tri) = (store(st.hit_any), store_i(st.best.tri));
+        let tri = store_i(st.best.tri);
         let (nn, nt) = (store_i(st.n_nodes), store_i(st.n_tris));
         let inv = _mm256_div_ps(splat(1.0), st.best.sum);
         let (u, v) = (_mm256_mul_ps(st.best.w1, inv), _mm256_mul_ps(st.best.w2, inv));
-        let mut out = Results { t: store(st.best.t), u: store(u), v: store(v), ..Results::default() };
+        let hit = crate::wide::bools_of(st.hit_any);
+        let mut out = Results { hit, t: store(st.best.t), u: store(u), v: store(v), ..Results::default() };
         // A loop, not `array::from_fn`: its closure would not be compiled for AVX2 nor inlined.
         for i in 0..LANES {
-            out.hit[i] = hit[i].to_bits() != 0;
             out.tri[i] = tri[i] as u32;
-            out.cost[i] = Cost { nodes: nn[i] as u32 + st.alone[i].nodes, tris: nt[i] as u32 + st.alone[i].tris };
+            out.cost[i] = Cost { nodes: nn[i] as u32, tris: nt[i] as u32 };
         }
         out
     }
