@@ -39,6 +39,13 @@ pub fn available() -> bool {
     crate::packet::available() && Simd::Avx2.supported()
 }
 
+/// [`available`], detected once: the check guards every packet, and the feature tests it makes
+/// were 2% of the bunny's packet instructions.
+fn available_cached() -> bool {
+    static AVAILABLE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *AVAILABLE.get_or_init(available)
+}
+
 /// Closest hits (`ANY == false`, `t_min` 0) or occlusion (`ANY == true`) of the valid lanes of
 /// `rays` with the triangle test `T`: the packet's stack and one for the lanes finished alone.
 /// Only call when [`available`] is true.
@@ -50,7 +57,7 @@ pub fn trace<const ANY: bool, T: TriangleTest>(
 ) -> Results {
     #[cfg(target_arch = "x86_64")]
     {
-        assert!(available(), "wide packets need AVX2; callers check `available()` first");
+        assert!(available_cached(), "wide packets need AVX2; callers check `available()` first");
         // SAFETY: AVX2 is present (checked above).
         unsafe { avx2::trace::<ANY, T>(bvh, rays, stack, single) }
     }
@@ -769,26 +776,32 @@ mod avx2 {
                                 (cur, cur_mask) = (node.child[first], masks[first]);
                                 continue 'walk;
                             }
-                            // Nearest first: the others go on the stack farthest first.
-                            let mut order = [(0f32, 0usize); WIDTH];
-                            order[0] = (near[first], first);
+                            // Nearest first: the others go on the stack farthest first. Sorted
+                            // as one integer each: the entry distance's bits (not negative, and
+                            // -0 taken as +0, so they order as the distances do), then the lower
+                            // slot first among equal distances; 8 bytes, not a 16-byte pair the
+                            // compiler zeroed field by field per node.
+                            let key = |slot: usize| (u64::from(near[slot].to_bits() & 0x7fff_ffff) << 3) | (7 - slot as u64);
+                            let mut order = [0u64; WIDTH];
+                            order[0] = key(first);
                             let mut n = 1;
                             while rest != 0 {
                                 let slot = rest.trailing_zeros() as usize;
                                 rest &= rest - 1;
-                                let e = (near[slot], slot);
+                                let e = key(slot);
                                 let mut k = n;
-                                while k > 0 && order[k - 1].0 < e.0 {
+                                while k > 0 && order[k - 1] < e {
                                     order[k] = order[k - 1];
                                     k -= 1;
                                 }
                                 order[k] = e;
                                 n += 1;
                             }
-                            for &(d, slot) in &order[..n - 1] {
-                                items.push(Item { node: node.child[slot], mask: masks[slot], near: d });
+                            for &e in &order[..n - 1] {
+                                let slot = 7 - (e & 7) as usize;
+                                items.push(Item { node: node.child[slot], mask: masks[slot], near: near[slot] });
                             }
-                            let slot = order[n - 1].1;
+                            let slot = 7 - (order[n - 1] & 7) as usize;
                             (cur, cur_mask) = (node.child[slot], masks[slot]);
                             continue 'walk;
                         }
