@@ -47,7 +47,7 @@ use tracer_cpu::{Method, Tracer, packet, packet8};
 /// the AVX-512 path forced (`-` on a CPU without it); "ours bvh8 packet" is `--method
 /// bvh8-packet`, 8-ray packets on the wide BVH; "ours bvh4" the 4-wide BVH one ray at a time
 /// (`--method bvh4`). "Embree 8 robust" is `rtcIntersect8` on the robust scene.
-const ENGINES: [&str; 13] = [
+const ENGINES: [&str; 12] = [
     "ours ordered",
     "ours packet",
     "ours bvh8",
@@ -60,7 +60,6 @@ const ENGINES: [&str; 13] = [
     "ours ordered MT",
     "ours bvh8 MT",
     "ours bvh4",
-    "ours bvh8 packet before",
 ];
 const PACKET: usize = 1;
 const BVH8: usize = 2;
@@ -251,7 +250,6 @@ fn main() {
             tracer.walk(Method::Ordered).ok().map(|w| Engine::Scalar(w, Intersect::MollerTrumbore)),
             tracer.walk(Method::Bvh8).ok().map(|w| Engine::Scalar(w, Intersect::MollerTrumbore)),
             tracer.walk(Method::Bvh4).ok().map(|w| Engine::Scalar(w, Intersect::Watertight)),
-            (tracer.bvh8().is_some() && packet8::available()).then_some(Engine::WidePacketBefore(&tracer)),
         ];
         for (i, e) in engines.iter_mut().enumerate() {
             if !opts.engines.contains(&i) {

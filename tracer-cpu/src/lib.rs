@@ -23,8 +23,6 @@ pub mod geometry;
 pub mod lanes;
 pub mod packet;
 pub mod packet8;
-#[doc(hidden)]
-pub mod packet8_before;
 pub mod reference;
 pub mod render;
 pub mod shade;

@@ -164,8 +164,6 @@ pub enum Engine<'a> {
     Bvh8(&'a Tracer<'a>, Simd),
     /// Ours, 8-wide AVX2 packets of 4 x 2 pixel blocks over the wide BVH (`packet8`).
     WidePacket(&'a Tracer<'a>),
-    /// TEMPORARY: `packet8_before`, the wide packets before the pkt11 branch.
-    WidePacketBefore(&'a Tracer<'a>),
     /// Embree, `rtcIntersect1` / `rtcOccluded1`.
     #[cfg(feature = "embree")]
     Embree1(&'a tracer_cpu::embree::Scene),
@@ -218,21 +216,6 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
                         packet8::trace::<true, Watertight>(bvh, p, pstack, stack)
                     } else {
                         packet8::trace::<false, Watertight>(bvh, p, pstack, stack)
-                    };
-                    std::array::from_fn(|i| match res.get(i) {
-                        Some(_) if any => 0.0,
-                        Some(h) => h.t,
-                        None => f32::INFINITY,
-                    })
-                });
-            }
-            Engine::WidePacketBefore(tracer) => {
-                let bvh = tracer.bvh8().expect("the scene has the child-pair layout");
-                blocks(rays, out, w, |p| {
-                    let res = if any {
-                        tracer_cpu::packet8_before::trace::<true, Watertight>(bvh, p, pstack, stack)
-                    } else {
-                        tracer_cpu::packet8_before::trace::<false, Watertight>(bvh, p, pstack, stack)
                     };
                     std::array::from_fn(|i| match res.get(i) {
                         Some(_) if any => 0.0,
