@@ -58,7 +58,7 @@ pub fn trace<const ANY: bool, T: TriangleTest>(
     #[cfg(target_arch = "x86_64")]
     {
         assert!(available_cached(), "wide packets need AVX2; callers check `available()` first");
-        // SAFETY: AVX2 is present (checked above).
+        // SAFETY: AVX2 and POPCNT are present (checked above).
         unsafe { avx2::trace::<ANY, T>(bvh, rays, stack, single) }
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -100,6 +100,8 @@ impl TraceLanes for Lanes<'_> {
     }
 }
 
+// Compiled for AVX2 and POPCNT (which `available` requires): AVX2 alone does not imply POPCNT,
+// and every `count_ones` of the walk and the leaves was then a 15-instruction bit trick.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::SPARSE;
@@ -787,7 +789,8 @@ mod avx2 {
                             // -0 taken as +0, so they order as the distances do), then the lower
                             // slot first among equal distances; 8 bytes, not a 16-byte pair the
                             // compiler zeroed field by field per node.
-                            let key = |slot: usize| (u64::from(near[slot].to_bits() & 0x7fff_ffff) << 3) | (7 - slot as u64);
+                            let key =
+                                |slot: usize| (u64::from(near[slot].to_bits() & 0x7fff_ffff) << 3) | (7 - slot as u64);
                             let mut order = [0u64; WIDTH];
                             order[0] = key(first);
                             let mut n = 1;
