@@ -39,6 +39,13 @@ pub fn available() -> bool {
     crate::packet::available() && Simd::Avx2.supported()
 }
 
+/// [`available`], detected once: the check guards every packet, and the feature tests it makes
+/// were 2% of the bunny's packet instructions.
+fn available_cached() -> bool {
+    static AVAILABLE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *AVAILABLE.get_or_init(available)
+}
+
 /// Closest hits (`ANY == false`, `t_min` 0) or occlusion (`ANY == true`) of the valid lanes of
 /// `rays` with the triangle test `T`: the packet's stack and one for the lanes finished alone.
 /// Only call when [`available`] is true.
@@ -50,8 +57,8 @@ pub fn trace<const ANY: bool, T: TriangleTest>(
 ) -> Results {
     #[cfg(target_arch = "x86_64")]
     {
-        assert!(available(), "wide packets need AVX2; callers check `available()` first");
-        // SAFETY: AVX2 is present (checked above).
+        assert!(available_cached(), "wide packets need AVX2; callers check `available()` first");
+        // SAFETY: AVX2 and POPCNT are present (checked above).
         unsafe { avx2::trace::<ANY, T>(bvh, rays, stack, single) }
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -93,6 +100,8 @@ impl TraceLanes for Lanes<'_> {
     }
 }
 
+// Compiled for AVX2 and POPCNT (which `available` requires): AVX2 alone does not imply POPCNT,
+// and every `count_ones` of the walk and the leaves was then a 15-instruction bit trick.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::SPARSE;
@@ -114,8 +123,9 @@ mod avx2 {
     /// directions have, per axis, the sign that chose `near_plane` and `far_plane`: the
     /// single-ray AVX2 test's operations ([`crate::bvh8`]), lane by lane the scalar slab test's
     /// result, with fewer operations than `packet`'s slab test (which finds each lane's entered plane).
-    #[target_feature(enable = "avx2")]
-    #[inline]
+    /// Always inlined (without AVX2 of its own, as [`one_lane`]): with POPCNT enabled LLVM moved
+    /// it out of the walk.
+    #[inline(always)]
     fn slab_signed(
         b: &[[f32; WIDTH]; 6],
         slot: usize,
@@ -124,25 +134,27 @@ mod avx2 {
         far_plane: &[usize; 3],
         t_best: __m256,
     ) -> (__m256, __m256) {
-        // Written out, not in a closure: a closure does not inherit AVX2.
-        let near = _mm256_max_ps(dist(b[near_plane[0]][slot], pk, 0), _mm256_setzero_ps());
-        let near = _mm256_max_ps(dist(b[near_plane[1]][slot], pk, 1), near);
-        let near = _mm256_max_ps(dist(b[near_plane[2]][slot], pk, 2), near);
-        let far = _mm256_min_ps(dist(b[far_plane[0]][slot], pk, 0), t_best);
-        let far = _mm256_min_ps(dist(b[far_plane[1]][slot], pk, 1), far);
-        let far = _mm256_min_ps(dist(b[far_plane[2]][slot], pk, 2), far);
-        (may_hold(near, far), near)
+        // SAFETY: register arithmetic under the caller's AVX2.
+        unsafe {
+            // Written out, not in a closure: a closure does not inherit AVX2.
+            let near = _mm256_max_ps(dist(b[near_plane[0]][slot], pk, 0), _mm256_setzero_ps());
+            let near = _mm256_max_ps(dist(b[near_plane[1]][slot], pk, 1), near);
+            let near = _mm256_max_ps(dist(b[near_plane[2]][slot], pk, 2), near);
+            let far = _mm256_min_ps(dist(b[far_plane[0]][slot], pk, 0), t_best);
+            let far = _mm256_min_ps(dist(b[far_plane[1]][slot], pk, 1), far);
+            let far = _mm256_min_ps(dist(b[far_plane[2]][slot], pk, 2), far);
+            (may_hold(near, far), near)
+        }
     }
 
     /// `(plane - origin) * inverse direction` of axis `a`, per lane.
-    #[target_feature(enable = "avx2")]
-    #[inline]
+    #[inline(always)]
     fn dist(plane: f32, pk: &Packet, a: usize) -> __m256 {
-        _mm256_mul_ps(_mm256_sub_ps(splat(plane), pk.o[a]), pk.inv[a])
+        mul(sub(splat(plane), pk.o[a]), pk.inv[a])
     }
 
     /// `dot(d, c)` per lane, as [`crate::geometry::edge_function`] ends: `d.x c.x + d.y c.y + d.z c.z`.
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     #[inline]
     fn dot(d: &[__m256; 3], c: [f32; 3]) -> __m256 {
         add(add(mul(d[0], splat(c[0])), mul(d[1], splat(c[1]))), mul(d[2], splat(c[2])))
@@ -162,7 +174,7 @@ mod avx2 {
 
     /// The plane normals ([`crate::geometry::plane_normal`]) of a block's triangles, 8-wide with
     /// the scalar operations.
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     #[inline]
     fn normals(block: &TriBlock) -> [__m256; 3] {
         let p = &block.p;
@@ -179,7 +191,7 @@ mod avx2 {
         ]
     }
 
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     #[inline]
     fn shared_origin(block: &TriBlock, o: [f32; 3]) -> SharedOrigin {
         let p = &block.p;
@@ -211,7 +223,7 @@ mod avx2 {
     /// all start at its origin: only the dot products with the lanes' directions and the
     /// division run per lane. Returns what `packet`'s test returns, or `None` where no lane of
     /// `mv` is inside the triangle's edges (nothing further can hit).
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     #[inline]
     fn intersect_shared_origin(
         s: &SharedOrigin,
@@ -250,9 +262,9 @@ mod avx2 {
         Some([m, t, w1, w2, sum])
     }
 
-    /// [`slab_signed`] for lanes that all start at `o`: `plane - origin` once, in scalar.
-    #[target_feature(enable = "avx2")]
-    #[inline]
+    /// [`slab_signed`] for lanes that all start at `o`: `plane - origin` once, in scalar. Always
+    /// inlined, as [`slab_signed`].
+    #[inline(always)]
     fn slab_shared_origin(
         b: &[[f32; WIDTH]; 6],
         slot: usize,
@@ -263,13 +275,16 @@ mod avx2 {
         t_best: __m256,
     ) -> (__m256, __m256) {
         let (np, fp, inv) = (near_plane, far_plane, &pk.inv);
-        let near = _mm256_max_ps(mul(splat(b[np[0]][slot] - o[0]), inv[0]), _mm256_setzero_ps());
-        let near = _mm256_max_ps(mul(splat(b[np[1]][slot] - o[1]), inv[1]), near);
-        let near = _mm256_max_ps(mul(splat(b[np[2]][slot] - o[2]), inv[2]), near);
-        let far = _mm256_min_ps(mul(splat(b[fp[0]][slot] - o[0]), inv[0]), t_best);
-        let far = _mm256_min_ps(mul(splat(b[fp[1]][slot] - o[1]), inv[1]), far);
-        let far = _mm256_min_ps(mul(splat(b[fp[2]][slot] - o[2]), inv[2]), far);
-        (may_hold(near, far), near)
+        // SAFETY: register arithmetic under the caller's AVX2.
+        unsafe {
+            let near = _mm256_max_ps(mul(splat(b[np[0]][slot] - o[0]), inv[0]), _mm256_setzero_ps());
+            let near = _mm256_max_ps(mul(splat(b[np[1]][slot] - o[1]), inv[1]), near);
+            let near = _mm256_max_ps(mul(splat(b[np[2]][slot] - o[2]), inv[2]), near);
+            let far = _mm256_min_ps(mul(splat(b[fp[0]][slot] - o[0]), inv[0]), t_best);
+            let far = _mm256_min_ps(mul(splat(b[fp[1]][slot] - o[1]), inv[1]), far);
+            let far = _mm256_min_ps(mul(splat(b[fp[2]][slot] - o[2]), inv[2]), far);
+            (may_hold(near, far), near)
+        }
     }
 
     /// A deferred subtree: node, the lanes that go into it (bits), and the packet's lower bound
@@ -327,7 +342,7 @@ mod avx2 {
     }
 
     /// The lanes in the bits of `m` as a mask vector.
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     #[inline]
     fn mask_of(m: u32) -> __m256 {
         let bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
@@ -370,7 +385,7 @@ mod avx2 {
     const SMALLEST4: [i32; 4] = [0, 4, 2, 6];
 
     /// The largest of `v`'s lanes in `mask` (-inf where none).
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     #[inline]
     fn largest(v: __m256, mask: __m256) -> f32 {
         let v = _mm256_blendv_ps(splat(f32::NEG_INFINITY), v, mask);
@@ -398,7 +413,7 @@ mod avx2 {
 
     impl Frustum {
         /// The frustum of the lanes in `group` (bits) of `pk`, from its shared origin if any.
-        #[target_feature(enable = "avx2")]
+        #[target_feature(enable = "avx2,popcnt")]
         #[inline]
         fn new(pk: &Packet, shared: Option<[f32; 3]>, group: u32, negative: &[u32; 3]) -> Self {
             let m = mask_of(group);
@@ -443,7 +458,7 @@ mod avx2 {
 
         /// Children of `b` that some lane may enter before `t_far` (the largest distance a lane
         /// still looks to), with the bound on their entry distances.
-        #[target_feature(enable = "avx2")]
+        #[target_feature(enable = "avx2,popcnt")]
         #[inline]
         fn test(&self, b: &[[f32; WIDTH]; 6], t_far: f32) -> (u32, __m256) {
             let load = |r: &[f32; WIDTH]| {
@@ -495,7 +510,7 @@ mod avx2 {
 
     /// Lanes whose walk is finished one ray at a time, from `start` (the root or a subtree few
     /// lanes reach), on the wide BVH's single-ray traversal, each from its best hit so far.
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     fn finish_alone<const ANY: bool, T: TriangleTest>(
         bvh: &Bvh8,
         rays: &Rays,
@@ -549,7 +564,7 @@ mod avx2 {
     /// Tests the triangles of `block` against the lanes in `lanes`, keeping their hits (and for
     /// `ANY` ending the lanes that found one); returns the lanes that found a hit. Its own
     /// function: inlined into [`walk`], LLVM kept the triangle test out of line instead.
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     fn leaf<const ANY: bool, T: TriangleTest>(
         block: &TriBlock,
         pk: &Packet,
@@ -619,7 +634,7 @@ mod avx2 {
     /// [`leaf`] one lane at a time, each against all of the block's triangles (`full`, bits) at
     /// once, as the single-ray traversal tests a block: cheaper than one test per triangle where
     /// fewer lanes than triangles reach the block.
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     fn leaf_by_lane<const ANY: bool, T: TriangleTest>(
         block: &TriBlock,
         full: u32,
@@ -692,7 +707,7 @@ mod avx2 {
     /// exactly against the leaf blocks' boxes, and a lane that enters a box enters every box
     /// around it, so no triangle is tested by a lane the ordered traversal would not test it
     /// with), the others the lanes that enter them by the per-lane test.
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     #[allow(clippy::too_many_arguments)]
     fn walk<const ANY: bool, T: TriangleTest>(
         bvh: &Bvh8,
@@ -769,26 +784,33 @@ mod avx2 {
                                 (cur, cur_mask) = (node.child[first], masks[first]);
                                 continue 'walk;
                             }
-                            // Nearest first: the others go on the stack farthest first.
-                            let mut order = [(0f32, 0usize); WIDTH];
-                            order[0] = (near[first], first);
+                            // Nearest first: the others go on the stack farthest first. Sorted
+                            // as one integer each: the entry distance's bits (not negative, and
+                            // -0 taken as +0, so they order as the distances do), then the lower
+                            // slot first among equal distances; 8 bytes, not a 16-byte pair the
+                            // compiler zeroed field by field per node.
+                            let key =
+                                |slot: usize| (u64::from(near[slot].to_bits() & 0x7fff_ffff) << 3) | (7 - slot as u64);
+                            let mut order = [0u64; WIDTH];
+                            order[0] = key(first);
                             let mut n = 1;
                             while rest != 0 {
                                 let slot = rest.trailing_zeros() as usize;
                                 rest &= rest - 1;
-                                let e = (near[slot], slot);
+                                let e = key(slot);
                                 let mut k = n;
-                                while k > 0 && order[k - 1].0 < e.0 {
+                                while k > 0 && order[k - 1] < e {
                                     order[k] = order[k - 1];
                                     k -= 1;
                                 }
                                 order[k] = e;
                                 n += 1;
                             }
-                            for &(d, slot) in &order[..n - 1] {
-                                items.push(Item { node: node.child[slot], mask: masks[slot], near: d });
+                            for &e in &order[..n - 1] {
+                                let slot = 7 - (e & 7) as usize;
+                                items.push(Item { node: node.child[slot], mask: masks[slot], near: near[slot] });
                             }
-                            let slot = order[n - 1].1;
+                            let slot = 7 - (order[n - 1] & 7) as usize;
                             (cur, cur_mask) = (node.child[slot], masks[slot]);
                             continue 'walk;
                         }
@@ -812,7 +834,7 @@ mod avx2 {
         }
     }
 
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     pub fn trace<const ANY: bool, T: TriangleTest>(
         bvh: &Bvh8,
         rays: &Rays,
