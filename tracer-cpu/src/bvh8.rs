@@ -557,26 +557,26 @@ impl<const W: usize> Plan<W> {
         }
         let len = nodes.len();
         let mut plan = Plan { leaf: vec![false; len], split: vec![0; len * W], open: vec![0; len] };
-        // `cost[n * W + k - 1]`: the least cost of `n`'s subtree in at most `k` slots.
-        let mut cost = vec![0f32; len * W];
-        let mut count = vec![0u64; len];
+        // The reverse of that order visits each node after both its subtrees, the left one
+        // first: per subtree, its triangles and its least cost in at most 1 to `W` slots stay on
+        // this stack until its parent takes them (as deep as the tree, not as long).
+        let mut done: Vec<(u64, [f32; W])> = Vec::new();
         for &n in order.iter().rev() {
             let n = n as usize;
             let node = &nodes[n];
             let area = half_area(node);
             if node.is_leaf() {
                 let c = node.count as usize;
-                count[n] = c as u64;
                 plan.leaf[n] = c <= W;
                 // A leaf of more than a block becomes a wide node over blocks (`range_node`).
                 let one = if c <= W { BLOCK_COST } else { NODE_COST + c.div_ceil(W) as f32 * BLOCK_COST };
-                cost[n * W..(n + 1) * W].fill(area * one);
+                done.push((c as u64, [area * one; W]));
                 continue;
             }
-            let (l, r) = (node.index as usize, node.index as usize + 1);
-            count[n] = count[l] + count[r];
-            let left: [f32; W] = std::array::from_fn(|k| cost[l * W + k]);
-            let right: [f32; W] = std::array::from_fn(|k| cost[r * W + k]);
+            let (Some((nr, right)), Some((nl, left))) = (done.pop(), done.pop()) else {
+                unreachable!("both subtrees come before their node")
+            };
+            let count = nl + nr;
             // The cheapest spread of both subtrees over at most `j` slots, and the left's share.
             let spread = |j: usize| {
                 (1..j)
@@ -586,15 +586,16 @@ impl<const W: usize> Plan<W> {
             let (inner, k) = spread(W);
             plan.open[n] = k;
             let inner = area * NODE_COST + inner;
-            let leaf = if count[n] <= W as u64 { area * BLOCK_COST } else { f32::INFINITY };
+            let leaf = if count <= W as u64 { area * BLOCK_COST } else { f32::INFINITY };
             plan.leaf[n] = leaf <= inner;
-            cost[n * W] = leaf.min(inner);
+            let mut cost = [leaf.min(inner); W];
             for j in 2..=W {
                 let (c, k) = spread(j);
                 let i = n * W + j - 1;
                 // More slots never cost more: keep the spread over fewer where it is as cheap.
-                (cost[i], plan.split[i]) = if c < cost[i - 1] { (c, k) } else { (cost[i - 1], plan.split[i - 1]) };
+                (cost[j - 1], plan.split[i]) = if c < cost[j - 2] { (c, k) } else { (cost[j - 2], plan.split[i - 1]) };
             }
+            done.push((count, cost));
         }
         plan
     }
