@@ -18,15 +18,15 @@
 //! (open the child of the largest area until the node is full; every subtree of at most `W`
 //! triangles a block), which this replaced: the greedy collapse leaves many nodes of 2 children
 //! (30% of the dragon's) and boxes a block's far-apart triangles together. Per ray the SAH
-//! collapse enters 1-3% fewer nodes and tests 6-10% fewer triangles, and traced 3-10% more rays
-//! per second on one thread of the 2-core VM (docs/cpu-benchmark.md, "Issue 11: the SAH
-//! collapse"). The boxes are the file's own, so every box a wide traversal tests is one the
+//! collapse enters 1-3% fewer nodes and tests 6-10% fewer triangles, and on one thread of the
+//! 2-core VM gained on 12 of the ray report's 15 rows against Embree (the million-triangle
+//! scene's 6-16 points; docs/cpu-benchmark.md, "Issue 11: the SAH collapse"). The boxes are the file's own, so every box a wide traversal tests is one the
 //! ordered traversal tests too, and the triangle test is the scalar one, lane by lane, in the same
 //! operations: both find exactly the same hits (closest hit: the nearest, ties to the lower
 //! triangle index, whatever the order of the tests; `tests/hits.rs` holds every path to that).
 //!
-//! Derived at load from the child-pair layout ([`WideBvh::new`], on one thread: 12 ms for the
-//! bunny, 0.3-0.5 s for the dragon and the million-triangle scene on the loaded 2-core VM;
+//! Derived at load from the child-pair layout ([`WideBvh::new`], on one thread: 8 ms for the
+//! bunny, 0.2-0.25 s for the dragon and the million-triangle scene on the loaded 2-core VM;
 //! `examples/ray_report.rs` prints it per scene and width), not stored in the file.
 
 use crate::geometry::{self, Cost, Hit, Ray, TriangleTest, may_hold};
