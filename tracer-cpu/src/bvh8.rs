@@ -577,17 +577,18 @@ impl<const W: usize> Plan<W> {
                 unreachable!("both subtrees come before their node")
             };
             let count = nl + nr;
-            // The cheapest spread of both subtrees over at most `j` slots, and the left's share.
+            // The cheapest spread of both subtrees over at most `j` slots, and the left's share
+            // (at least 1, also where every cost is infinite: boxes of areas beyond f32).
             let spread = |j: usize| {
                 (1..j)
                     .map(|k| (left[k - 1] + right[j - k - 1], k as u8))
-                    .fold((f32::INFINITY, 0), |a, b| if b.0 < a.0 { b } else { a })
+                    .fold((f32::INFINITY, 1), |a, b| if b.0 < a.0 { b } else { a })
             };
             let (inner, k) = spread(W);
             plan.open[n] = k;
             let inner = area * NODE_COST + inner;
             let leaf = if count <= W as u64 { area * BLOCK_COST } else { f32::INFINITY };
-            plan.leaf[n] = leaf <= inner;
+            plan.leaf[n] = count <= W as u64 && leaf <= inner;
             let mut cost = [leaf.min(inner); W];
             for j in 2..=W {
                 let (c, k) = spread(j);
@@ -608,6 +609,7 @@ impl<const W: usize> Plan<W> {
         let mut todo = [(0u32, 0usize); W];
         let n = &nodes[b as usize];
         let k = self.open[b as usize] as usize;
+        assert!((1..W).contains(&k), "the plan gives both subtrees of a wide node a slot");
         todo[0] = (n.index + 1, W - k);
         todo[1] = (n.index, k);
         let mut len = 2;
@@ -1369,6 +1371,25 @@ mod tests {
     fn the_collapse_keeps_every_triangle_once_inside_its_boxes() {
         collapse_keeps_every_triangle_once::<8>();
         collapse_keeps_every_triangle_once::<4>();
+    }
+
+    /// Boxes so large that their areas overflow to infinity (every SAH cost infinite): the
+    /// collapse still spreads each node's slots and keeps every triangle once.
+    #[test]
+    fn boxes_of_infinite_area_are_collapsed_too() {
+        for n in [3, 20, 300] {
+            let tris: Vec<Triangle> = scattered(n, 5)
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.vertices().map(|v| v.map(|x| x * 1e25));
+                    Triangle::from_vertices(a, b, c)
+                })
+                .collect();
+            let nodes = halving_tree(&tris, 2);
+            assert!(half_area(&nodes[0]).is_infinite(), "the test needs an infinite area");
+            check_structure(&WideBvh::<8>::new(&nodes, &tris), &tris);
+            check_structure(&WideBvh::<4>::new(&nodes, &tris), &tris);
+        }
     }
 
     /// A leaf of more triangles than a block (a file from another builder) becomes wide nodes
