@@ -8,18 +8,25 @@
 //! 8-wide BVH only) and a portable one; `crate::packet8` traces coherent packets of 8 rays
 //! through the 8-wide tree.
 //!
-//! The collapse (after Embree's BVH4/BVH8 builders and Wald et al., "Getting Rid of Packets",
-//! 2008): a wide node starts from the two children of a binary node and repeatedly opens the child
-//! with the largest surface area (replacing it by its two children) until it has `W` or no child is
-//! left to open. A subtree of at most `W` triangles is never opened: it becomes one leaf block,
-//! whatever its binary shape (testing `W` triangles costs one sequence, like testing one). The
-//! boxes are the file's own, so every box a wide traversal tests is one the ordered traversal
-//! tests too, and the triangle test is the scalar one, lane by lane, in the same operations: both
-//! find exactly the same hits (closest hit: the nearest, ties to the lower triangle index,
-//! whatever the order of the tests; `tests/hits.rs` holds every path to that).
+//! The collapse (Ylitie, Karras and Laine, "Efficient Incoherent Ray Traversal on GPUs Through
+//! Compressed Wide BVHs", 2017): every child slot of a wide node is a node of the binary tree,
+//! made either a leaf block (a subtree of at most `W` triangles, whatever its binary shape: testing
+//! `W` triangles costs one sequence, like testing one) or a wide node of its own, and a wide node's
+//! `W` slots are spread over its binary subtree. Which, is decided bottom-up by dynamic programming
+//! for the least SAH cost (a slot's box area times the cost of testing a node's boxes or a block's
+//! triangles, [`NODE_COST`] and [`BLOCK_COST`]), not greedily as Embree's BVH8 collapse does
+//! (open the child of the largest area until the node is full; every subtree of at most `W`
+//! triangles a block), which this replaced: the greedy collapse leaves many nodes of 2 children
+//! (30% of the dragon's) and boxes a block's far-apart triangles together. Per ray the SAH
+//! collapse enters 1-3% fewer nodes and tests 6-10% fewer triangles, and on one thread of the
+//! 2-core VM gained on 12 of the ray report's 15 rows against Embree (the million-triangle
+//! scene's 6-16 points; docs/cpu-benchmark.md, "Issue 11: the SAH collapse"). The boxes are the file's own, so every box a wide traversal tests is one the
+//! ordered traversal tests too, and the triangle test is the scalar one, lane by lane, in the same
+//! operations: both find exactly the same hits (closest hit: the nearest, ties to the lower
+//! triangle index, whatever the order of the tests; `tests/hits.rs` holds every path to that).
 //!
-//! Derived at load from the child-pair layout ([`WideBvh::new`], on one thread: 12 ms for the
-//! bunny, 0.3-0.5 s for the dragon and the million-triangle scene on the loaded 2-core VM;
+//! Derived at load from the child-pair layout ([`WideBvh::new`], on one thread: 8 ms for the
+//! bunny, 0.2-0.25 s for the dragon and the million-triangle scene on the loaded 2-core VM;
 //! `examples/ray_report.rs` prints it per scene and width), not stored in the file.
 
 use crate::geometry::{self, Cost, Hit, Ray, TriangleTest, may_hold};
@@ -241,7 +248,6 @@ impl<const W: usize> WideBvh<W> {
     pub fn from_source(nodes: &[Node], tris: &(impl TriangleSource + ?Sized)) -> Self {
         // `valid` holds a bit per slot; a binary node opens into at least 2.
         const { assert!(W >= 2 && W <= 32) };
-        let counts = subtree_counts(nodes);
         let mut out = Self {
             nodes: Vec::with_capacity(nodes.len() / (W - 2).max(1) + 1),
             blocks: Vec::with_capacity(tris.len() / (W / 2) + 1),
@@ -252,11 +258,13 @@ impl<const W: usize> WideBvh<W> {
             out.blocks.push(TriBlock::new(tris, &[]));
             return out;
         }
+        let plan = Plan::<W>::new(nodes);
         let mut work: Vec<(Work, Option<(usize, usize)>)> = vec![(Work::Binary(0), None)];
         let (mut indices, mut scratch) = (Vec::with_capacity(W), Vec::new());
+        let mut kids = Vec::with_capacity(W);
         while let Some((w, parent)) = work.pop() {
             let r = match w {
-                Work::Binary(b) if counts[b as usize] <= W as u64 => {
+                Work::Binary(b) if plan.leaf[b as usize] => {
                     indices.clear();
                     leaf_indices(nodes, b, &mut indices, &mut scratch);
                     indices.sort_unstable();
@@ -267,34 +275,16 @@ impl<const W: usize> WideBvh<W> {
                     out.range_node(tris, n.index, n.count, &mut work)
                 }
                 Work::Binary(b) => {
-                    let n = &nodes[b as usize];
-                    let mut kids = [0u32; W];
-                    kids[..2].copy_from_slice(&[n.index, n.index + 1]);
-                    let mut len = 2;
-                    while len < W {
-                        let open = (0..len)
-                            .filter(|&k| {
-                                let c = kids[k] as usize;
-                                !nodes[c].is_leaf() && counts[c] > W as u64
-                            })
-                            .max_by(|&a, &b| {
-                                half_area(&nodes[kids[a] as usize]).total_cmp(&half_area(&nodes[kids[b] as usize]))
-                            });
-                        let Some(k) = open else { break };
-                        let c = nodes[kids[k] as usize].index;
-                        kids[k] = c;
-                        kids[len] = c + 1;
-                        len += 1;
-                    }
+                    plan.children(nodes, b, &mut kids);
                     let id = out.nodes.len();
                     let mut node = WideNode::empty();
-                    for (slot, &k) in kids[..len].iter().enumerate() {
+                    for (slot, &k) in kids.iter().enumerate() {
                         let c = &nodes[k as usize];
                         node.set(slot, c.min, c.max);
                     }
                     out.nodes.push(node);
-                    for slot in (0..len).rev() {
-                        work.push((Work::Binary(kids[slot]), Some((id, slot))));
+                    for (slot, &k) in kids.iter().enumerate().rev() {
+                        work.push((Work::Binary(k), Some((id, slot))));
                     }
                     id as u32
                 }
@@ -530,27 +520,113 @@ impl<const W: usize> WideBvh<W> {
     }
 }
 
-/// Triangles under each binary node.
-fn subtree_counts(nodes: &[Node]) -> Vec<u64> {
-    let mut order = Vec::with_capacity(nodes.len());
-    let mut stack = vec![0u32];
-    while let Some(n) = stack.pop() {
-        order.push(n);
-        let node = &nodes[n as usize];
-        if !node.is_leaf() {
-            stack.extend([node.index, node.index + 1]);
+/// The SAH costs the collapse weighs, per unit of a box's area (the probability that a ray
+/// enters it): testing a wide node's boxes ([`NODE_COST`]) and a leaf block's triangles
+/// ([`BLOCK_COST`]), each one SIMD sequence whatever the number of lanes in use. A block loads 5
+/// cache lines to a node's 4 and runs about three times the operations; 2 and 3 traced alike on
+/// the 2-core VM, 1 was slower (docs/cpu-benchmark.md, "Issue 11: the SAH collapse").
+const NODE_COST: f32 = 1.0;
+const BLOCK_COST: f32 = 2.0;
+
+/// The collapse's choices, made bottom-up by dynamic programming over the binary tree (Ylitie,
+/// Karras and Laine, "Efficient Incoherent Ray Traversal on GPUs Through Compressed Wide BVHs",
+/// 2017): for each binary node and each budget of 1 to `W` slots, the least SAH cost of its
+/// subtree spread over at most that many slots of a wide node, each slot a leaf block (a subtree
+/// of at most `W` triangles) or a wide node of its own.
+struct Plan<const W: usize> {
+    /// Whether binary node `n`, given one slot, becomes a leaf block (else a wide node).
+    leaf: Vec<bool>,
+    /// At `n * W + k - 1`: how many of `k` slots the left subtree of `n` takes when `n` is
+    /// spread over at most `k` (the rest go to the right one); 0 where `n` takes one slot itself.
+    split: Vec<u8>,
+    /// The slots of `n`'s left subtree when `n` becomes a wide node (its `W` slots spread over
+    /// both subtrees).
+    open: Vec<u8>,
+}
+
+impl<const W: usize> Plan<W> {
+    fn new(nodes: &[Node]) -> Self {
+        let mut order = Vec::with_capacity(nodes.len());
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            order.push(n);
+            let node = &nodes[n as usize];
+            if !node.is_leaf() {
+                stack.extend([node.index, node.index + 1]);
+            }
+        }
+        let len = nodes.len();
+        let mut plan = Plan { leaf: vec![false; len], split: vec![0; len * W], open: vec![0; len] };
+        // The reverse of that order visits each node after both its subtrees, the left one
+        // first: per subtree, its triangles and its least cost in at most 1 to `W` slots stay on
+        // this stack until its parent takes them (as deep as the tree, not as long).
+        let mut done: Vec<(u64, [f32; W])> = Vec::new();
+        for &n in order.iter().rev() {
+            let n = n as usize;
+            let node = &nodes[n];
+            let area = half_area(node);
+            if node.is_leaf() {
+                let c = node.count as usize;
+                plan.leaf[n] = c <= W;
+                // A leaf of more than a block becomes a wide node over blocks (`range_node`).
+                let one = if c <= W { BLOCK_COST } else { NODE_COST + c.div_ceil(W) as f32 * BLOCK_COST };
+                done.push((c as u64, [area * one; W]));
+                continue;
+            }
+            let (Some((nr, right)), Some((nl, left))) = (done.pop(), done.pop()) else {
+                unreachable!("both subtrees come before their node")
+            };
+            let count = nl + nr;
+            // The cheapest spread of both subtrees over at most `j` slots, and the left's share
+            // (at least 1, also where every cost is infinite: boxes of areas beyond f32).
+            let spread = |j: usize| {
+                (1..j)
+                    .map(|k| (left[k - 1] + right[j - k - 1], k as u8))
+                    .fold((f32::INFINITY, 1), |a, b| if b.0 < a.0 { b } else { a })
+            };
+            let (inner, k) = spread(W);
+            plan.open[n] = k;
+            let inner = area * NODE_COST + inner;
+            let leaf = if count <= W as u64 { area * BLOCK_COST } else { f32::INFINITY };
+            plan.leaf[n] = count <= W as u64 && leaf <= inner;
+            let mut cost = [leaf.min(inner); W];
+            for j in 2..=W {
+                let (c, k) = spread(j);
+                let i = n * W + j - 1;
+                // More slots never cost more: keep the spread over fewer where it is as cheap.
+                (cost[j - 1], plan.split[i]) = if c < cost[j - 2] { (c, k) } else { (cost[j - 2], plan.split[i - 1]) };
+            }
+            done.push((count, cost));
+        }
+        plan
+    }
+
+    /// The binary nodes that become the children of internal binary node `b`'s wide node, left
+    /// to right: its `W` slots spread over its subtrees as planned.
+    fn children(&self, nodes: &[Node], b: u32, kids: &mut Vec<u32>) {
+        kids.clear();
+        // (binary node, slots): at most `W` pending, since each takes one slot or more of `W`.
+        let mut todo = [(0u32, 0usize); W];
+        let n = &nodes[b as usize];
+        let k = self.open[b as usize] as usize;
+        assert!((1..W).contains(&k), "the plan gives both subtrees of a wide node a slot");
+        todo[0] = (n.index + 1, W - k);
+        todo[1] = (n.index, k);
+        let mut len = 2;
+        while len > 0 {
+            len -= 1;
+            let (x, slots) = todo[len];
+            let k = self.split[x as usize * W + slots - 1] as usize;
+            if k == 0 {
+                kids.push(x);
+            } else {
+                let c = nodes[x as usize].index;
+                todo[len] = (c + 1, slots - k);
+                todo[len + 1] = (c, k);
+                len += 2;
+            }
         }
     }
-    let mut counts = vec![0u64; nodes.len()];
-    for &n in order.iter().rev() {
-        let node = &nodes[n as usize];
-        counts[n as usize] = if node.is_leaf() {
-            node.count as u64
-        } else {
-            counts[node.index as usize] + counts[node.index as usize + 1]
-        };
-    }
-    counts
 }
 
 /// The triangles under binary node `b`, with `stack` as scratch.
@@ -1220,16 +1296,100 @@ mod tests {
             let tris = scattered(n, n as u64);
             let bvh = WideBvh::<W>::new(&halving_tree(&tris, leaf), &tris);
             check_structure(&bvh, &tris);
-            assert_eq!(bvh.is_empty(), n <= W, "{n} triangles, width {W}");
-            // Subtrees of at most W triangles are single blocks: at most twice the blocks needed.
-            assert!(bvh.len().1 <= 2 * n.div_ceil(W) + 1, "{n} triangles in {} blocks of {W}", bvh.len().1);
+            // More triangles than a block holds need a node; fewer may get one too, where their
+            // blocks' boxes are that much smaller than the whole.
+            assert!(n <= W || !bvh.is_empty(), "{n} triangles, width {W}");
+            let blocks = bvh.blocks.iter().map(|b| b.count() as usize);
+            assert!(blocks.clone().all(|c| c > 0) && blocks.sum::<usize>() == n, "no empty block");
         }
+    }
+
+    /// The SAH cost of a wide tree as the collapse weighs it, from its own boxes (`root`: the
+    /// binary root, whose box the wide tree does not keep).
+    fn wide_cost<const W: usize>(bvh: &WideBvh<W>, root: &Node) -> f64 {
+        let weight = |r: u32| if r & LEAF != 0 { BLOCK_COST } else { NODE_COST } as f64;
+        let mut sum = half_area(root) as f64 * weight(bvh.root);
+        for node in &bvh.nodes {
+            for slot in (0..W).filter(|&s| node.valid & (1 << s) != 0) {
+                let lane = |k: usize| [node.bounds[k][slot], node.bounds[k + 1][slot], node.bounds[k + 2][slot]];
+                let b = Node { min: lane(0), count: 0, max: lane(3), index: 0 };
+                sum += half_area(&b) as f64 * weight(node.child[slot]);
+            }
+        }
+        sum
+    }
+
+    /// The same cost for the greedy collapse the SAH collapse replaced (Embree's: open the child
+    /// of the largest area until the node is full; any subtree of at most `W` triangles a block).
+    fn greedy_cost<const W: usize>(nodes: &[Node], b: usize) -> f64 {
+        fn count(nodes: &[Node], b: usize) -> usize {
+            let n = &nodes[b];
+            if n.is_leaf() {
+                n.count as usize
+            } else {
+                count(nodes, n.index as usize) + count(nodes, n.index as usize + 1)
+            }
+        }
+        let area = half_area(&nodes[b]) as f64;
+        if count(nodes, b) <= W {
+            return area * BLOCK_COST as f64;
+        }
+        let mut kids = vec![nodes[b].index as usize, nodes[b].index as usize + 1];
+        while kids.len() < W {
+            let open = (0..kids.len())
+                .filter(|&k| !nodes[kids[k]].is_leaf() && count(nodes, kids[k]) > W)
+                .max_by(|&x, &y| half_area(&nodes[kids[x]]).total_cmp(&half_area(&nodes[kids[y]])));
+            let Some(k) = open else { break };
+            let c = nodes[kids[k]].index as usize;
+            kids[k] = c;
+            kids.push(c + 1);
+        }
+        area * NODE_COST as f64 + kids.iter().map(|&k| greedy_cost::<W>(nodes, k)).sum::<f64>()
+    }
+
+    /// The collapse is optimal for its cost model: never costlier than the greedy collapse, and
+    /// cheaper on scattered triangles, whose small subtrees' boxes leave much empty space.
+    #[test]
+    fn the_sah_collapse_costs_no_more_than_the_greedy_one() {
+        sah_beats_greedy::<8>();
+        sah_beats_greedy::<4>();
+    }
+
+    fn sah_beats_greedy<const W: usize>() {
+        let mut cheaper = 0;
+        for (n, leaf) in [(5, 1), (9, 1), (100, 2), (1000, 1), (1000, 3), (777, 4)] {
+            let tris = scattered(n, 3 * n as u64);
+            let nodes = halving_tree(&tris, leaf);
+            let (sah, greedy) = (wide_cost(&WideBvh::<W>::new(&nodes, &tris), &nodes[0]), greedy_cost::<W>(&nodes, 0));
+            assert!(sah <= greedy * (1.0 + 1e-5), "{n} triangles, width {W}: {sah} against {greedy}");
+            cheaper += usize::from(sah < greedy * 0.99);
+        }
+        assert!(cheaper >= 3, "width {W}: cheaper on {cheaper} of 6 trees");
     }
 
     #[test]
     fn the_collapse_keeps_every_triangle_once_inside_its_boxes() {
         collapse_keeps_every_triangle_once::<8>();
         collapse_keeps_every_triangle_once::<4>();
+    }
+
+    /// Boxes so large that their areas overflow to infinity (every SAH cost infinite): the
+    /// collapse still spreads each node's slots and keeps every triangle once.
+    #[test]
+    fn boxes_of_infinite_area_are_collapsed_too() {
+        for n in [3, 20, 300] {
+            let tris: Vec<Triangle> = scattered(n, 5)
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.vertices().map(|v| v.map(|x| x * 1e25));
+                    Triangle::from_vertices(a, b, c)
+                })
+                .collect();
+            let nodes = halving_tree(&tris, 2);
+            assert!(half_area(&nodes[0]).is_infinite(), "the test needs an infinite area");
+            check_structure(&WideBvh::<8>::new(&nodes, &tris), &tris);
+            check_structure(&WideBvh::<4>::new(&nodes, &tris), &tris);
+        }
     }
 
     /// A leaf of more triangles than a block (a file from another builder) becomes wide nodes
