@@ -5,6 +5,7 @@ use crate::bench::{Bench, Timed};
 use bvh_format::SceneFile;
 use render_spec::{Image, Settings};
 use std::time::Instant;
+use tracer_cpu::render::Canvas;
 use tracer_cpu::{Method, Tracer};
 
 /// A pool of `threads` workers [default: one per core].
@@ -41,6 +42,13 @@ pub fn held_line(tracer: &Tracer<'_>, method: Method) -> String {
     )
 }
 
+/// A scene prepared for one method, and the buffers of its last frame, which the next reuses.
+pub struct CpuRenderer<'a> {
+    tracer: Tracer<'a>,
+    method: Method,
+    buffers: Option<Canvas>,
+}
+
 pub struct CpuBench {
     pub pool: rayon::ThreadPool,
     /// Print each prepared method's bytes held ([`held_line`]; `trace-cpu bench --vertices`).
@@ -48,7 +56,7 @@ pub struct CpuBench {
 }
 
 impl Bench for CpuBench {
-    type Renderer<'a> = (Tracer<'a>, Method);
+    type Renderer<'a> = CpuRenderer<'a>;
 
     fn tracer(&self) -> &'static str {
         "cpu"
@@ -60,12 +68,13 @@ impl Bench for CpuBench {
 
     fn timing(&self) -> String {
         "a frame's time is the wall-clock time of `tracer_cpu::render`: primary rays, tracing and shading \
-         into the 8-bit image, no AOVs; the scene is loaded and prepared before"
+         into the 8-bit image, no AOVs (the measurement of `--method auto` included), into the buffers of the frame before; the \
+         scene is loaded and prepared before"
             .to_owned()
     }
 
     /// `method` may end in [`crate::bench::INDEXED_SUFFIX`] for the indexed vertex form.
-    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<(Tracer<'a>, Method), String> {
+    fn prepare<'a>(&'a self, scene: &'a SceneFile, method: &str) -> Result<CpuRenderer<'a>, String> {
         let (name, form) = crate::bench::split_form(method);
         let method = method_of(name)?;
         if method == Method::Packet && method.resolve(scene) != method {
@@ -77,24 +86,43 @@ impl Bench for CpuBench {
         if self.report_held {
             crate::say!("{}", held_line(&tracer, method));
         }
-        Ok((tracer, method))
+        Ok(CpuRenderer { tracer, method, buffers: None })
     }
 
-    fn frame(&self, r: &mut (Tracer<'_>, Method), s: &Settings) -> Result<Timed, String> {
+    fn frame(&self, r: &mut CpuRenderer<'_>, s: &Settings) -> Result<Timed, String> {
+        let s = Settings { aovs: false, ..s.clone() };
+        // Into the last frame's buffers, as a renderer drawing frame after frame would: on the
+        // H100 host's 16 threads, fresh buffers each frame (even paged in before the clock) held
+        // the dragon's frames to 10.6-12.5x one thread, reused ones to 14.3-15.1x
+        // (tools/scripts/h100-cpu-scaling.sh, 2026-11-26).
+        let canvas = r.buffers.take().unwrap_or_else(|| {
+            let mut fresh = Canvas::new(&s);
+            self.pool.install(|| fresh.page_in());
+            fresh
+        });
+        let (tracer, method) = (&r.tracer, r.method);
         let t0 = Instant::now();
-        let image = self.image(r, &Settings { aovs: false, ..s.clone() })?;
+        let image = self
+            .pool
+            .install(|| {
+                let plan = tracer_cpu::render::plan(tracer, &s, method)?;
+                tracer_cpu::render::render_into(tracer, &s, &plan, canvas, &|_| {})
+            })
+            .map_err(|e| e.to_string())?;
         let ms = t0.elapsed().as_secs_f64() * 1e3;
-        Ok(Timed { ms, rays: crate::bench::rays_of(&image.rays) })
+        let rays = crate::bench::rays_of(&image.rays);
+        r.buffers = Some(Canvas::reuse(image));
+        Ok(Timed { ms, rays })
     }
 
-    fn image(&self, (tracer, method): &mut (Tracer<'_>, Method), s: &Settings) -> Result<Image, String> {
-        self.pool.install(|| tracer_cpu::render(tracer, s, *method)).map_err(|e| e.to_string())
+    fn image(&self, r: &mut CpuRenderer<'_>, s: &Settings) -> Result<Image, String> {
+        self.pool.install(|| tracer_cpu::render(&r.tracer, s, r.method)).map_err(|e| e.to_string())
     }
 
-    fn image_with_self_hits(&self, r: &mut (Tracer<'_>, Method), s: &Settings) -> Result<Image, String> {
-        r.0.count_self_hits(true);
+    fn image_with_self_hits(&self, r: &mut CpuRenderer<'_>, s: &Settings) -> Result<Image, String> {
+        r.tracer.count_self_hits(true);
         let image = self.image(r, s);
-        r.0.count_self_hits(false);
+        r.tracer.count_self_hits(false);
         image
     }
 }
