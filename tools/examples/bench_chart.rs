@@ -9,28 +9,41 @@
 //! primary ones over the time beyond the cast frame). Modes without a cast row beside them are left
 //! out with a warning.
 //!
+//! A Markdown file written by the ray report (`tracer-cpu/examples/ray_report.rs`) is read as well:
+//! its throughput table becomes one group of bars per kind of ray and one bar per tracer (ours
+//! and Embree's), at the thread count `--threads` names (by default the largest in the file).
+//!
 //! ```text
-//! cargo run --release -p tools --example bench_chart -- CSV... [--ray-types] [-o chart.svg|chart.png]
+//! cargo run --release -p tools --example bench_chart -- CSV|ray-report.md... [--ray-types] [--threads N]
+//!     [-o chart.svg|chart.png]
 //! ```
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::PathBuf;
-use tools::bench::{Row, read_csv, significant};
+use tools::bench::{Row, read_csv, read_ray_report, significant};
 
 fn main() {
     let mut csvs = Vec::new();
     let mut out = PathBuf::from("bench-chart.svg");
     let mut ray_types = false;
+    let mut threads = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "-o" | "--output" => out = args.next().map(PathBuf::from).unwrap_or_else(|| fail("-o needs a file name")),
             "--ray-types" => ray_types = true,
+            "--threads" => {
+                threads = Some(
+                    args.next()
+                        .and_then(|n| n.parse::<u32>().ok())
+                        .unwrap_or_else(|| fail("--threads needs a whole number")),
+                )
+            }
             "-h" | "--help" => {
                 println!(
-                    "bench_chart CSV... [--ray-types] [-o chart.svg|chart.png]: Mrays/s per scene, setting (or kind of \
-                     ray), tracer and method"
+                    "bench_chart CSV|ray-report.md... [--ray-types] [--threads N] [-o chart.svg|chart.png]: Mrays/s \
+                     per scene, setting (or kind of ray), tracer and method"
                 );
                 return;
             }
@@ -38,11 +51,12 @@ fn main() {
         }
     }
     if csvs.is_empty() {
-        fail("give at least one CSV written by trace-cpu bench or trace-vk bench");
+        fail("give at least one CSV written by trace-cpu bench or trace-vk bench, or a ray report's .md");
     }
     let mut rows = Vec::new();
     for c in &csvs {
-        rows.extend(read_csv(c).unwrap_or_else(|e| fail(&e)));
+        let read = if c.extension().is_some_and(|e| e == "md") { read_ray_report(c, threads) } else { read_csv(c) };
+        rows.extend(read.unwrap_or_else(|e| fail(&e)));
     }
     if ray_types {
         rows = by_ray_type(&rows);
@@ -180,8 +194,14 @@ where
         let n = settings.len() * slots;
         let rates: Vec<f64> = mine.iter().map(|r| r.mrays()).filter(|x| x.is_finite() && *x > 0.0).collect();
         let (lo, hi) = rates.iter().fold((f64::INFINITY, 0.0f64), |(l, h), &x| (l.min(x), h.max(x)));
-        // Headroom above the tallest bar for the legend (the axis is logarithmic).
-        let (lo, hi) = if rates.is_empty() { (0.1, 10.0) } else { (lo / 2.0, hi * 20.0) };
+        // Headroom above the tallest bar for the legend: on the logarithmic axis a third of the
+        // panel, whether the rates span 2x (one tracer's methods) or 1000x (CPU beside GPU).
+        let (lo, hi) = if rates.is_empty() {
+            (0.1, 10.0)
+        } else {
+            let lo = lo / 1.5;
+            (lo, hi * (hi / lo).sqrt().max(2.0))
+        };
         let triangles = mine.first().map_or(0, |r| r.triangles);
         let mut chart = ChartBuilder::on(panel)
             .caption(format!("{scene} ({triangles} triangles)"), ("sans-serif", 20))

@@ -272,6 +272,83 @@ pub fn significant(x: f64) -> String {
     format!("{x:.digits$}")
 }
 
+/// The throughput table of a ray report (`tracer-cpu/examples/ray_report.rs`) as rows, for charts:
+/// the kind of ray as the mode, the column's first word ("ours", "Embree") as the tracer and the
+/// rest as the method, the thread count as the device; only the rows of `threads` (by default the
+/// largest thread count in the file).
+pub fn read_ray_report(path: &Path, threads: Option<u32>) -> Result<Vec<Row>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    ray_report_rows(&text, threads).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// [`read_ray_report`] on the report's text.
+fn ray_report_rows(text: &str, threads: Option<u32>) -> Result<Vec<Row>, String> {
+    const KINDS: [&str; 5] = ["primary", "shadow", "secondary", "ao", "diffuse"];
+    let cells = |l: &str| l.trim().trim_matches('|').split('|').map(|c| c.trim().to_owned()).collect::<Vec<_>>();
+    let table: Vec<&str> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("### Throughput"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .collect();
+    let Some((header, body)) = table.split_first() else {
+        return Err("it holds no ray report throughput table".to_owned());
+    };
+    let header = cells(header);
+    let column = |name: &str| header.iter().position(|h| h == name);
+    let (Some(scene), Some(size), Some(rays), Some(kind), Some(thr)) =
+        (column("scene"), column("size"), column("rays"), column("kind"), column("threads"))
+    else {
+        return Err("its throughput table lacks a scene, size, rays, kind or threads column".to_owned());
+    };
+    // The scene's triangle count from the Scenes line: "NAME (N triangles, ...".
+    let triangles = |name: &str| -> u64 {
+        let line = text.lines().find(|l| l.starts_with("- Scenes:")).unwrap_or("");
+        line.split(&format!("{name} ("))
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or(0)
+    };
+    let body: Vec<Vec<String>> = body.iter().skip(1).map(|l| cells(l)).filter(|c| c.len() == header.len()).collect();
+    let most = body.iter().filter_map(|c| c[thr].parse::<u32>().ok()).max();
+    let want = threads.or(most).ok_or_else(|| "its throughput table has no rows".to_owned())?;
+    let mut rows = Vec::new();
+    for c in body.iter().filter(|c| c[thr].parse::<u32>().ok() == Some(want)) {
+        let (Some((w, h)), Ok(n), Some(k)) =
+            (c[size].split_once('x'), c[rays].parse::<u64>(), KINDS.iter().position(|k| *k == c[kind]))
+        else {
+            return Err(format!("cannot read the row {:?}", c.join(" | ")));
+        };
+        let mut counts = [0; 5];
+        counts[k] = n;
+        // The tracers' columns: a rate, or "-" where one was left out; the ratios ("a / b") are not.
+        for (i, name) in header.iter().enumerate().skip(thr + 1).filter(|(_, h)| !h.contains(" / ")) {
+            let Ok(mrays) = c[i].parse::<f64>() else { continue };
+            let (tracer, method) = name.split_once(' ').unwrap_or((name, ""));
+            rows.push(Row {
+                scene: c[scene].clone(),
+                triangles: triangles(&c[scene]),
+                camera: "medium".into(),
+                width: w.parse().unwrap_or(0),
+                height: h.parse().unwrap_or(0),
+                mode: c[kind].clone(),
+                lights: 1,
+                method: method.to_owned(),
+                median_ms: n as f64 / mrays / 1e3,
+                min_ms: n as f64 / mrays / 1e3,
+                rays: counts,
+                tracer: tracer.to_owned(),
+                device: format!("{want} threads"),
+            });
+        }
+    }
+    if rows.is_empty() {
+        return Err(format!("it has no rates on {want} threads"));
+    }
+    Ok(rows)
+}
+
 /// Reads rows written by [`Row::csv`] (or by earlier versions of `trace-vk bench`, whose files have
 /// no `tracer` and `device` columns: those rows are `vk` on an unnamed device; nor `ao` and
 /// `diffuse`: those rows traced none).
@@ -534,6 +611,31 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_ray_report_table_becomes_one_row_per_tracer_and_kind_at_one_thread_count() {
+        let text = "# CPU ray throughput\n\n- Scenes: bunny (69453 triangles, scenes/bunny.toml)\n\n\
+### Throughput, million rays per second\n\n\
+| scene | size | rays | kind | threads | ours bvh8 | ours bvh8 packet | Embree 1 | bvh8 / Embree 1 |\n\
+|---|---|---:|---|---:|---:|---:|---:|---:|\n\
+| bunny | 64x48 | 3072 | primary | 1 | 15.00 | - | 12.00 | 125% |\n\
+| bunny | 64x48 | 3072 | primary | 16 | 200.00 | 480.00 | 160.00 | 125% |\n\
+| bunny | 64x48 | 2000 | shadow | 16 | 100.00 | 250.00 | 125.00 | 80% |\n\n### Hit agreement\n";
+        let rows = super::ray_report_rows(text, None).unwrap();
+        // 16 threads by default: 2 kinds x 3 tracers, the ratio column left out.
+        assert_eq!(rows.len(), 6);
+        let r = rows.iter().find(|r| r.mode == "shadow" && r.tracer == "Embree" && r.method == "1").unwrap();
+        assert_eq!((r.scene.as_str(), r.triangles, r.width, r.height), ("bunny", 69453, 64, 48));
+        assert_eq!(r.rays, [0, 2000, 0, 0, 0]);
+        assert_eq!(r.device, "16 threads");
+        assert!((r.mrays() - 125.0).abs() < 1e-9);
+        assert!(rows.iter().any(|r| r.tracer == "ours" && r.method == "bvh8 packet" && r.mode == "primary"));
+        let one = super::ray_report_rows(text, Some(1)).unwrap();
+        assert_eq!(one.len(), 2);
+        assert!((one[0].mrays() - 15.0).abs() < 1e-9 && one[0].rays == [3072, 0, 0, 0, 0]);
+        assert!(super::ray_report_rows(text, Some(8)).unwrap_err().contains("no rates on 8 threads"));
+        assert!(super::ray_report_rows("# nothing", None).unwrap_err().contains("no ray report"));
+    }
+
     use super::*;
 
     #[test]
