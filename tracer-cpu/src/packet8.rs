@@ -481,11 +481,10 @@ mod avx2 {
     /// the lane `i` (in every lane of it): the children it enters.
     /// Always inlined (without AVX2 of its own, as [`smallest4`]): left to LLVM, the walk called it.
     #[inline(always)]
-    fn one_lane(b: &[[f32; WIDTH]; 6], pk: &Packet, i: __m256i, f: &Frustum, t_best: __m256) -> u32 {
+    fn one_lane(b: &[[f32; WIDTH]; 6], lane: &LaneSplat, f: &Frustum, t_best: __m256) -> u32 {
         // SAFETY: loads of 8 floats and register arithmetic under the caller's AVX2.
         unsafe {
-            let o = [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.o[a], i));
-            let inv = [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.inv[a], i));
+            let (o, inv) = (&lane.o, &lane.inv);
             let (np, fp) = (&f.near_plane, &f.far_plane);
             let d0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[np[0]].as_ptr()), o[0]), inv[0]);
             let d1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[np[1]].as_ptr()), o[1]), inv[1]);
@@ -496,6 +495,29 @@ mod avx2 {
             let e2 = _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[fp[2]].as_ptr()), o[2]), inv[2]);
             let far = _mm256_min_ps(e2, _mm256_min_ps(e1, _mm256_min_ps(e0, t_best)));
             _mm256_movemask_ps(may_hold(near, far)) as u32
+        }
+    }
+
+    /// One lane's origin and reciprocal direction in every lane, for [`one_lane`]: made again
+    /// only where a node's first live lane is another than the last node's (rarely), not with 6
+    /// lane permutations per node.
+    struct LaneSplat {
+        lane: u32,
+        o: [__m256; 3],
+        inv: [__m256; 3],
+    }
+
+    impl LaneSplat {
+        /// Lane `lane` of `pk`; the origin from `shared` where the lanes share one.
+        #[target_feature(enable = "avx2,popcnt")]
+        #[inline]
+        fn new(pk: &Packet, shared: Option<[f32; 3]>, lane: u32) -> Self {
+            let i = _mm256_set1_epi32(lane as i32);
+            let o = match shared {
+                Some(o) => o.map(splat),
+                None => [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.o[a], i)),
+            };
+            LaneSplat { lane, o, inv: [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.inv[a], i)) }
         }
     }
 
@@ -726,6 +748,7 @@ mod avx2 {
         let mut t_far = largest(st.best.t, _mm256_and_ps(group_v, st.alive));
         let mut cur = bvh.root;
         let mut cur_mask = group & _mm256_movemask_ps(st.alive) as u32;
+        let mut lane = LaneSplat::new(pk, shared, cur_mask.trailing_zeros() & 7);
         'walk: loop {
             if cur & LEAF == 0 {
                 if cur_mask.count_ones() <= SPARSE {
@@ -744,8 +767,12 @@ mod avx2 {
                     let (hit, near) = f.test(b, t_far);
                     let mut hit = hit & node.valid;
                     if hit != 0 {
-                        let i = _mm256_set1_epi32(cur_mask.trailing_zeros() as i32);
-                        let first = one_lane(b, pk, i, &f, _mm256_permutevar8x32_ps(st.best.t, i));
+                        let l = cur_mask.trailing_zeros();
+                        if l != lane.lane {
+                            lane = LaneSplat::new(pk, shared, l);
+                        }
+                        let i = _mm256_set1_epi32(l as i32);
+                        let first = one_lane(b, &lane, &f, _mm256_permutevar8x32_ps(st.best.t, i));
                         let mut masks = [0u32; WIDTH];
                         let mut m = hit;
                         while m != 0 {
