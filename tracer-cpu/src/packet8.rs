@@ -323,6 +323,11 @@ mod avx2 {
             self.len += 1;
         }
         #[inline(always)]
+        fn clear(&mut self) {
+            self.len = 0;
+            self.spill.clear();
+        }
+        #[inline(always)]
         fn pop(&mut self) -> Option<Item> {
             if self.len == 0 {
                 return None;
@@ -850,6 +855,12 @@ mod avx2 {
                 }
             }
             let alive = _mm256_movemask_ps(st.alive) as u32;
+            // A shadow packet whose lanes are all blocked ends here, not after popping every
+            // deferred subtree.
+            if ANY && alive & group == 0 {
+                items.clear();
+                return;
+            }
             loop {
                 let Some(e) = items.pop() else { return };
                 let m = e.mask & alive;
