@@ -5,6 +5,7 @@
 use crate::sweep::{PRESORTED_MAX, Presorted, bounds_at, presorted_split};
 use crate::top::{At, Top, top_units};
 use bvh_format::Node;
+use bvh_format::memory::advise_huge_pages;
 use glam::Vec3A;
 use std::mem::MaybeUninit;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
@@ -379,46 +380,16 @@ struct Ctx<'a, S: Splitter> {
 /// `fill` must write every element of the slice it is given, or panic.
 unsafe fn written<T, R>(len: usize, fill: impl FnOnce(&mut [MaybeUninit<T>]) -> R) -> (Vec<T>, R) {
     let mut v = Vec::with_capacity(len);
-    advise_huge_pages(&mut v.spare_capacity_mut()[..len]);
+    advise_huge_pages(&mut v.spare_capacity_mut()[..len], HUGE_BUFFER);
     let r = fill(&mut v.spare_capacity_mut()[..len]);
     // SAFETY: the caller's contract: `fill` returned, so it wrote all `len` elements.
     unsafe { v.set_len(len) };
     (v, r)
 }
 
-/// Asks Linux to back `buf` with transparent huge pages (2 MiB) where its memory has not been
-/// touched yet. A build of a million triangles writes about 170 MB of fresh memory (the
-/// references, the spare buffer, the slots and the layouts; glibc maps every buffer above 32 MiB
-/// afresh and unmaps it when freed), and with 4 KiB pages the kernel's fault handling took about
-/// a sixth of its CPU time; a huge page is one fault per 512 of them.
-/// Embree advises its large allocations the same way. Only a hint: where huge pages are off
-/// (`/sys/kernel/mm/transparent_hugepage/enabled` set to `never`) or the call fails, nothing
-/// changes but the speed. The contents are not touched, so the buffer's state does not change.
-fn advise_huge_pages<T>(buf: &mut [MaybeUninit<T>]) {
-    #[cfg(target_os = "linux")]
-    {
-        const HUGE: usize = 2 << 20;
-        const PAGE: usize = 4096;
-        /// `MADV_HUGEPAGE` of Linux's `<asm-generic/mman-common.h>` (the same on every architecture).
-        const MADV_HUGEPAGE: std::ffi::c_int = 14;
-        unsafe extern "C" {
-            // The C library's, which the standard library links on Linux.
-            fn madvise(addr: *mut std::ffi::c_void, len: usize, advice: std::ffi::c_int) -> std::ffi::c_int;
-        }
-        let (start, bytes) = (buf.as_mut_ptr() as usize, std::mem::size_of_val(buf));
-        // Only the large buffers: the smaller ones (the bunny's, a million triangles' leaf order)
-        // mostly come from the heap that glibc recycles, already backed.
-        if bytes < 8 * HUGE {
-            return;
-        }
-        let (lo, hi) = (start.next_multiple_of(PAGE), (start + bytes) / PAGE * PAGE);
-        // SAFETY: `[lo, hi)` lies within `buf`, memory this process owns; MADV_HUGEPAGE changes
-        // how the kernel backs it, never its contents. The result is ignored: a hint.
-        unsafe { madvise(lo as *mut std::ffi::c_void, hi - lo, MADV_HUGEPAGE) };
-    }
-    #[cfg(not(target_os = "linux"))]
-    let _ = buf;
-}
+/// The build's buffers worth huge pages: the smaller ones (the bunny's, a million triangles' leaf
+/// order) mostly come from the heap that glibc recycles, already backed.
+const HUGE_BUFFER: usize = 16 << 20;
 
 /// Builds a tree over `refs` (used as scratch space: their order afterwards means nothing) with
 /// the given splitter; `escape` asks for the escape-pointer layout too. `progress`, when given,
@@ -491,7 +462,7 @@ fn build_with<S: Splitter>(refs: &mut [PrimRef], root: NodeBounds, mut ctx: Ctx<
     // The slots too, though about half of them are never written (huge pages clear those with
     // the rest): million's CPU time fell by 10 % with only the other buffers advised, by 17 %
     // with the slots as well (docs/build-benchmark.md).
-    advise_huge_pages(&mut slots.0);
+    advise_huge_pages(&mut slots.0, HUGE_BUFFER);
     // SAFETY: `build_node` writes every element of its part of the leaf order (its leaves'
     // primitives; the children's parts split at `mid`).
     let mut order = unsafe {

@@ -8,6 +8,7 @@
 
 mod error;
 pub mod layout;
+pub mod memory;
 mod par;
 mod read;
 pub mod tree;

@@ -54,6 +54,9 @@ ALL=$(nproc)
   echo "host: $ALL cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
   echo "flags: $(grep -m1 '^flags' /proc/cpuinfo | tr ' ' '\n' | grep -E '^(avx2|fma|avx512f|avx512vl|avx512dq)$' | tr '\n' ' ')"
   echo "load: $(cut -d' ' -f1-3 /proc/loadavg)"
+  # Whether the wide BVH's madvise for huge pages (branch sr11) can change anything here: with
+  # `[always]` its arrays had them before too, with `[madvise]` only since.
+  echo "transparent huge pages: $(cat /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null || echo '?')"
   echo "date: $(date -u '+%Y-%m-%d %H:%M UTC'); git: $(git rev-parse --short HEAD 2>/dev/null || echo '?')"
 } | tee "$OUT/host.txt"
 exec > >(tee "$OUT/log.txt") 2>&1

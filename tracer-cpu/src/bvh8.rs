@@ -27,7 +27,8 @@
 //!
 //! Derived at load from the child-pair layout ([`WideBvh::new`], on one thread: 8 ms for the
 //! bunny, 0.2-0.25 s for the dragon and the million-triangle scene on the loaded 2-core VM;
-//! `examples/ray_report.rs` prints it per scene and width), not stored in the file.
+//! `examples/ray_report.rs` prints it per scene and width), not stored in the file. Arrays of
+//! 32 MiB or more ask for transparent huge pages, as Embree's allocator does (see `huge_pages`).
 
 use crate::geometry::{self, Cost, Hit, Ray, TriangleTest, may_hold};
 use crate::traverse::Stack;
@@ -230,6 +231,14 @@ enum Work {
     Range(u32, u32),
 }
 
+/// Wide BVHs of at least this many bytes ask for transparent huge pages
+/// ([`bvh_format::memory::advise_huge_pages`]) where the kernel grants them on request (`madvise`):
+/// an incoherent walk of a tree of tens of MB takes a TLB miss on most nodes and blocks with
+/// 4 KiB pages (Zen 4's L2 TLB covers 12 MB of them), a page walk before the cache miss. A tree
+/// the TLB covers gains nothing (the bunny's 5 MB traced AO and diffuse rays about 10 points
+/// slower with them on the VM, docs/cpu-benchmark.md, branch sr11).
+const HUGE_TREE: usize = 32 << 20;
+
 /// Half the surface area of a box, the SAH's measure of how likely a ray enters it.
 fn half_area(n: &Node) -> f32 {
     let d = [n.max[0] - n.min[0], n.max[1] - n.min[1], n.max[2] - n.min[2]];
@@ -258,6 +267,8 @@ impl<const W: usize> WideBvh<W> {
             out.blocks.push(TriBlock::new(tris, &[]));
             return out;
         }
+        bvh_format::memory::advise_huge_pages(out.nodes.spare_capacity_mut(), HUGE_TREE);
+        bvh_format::memory::advise_huge_pages(out.blocks.spare_capacity_mut(), HUGE_TREE);
         let plan = Plan::<W>::new(nodes);
         let mut work: Vec<(Work, Option<(usize, usize)>)> = vec![(Work::Binary(0), None)];
         let (mut indices, mut scratch) = (Vec::with_capacity(W), Vec::new());
