@@ -28,7 +28,7 @@
 //! Derived at load from the child-pair layout ([`WideBvh::new`], on one thread: 8 ms for the
 //! bunny, 0.2-0.25 s for the dragon and the million-triangle scene on the loaded 2-core VM;
 //! `examples/ray_report.rs` prints it per scene and width), not stored in the file. Arrays of
-//! 32 MiB or more ask for transparent huge pages, as Embree's allocator does (see `huge_pages`).
+//! 32 MiB or more ask for transparent huge pages, as Embree's allocator does (see `HUGE_TREE`).
 
 use crate::geometry::{self, Cost, Hit, Ray, TriangleTest, may_hold};
 use crate::traverse::Stack;

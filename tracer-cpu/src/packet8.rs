@@ -9,9 +9,9 @@
 //! entry distance (closest hit), deferred ones on a stack of (node, lane bits, distance). A leaf
 //! block is tested one triangle at a time against the lanes, or, where fewer than 1.25 times as
 //! many lanes as triangles reach it and the lanes do not share an origin, one lane at a time
-//! against all its triangles (the single-ray block test). Where all lanes share an origin (primary rays) the
-//! part of the triangle test that does not depend on the direction is computed once per block,
-//! 8 triangles at a time. A triangle test stops before its division where no lane is inside the
+//! against all its triangles (the single-ray block test). Where all lanes share an origin
+//! (primary rays) the part of the triangle test that does not depend on the direction is
+//! computed once per block, 8 triangles at a time. A triangle test stops before its division where no lane is inside the
 //! triangle's edges (most triangles of a block, for every lane). A subtree reached by at most
 //! [`SPARSE`] live lanes is finished one ray at a time on the wide BVH's single-ray traversal.
 //!
@@ -605,7 +605,7 @@ mod avx2 {
             !_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(index, _mm256_set1_epi32(-1)))) as u32 & 0xff;
         // Shared-origin lanes keep the per-triangle test, whose scalar part is done once per
         // block (one lane at a time measured no faster for them). The others go one lane at a
-        // time up to 1.25 lanes per triangle: the branch-free block test beat the per-triangle
+        // time below 1.25 lanes per triangle: the branch-free block test beat the per-triangle
         // one there (shadow rays on the VM: bunny +5%, dragon +12% against "fewer lanes than
         // triangles"; every lane alone, or below 0.5 or 0.625 per triangle, measured slower).
         if shared.is_none() && lanes.count_ones() * 4 < full.count_ones() * 5 {
@@ -663,7 +663,7 @@ mod avx2 {
 
     /// [`leaf`] one lane at a time, each against all of the block's triangles (`full`, bits) at
     /// once, as the single-ray traversal tests a block: cheaper than one test per triangle where
-    /// up to 1.25 times as many lanes as triangles reach the block.
+    /// fewer than 1.25 times as many lanes as triangles reach the block.
     #[target_feature(enable = "avx2,popcnt")]
     fn leaf_by_lane<const ANY: bool, T: TriangleTest>(
         block: &TriBlock,
