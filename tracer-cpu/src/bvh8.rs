@@ -21,8 +21,9 @@
 //! collapse enters 1-3% fewer nodes and tests 6-10% fewer triangles, and on one thread of the
 //! 2-core VM gained on 12 of the ray report's 15 rows against Embree (the million-triangle
 //! scene's 6-16 points; docs/cpu-benchmark.md, "Issue 11: the SAH collapse"). The boxes are the file's own, so every box a wide traversal tests is one the
-//! ordered traversal tests too, and the triangle test is the scalar one, lane by lane, in the same
-//! operations: both find exactly the same hits (closest hit: the nearest, ties to the lower
+//! ordered traversal tests too, entered wherever the ordered traversal enters it (and within a
+//! rounding of the exit beyond: `geometry::may_hold_wide`), and the triangle test is the scalar
+//! one, lane by lane, in the same operations: both find exactly the same hits (closest hit: the nearest, ties to the lower
 //! triangle index, whatever the order of the tests; `tests/hits.rs` holds every path to that).
 //!
 //! Derived at load from the child-pair layout ([`WideBvh::new`], on one thread: 8 ms for the
@@ -482,7 +483,8 @@ impl<const W: usize> WideBvh<W> {
                     cost.nodes += 1;
                     let lane = |k: usize| [node.bounds[k][slot], node.bounds[k + 1][slot], node.bounds[k + 2][slot]];
                     let child = Node { min: lane(0), count: 0, max: lane(3), index: 0 };
-                    if let Some(near) = geometry::slab(&child, ray, best.t) {
+                    let (near, far) = geometry::slab_range(&child, ray, best.t);
+                    if geometry::may_hold_wide(near, far) {
                         hits[n] = (near, node.child[slot]);
                         n += 1;
                     }
@@ -657,10 +659,9 @@ fn leaf_indices(nodes: &[Node], b: u32, out: &mut Vec<u32>, stack: &mut Vec<u32>
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod avx2 {
     use super::{Found, LEAF, TriBlock, WideBvh, WideNode};
-    use crate::geometry::{Cost, Hit, Ray, TriangleTest, may_hold};
+    use crate::geometry::{Cost, EXIT_SCALE, Hit, Ray, TriangleTest, may_hold};
     use crate::traverse::Stack;
     use render_spec::Intersect;
-    use render_spec::constants::T_SLACK;
     use std::arch::x86_64::*;
 
     /// One register of lanes: `__m128` (4, the 4-wide BVH's nodes and blocks) or `__m256` (8, the
@@ -850,13 +851,18 @@ pub(crate) mod avx2 {
         let zero = V::zero();
         let positive = w0.cmp::<_CMP_GE_OQ>(zero).and(w1.cmp::<_CMP_GE_OQ>(zero)).and(w2.cmp::<_CMP_GE_OQ>(zero));
         let negative = w0.cmp::<_CMP_LE_OQ>(zero).and(w1.cmp::<_CMP_LE_OQ>(zero)).and(w2.cmp::<_CMP_LE_OQ>(zero));
+        let inside = positive.or(negative);
+        // Most blocks a ray enters hold no triangle it passes through: those skip the plane
+        // normal, the distance and its division (a third of the test's work).
+        if inside.bits() == 0 {
+            return [zero; 5];
+        }
         let sum = w0.add(w1).add(w2);
         // The plane normal, as geometry::plane_normal computes it.
         let n = cross(&edge(&b.p, 1), &edge(&b.p, 2));
         let den = dot(&n, d);
         let t = dot(&n, &a0).div(den);
-        let mut m = positive.or(negative);
-        m = m.and(sum.cmp::<_CMP_NEQ_OQ>(zero));
+        let mut m = inside.and(sum.cmp::<_CMP_NEQ_OQ>(zero));
         m = m.and(den.cmp::<_CMP_NEQ_OQ>(zero));
         m = m.and(t.cmp::<_CMP_GT_OQ>(t_min));
         m = m.and(t.cmp::<_CMP_LE_OQ>(t_max));
@@ -972,15 +978,19 @@ pub(crate) mod avx2 {
         let near_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { 3 + a } else { a });
         let far_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { a } else { 3 + a });
         let zero = V::zero();
-        let slack = V::splat(T_SLACK);
+        let exit_scale = V::splat(EXIT_SCALE);
         let t_min_v = V::splat(t_min);
         let mut best = Found { t: t_max, tri, w1: 0.0, w2: 0.0, sum: 1.0 };
         let mut found = false;
+        // Counted here and added to `cost` once per ray: a local stays in a register.
+        let mut work = Cost::default();
         stack.clear();
         let mut cur = start;
         loop {
             if cur & LEAF == 0 {
-                let node = &bvh.nodes[cur as usize];
+                debug_assert!((cur as usize) < bvh.nodes.len());
+                // SAFETY: the collapse refers only to nodes it made.
+                let node = unsafe { bvh.nodes.get_unchecked(cur as usize) };
                 let b = &node.bounds;
                 let t_best = V::splat(best.t);
                 let near = dist(&b[near_plane[0]], &r, 0).max(zero);
@@ -989,13 +999,11 @@ pub(crate) mod avx2 {
                 let far = dist(&b[far_plane[0]], &r, 0).min(t_best);
                 let far = dist(&b[far_plane[1]], &r, 1).min(far);
                 let far = dist(&b[far_plane[2]], &r, 2).min(far);
-                // `may_hold(near, far)`: near <= far + |far| * T_SLACK, bit for bit without the
-                // `|far|`: `near` is 0 or more (the `max` with 0 above drops NaN), so where `far`
-                // is negative both sides are below `near` (`far + far * T_SLACK` too), and where
-                // it is 0 or more (-0 included, whose sum compares equal) `far` is `|far|`.
-                let ok = near.cmp::<_CMP_LE_OQ>(far.add(far.mul(slack)));
+                // `geometry::may_hold_wide(near, far)` (`near` is 0 or more: the `max` with 0
+                // above drops NaN).
+                let ok = near.cmp::<_CMP_LE_OQ>(far.mul(exit_scale));
                 let mut mask = ok.bits() & node.valid;
-                cost.nodes += node.valid.count_ones();
+                work.nodes += node.valid.count_ones();
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
@@ -1053,17 +1061,23 @@ pub(crate) mod avx2 {
                     continue;
                 }
             } else {
-                let block = &bvh.blocks[(cur & !LEAF) as usize];
-                if leaf::<ANY, T, V, W>(block, &r, t_min_v, &mut best, cost) {
+                debug_assert!(((cur & !LEAF) as usize) < bvh.blocks.len());
+                // SAFETY: the collapse refers only to blocks it made.
+                let block = unsafe { bvh.blocks.get_unchecked((cur & !LEAF) as usize) };
+                if leaf::<ANY, T, V, W>(block, &r, t_min_v, &mut best, &mut work) {
                     found = true;
                     if ANY {
+                        *cost += work;
                         return Some(best);
                     }
                 }
             }
             loop {
                 match stack.pop() {
-                    None => return found.then_some(best),
+                    None => {
+                        *cost += work;
+                        return found.then_some(best);
+                    }
                     Some((c, near)) if may_hold(near, best.t) => {
                         cur = c;
                         break;
@@ -1079,9 +1093,8 @@ pub(crate) mod avx2 {
 mod avx512 {
     use super::avx2::{Lanes, Vector, leaf, prefetch};
     use super::{Bvh8, Found, LEAF, WIDTH};
-    use crate::geometry::{Cost, Ray, TriangleTest, may_hold};
+    use crate::geometry::{Cost, EXIT_SCALE, Ray, TriangleTest, may_hold};
     use crate::traverse::Stack;
-    use render_spec::constants::T_SLACK;
     use std::arch::x86_64::*;
 
     /// Lanes 0-7 from `lo`, 8-15 from `hi`.
@@ -1120,7 +1133,7 @@ mod avx512 {
         let near_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { 3 + a } else { a });
         let far_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { a } else { 3 + a });
         let sign = _mm256_set1_ps(-0.0);
-        let slack = _mm256_set1_ps(T_SLACK);
+        let exit_scale = _mm256_set1_ps(EXIT_SCALE);
         let t_min_v = _mm256_set1_ps(t_min);
         let mut best = Found { t: t_max, tri, w1: 0.0, w2: 0.0, sum: 1.0 };
         let mut found = false;
@@ -1138,9 +1151,8 @@ mod avx512 {
                 }
                 let near = _mm512_castps512_ps256(acc);
                 let far = _mm256_xor_ps(_mm512_extractf32x8_ps::<1>(acc), sign);
-                // `may_hold(near, far)`: near <= far + |far| * T_SLACK, as the AVX2 traversal
-                // writes it without the `|far|` (`near` is 0 or more).
-                let ok = _mm256_cmp_ps_mask::<_CMP_LE_OQ>(near, _mm256_add_ps(far, _mm256_mul_ps(far, slack)));
+                // `geometry::may_hold_wide(near, far)`, as the AVX2 traversal.
+                let ok = _mm256_cmp_ps_mask::<_CMP_LE_OQ>(near, _mm256_mul_ps(far, exit_scale));
                 let mask = ok as u32 & node.valid;
                 cost.nodes += node.valid.count_ones();
                 if mask != 0 {

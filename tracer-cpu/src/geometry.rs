@@ -71,6 +71,14 @@ pub fn may_hold(near: f32, t: f32) -> bool {
 /// in the same order.
 #[inline(always)]
 pub fn slab(node: &Node, ray: &Ray, t_max: f32) -> Option<f32> {
+    let (near, far) = slab_range(node, ray, t_max);
+    may_hold(near, far).then_some(near)
+}
+
+/// The entry and exit distances [`slab`] compares: the interval of `[0, t_max]` inside the box,
+/// empty where `near > far`, before the slack.
+#[inline(always)]
+pub fn slab_range(node: &Node, ray: &Ray, t_max: f32) -> (f32, f32) {
     let lo = (Vec3::from(node.min) - ray.origin) * ray.inv_dir;
     let hi = (Vec3::from(node.max) - ray.origin) * ray.inv_dir;
     let mut near = 0.0f32;
@@ -85,8 +93,25 @@ pub fn slab(node: &Node, ray: &Ray, t_max: f32) -> Option<f32> {
         near = if enter > near { enter } else { near };
         far = if exit < far { exit } else { far };
     }
-    may_hold(near, far).then_some(near)
+    (near, far)
 }
+
+/// The wide traversals' form of [`may_hold`] on a box's exit distance (`bvh8`: one multiply
+/// instead of a multiply and an add on the path from a node's boxes to the next node's address).
+/// It accepts every box [`may_hold`] accepts, so that they find every hit the binary traversals
+/// find: for `far` of 0 or more, the exact `far * (1 + 2 T_SLACK)` is at least the exact
+/// `far + round(far * T_SLACK)` (the product's rounding error is at most the product, subnormals
+/// included), `1 + 2 T_SLACK` is a float, and rounding to nearest is monotonic; a negative or
+/// negative-zero `far` gives the same answer in both forms, since `near` is never below 0. A box
+/// is entered where `near` lies within a rounding above `may_hold`'s bound: extra work, no other
+/// hit.
+#[inline(always)]
+pub fn may_hold_wide(near: f32, far: f32) -> bool {
+    near <= far * EXIT_SCALE
+}
+
+/// `1 + 2 T_SLACK`, exactly ([`may_hold_wide`]).
+pub const EXIT_SCALE: f32 = 1.0 + 2.0 * T_SLACK;
 
 /// The edge function of the edge from `a` to `b` (vertices relative to the ray origin) for the
 /// direction `d`: `dot(cross(a - b, a + b), d)`, which is twice `dot(cross(a, b), d)`, the signed
@@ -141,8 +166,8 @@ pub fn intersect(tri: &Triangle, ray: &Ray, t_min: f32, t_max: f32) -> Option<(f
 }
 
 /// The (unnormalised) normal of the triangle's plane that [`intersect`] measures distances with:
-/// `cross(p1 - p0, p2 - p0)`, operation by operation. A triangle's alone, so the wide BVH's leaf
-/// blocks store it (`bvh8`), and the packet path computes it once per triangle, in this order.
+/// `cross(p1 - p0, p2 - p0)`, operation by operation. A triangle's alone: the wide BVH's leaf
+/// test computes it in its lanes (`bvh8`), the packet path once per triangle, in this order.
 #[inline(always)]
 pub fn plane_normal(tri: &Triangle) -> [f32; 3] {
     let (p0, p1, p2) = (tri.p0, tri.p1, tri.p2);
@@ -312,6 +337,36 @@ mod tests {
         assert_eq!(ours_broken, 0, "contracted edge functions lost their antisymmetry");
         // The check can fail: the plain cross product loses it under contraction.
         assert!(plain_broken > 1000, "only {plain_broken} plain cross products broke");
+    }
+
+    /// Every exit distance's largest accepted entry under [`may_hold`] is accepted by
+    /// [`may_hold_wide`] too: exit distances over the whole float range (every 509th bit pattern
+    /// of the positive floats, subnormals, zeros and infinity included, and their negations).
+    #[test]
+    fn the_wide_box_test_accepts_every_box_the_scalar_test_accepts() {
+        let mut fars: Vec<f32> = (0..0x7f80_0000u32).step_by(509).map(f32::from_bits).collect();
+        fars.extend([0.0, -0.0, f32::MIN_POSITIVE, f32::MAX, f32::INFINITY, 1.0, 3.0e-41]);
+        let negated: Vec<f32> = fars.iter().map(|f| -f).collect();
+        fars.extend(negated);
+        let mut checked = 0;
+        for far in fars {
+            // `near` is 0 or more in both traversals: the largest `may_hold` accepts, if any (none
+            // for a negative `far`, whose bound is negative or, for -inf, NaN).
+            let bound = far + far.abs() * T_SLACK;
+            if bound.is_nan() || bound < 0.0 {
+                assert!(!may_hold(0.0, far), "{far:e}");
+                assert!(!may_hold_wide(0.0, far), "{far:e}");
+                continue;
+            }
+            assert!(may_hold(bound, far), "{far:e}");
+            assert!(may_hold_wide(bound, far), "{far:e}: {bound:e} accepted by the scalar test only");
+            checked += 1;
+        }
+        assert!(checked > 4_000_000, "{checked}");
+        // It accepts more where it must not matter: within a few roundings above the bound.
+        let far = 1.0f32;
+        let above = f32::from_bits((far + far * T_SLACK).to_bits() + 1);
+        assert!(!may_hold(above, far) && may_hold_wide(above, far));
     }
 
     #[test]

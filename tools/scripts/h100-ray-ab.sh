@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# Builds of the ray report side by side on the 16-core host: each VARIANT's ray report run in
+# turn, ROUNDS times, so that a tracer-cpu change is judged by its ratio to Embree measured in
+# the same run, and by that ratio's median over rounds against the other variants' (the host
+# drifts by several points between runs of one binary: docs/cpu-benchmark.md).
+#
+# VARIANTS: space-separated NAME or NAME:VAR=VALUE[,VAR=VALUE] (environment for that run); NAME
+# picks .bin/ray_report_NAME. Env: ENGINES (default "ours bvh8,Embree 1"), KINDS (default all),
+# SCENES (default bunny dragon million), SIZE (default 1920x1440), THREADS (default 1,16), REPS
+# (default 5), ROUNDS (default 2), COLUMN (the ratio column's header, default "bvh8 / Embree 1").
+# Carry .bin with ray_report_NAME (or ray_report_NAME.xz) and embree.txz (h100-simd.sh says how
+# to make them). Writes $OUT: each run's Markdown, and summary.md (per row: each variant's median ratio).
+set -uo pipefail
+OUT=${OUT:-out/h100-ray-ab}
+VARIANTS=${VARIANTS:?name the variants, e.g. VARIANTS="base new"}
+ENGINES=${ENGINES:-ours bvh8,Embree 1}
+KINDS=${KINDS:-primary,shadow,secondary,ao,diffuse}
+SCENES=${SCENES:-bunny dragon million}
+SIZE=${SIZE:-1920x1440}
+THREADS=${THREADS:-1,16}
+REPS=${REPS:-5}
+ROUNDS=${ROUNDS:-2}
+COLUMN=${COLUMN:-bvh8 / Embree 1}
+mkdir -p "$OUT"
+if [ -f .bin/embree.txz ] && [ ! -d .bin/embree ]; then tar xJf .bin/embree.txz -C .bin; fi
+for f in .bin/ray_report_*.xz; do [ -e "$f" ] && xz -d "$f" && chmod +x "${f%.xz}"; done
+if [ -d .bin/embree/usr/lib/x86_64-linux-gnu ]; then
+  export LD_LIBRARY_PATH=$PWD/.bin/embree/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
+fi
+{ nproc; uptime; grep -m1 "model name" /proc/cpuinfo; cat /sys/kernel/mm/transparent_hugepage/enabled; } >"$OUT/host.txt"
+ARGS=()
+for s in $SCENES; do ARGS+=(--scene "$s=scenes/$s.toml"); done
+for r in $(seq 1 "$ROUNDS"); do
+  for v in $VARIANTS; do
+    name=${v%%:*}
+    envs=()
+    [ "$name" != "$v" ] && IFS=, read -ra envs <<<"${v#*:}"
+    tag=$(echo "$v" | tr ':=,' '_-_')
+    echo "== $tag $r $(date -u +%H:%M:%S) load $(cut -d' ' -f1 /proc/loadavg)"
+    env "${envs[@]}" ".bin/ray_report_$name" "${ARGS[@]}" --sizes "$SIZE" --threads "$THREADS" --reps "$REPS" \
+      --kinds "$KINDS" --engines "$ENGINES" --out "$OUT/$tag-$r.md" >"$OUT/$tag-$r.log" 2>&1 ||
+      { echo "$tag $r FAILED"; tail -5 "$OUT/$tag-$r.log"; }
+  done
+done
+# The targets table: columns scene, size, kind, threads, then the ratios by header.
+{
+  printf "| scene | kind | threads |"
+  for v in $VARIANTS; do printf " %s |" "$v"; done
+  printf "\n|---|---|--:|"
+  for v in $VARIANTS; do printf -- "--:|"; done
+  printf "\n"
+  for v in $VARIANTS; do
+    tag=$(echo "$v" | tr ':=,' '_-_')
+    for f in "$OUT/$tag"-*.md; do
+      awk -F'|' -v col="$COLUMN" -v tag="$v" '
+        /^\| scene \| size \| kind \| threads \|/ && !done { for (i = 1; i <= NF; i++) if ($i ~ "^ *" col " *$") c = i; on = c > 0; next }
+        on && /^\|---/ { next }
+        on && /^\|/ { gsub(/ /, "", $2); gsub(/ /, "", $4); gsub(/ /, "", $5); gsub(/[ %]/, "", $c); print tag "," $2 "," $4 "," $5 "," $c; next }
+        on { on = 0; done = 1 }' "$f"
+    done
+  done | awk -F, -v vars="$VARIANTS" '
+    { k = $2 "|" $3 "|" $4; r[$1, k] = r[$1, k] " " $5; if (!(k in seen)) { seen[k] = 1; o[++n] = k } }
+    function med(s,   a, c, i, j, x) { c = split(s, a, " "); if (!c) return "-"; for (i = 1; i <= c; i++) for (j = i + 1; j <= c; j++) if (a[j] + 0 < a[i] + 0) { x = a[i]; a[i] = a[j]; a[j] = x }; return c % 2 ? a[(c + 1) / 2] "%" : (a[c / 2] + a[c / 2 + 1]) / 2 "%" }
+    END { m = split(vars, vs, " "); for (i = 1; i <= n; i++) { split(o[i], p, "|"); printf "| %s | %s | %s |", p[1], p[2], p[3]; for (j = 1; j <= m; j++) printf " %s (%s) |", med(r[vs[j], o[i]]), substr(r[vs[j], o[i]], 2); printf "\n" } }'
+} | tee "$OUT/summary.md"
