@@ -1,20 +1,20 @@
 //! Coherent packets of 8 rays (a 4 x 2 pixel block) through the wide BVH ([`crate::bvh8`]) with
-//! AVX2, the way Embree's `rtcIntersect8` walks a coherent packet. The lanes are split by the
-//! signs of their directions (one walk per octant; a lane with an axis-parallel direction goes
-//! alone). Per walk a frustum bounds the lanes' origins and reciprocal directions; at a node one
-//! 8-wide sequence tests all 8 children against the frustum (no child a lane enters fails it),
-//! one more tests them exactly against the first live lane; an inner child that lane enters takes
-//! all the node's lanes along, the other children only the lanes their exact per-lane test lets
-//! in, and a leaf block always only those. Children are visited nearest first by the frustum's
-//! entry distance (closest hit), deferred ones on a stack of (node, lane bits, distance). A leaf
-//! block is tested one triangle at a time against the lanes, or, where the lanes do not share an
-//! origin and that takes fewer vector tests (by 1.25 times), one lane at a time against all its
-//! triangles (the single-ray block test), or 2 or 4 lanes at a time against a block of at most 4
-//! or 2 triangles. Where all lanes share an origin (primary rays) the part of the triangle test
-//! that does not depend on the direction is computed once per block, 8 triangles at a time. A
-//! triangle test stops before its division where no lane is inside the triangle's edges (most
-//! triangles of a block, for every lane) or, for lanes without a shared origin, where none has
-//! the triangle's plane ahead (a shadow ray's own triangle). A subtree reached by at most
+//! AVX2, the way Embree's `rtcIntersect8` walks a coherent packet. The lanes are split by the signs
+//! of their directions (one walk per octant; a lane with an axis-parallel direction goes alone).
+//! Per walk a frustum bounds the lanes' origins and reciprocal directions; at a node one 8-wide
+//! sequence tests all 8 children against the frustum (no child a lane enters fails it), one more
+//! tests them exactly against the first live lane; an inner child that lane enters takes all the
+//! node's lanes along, the other children only the lanes their exact per-lane test lets in, and a
+//! leaf block always only those. Children are visited nearest first by the frustum's entry distance
+//! (closest hit; any hit: last to first, as Embree), deferred ones on a stack of (node, lane bits,
+//! distance). A leaf block is tested one triangle at a time against the lanes, or, where the lanes
+//! do not share an origin and that takes fewer vector tests (by 1.25 times), one lane at a time
+//! against all its triangles (the single-ray block test), or 2 or 4 lanes at a time against a block
+//! of at most 4 or 2 triangles. Where all lanes share an origin (primary rays) the part of the
+//! triangle test that does not depend on the direction is computed once per block, 8 triangles at a
+//! time. A triangle test stops before its division where no lane is inside the triangle's edges
+//! (most triangles of a block, for every lane) or, for lanes without a shared origin, where none
+//! has the triangle's plane ahead (a shadow ray's own triangle). A subtree reached by at most
 //! [`SPARSE`] live lanes is finished one ray at a time on the wide BVH's single-ray traversal.
 //!
 //! Every lane computes what the scalar path computes (the slab test and the triangle tests of
@@ -752,8 +752,9 @@ mod avx2 {
     /// [`crate::geometry::intersect`] on 8 (ray, triangle) pairs, lane by lane its operations in
     /// its order (as `bvh8::avx2::watertight`): vertices `p[vertex][axis]`, the rays' origins `o`
     /// and directions `d`, each lane one pair. Returns the lanes of `live` (bits) that hit in
-    /// `(0, t_max]` with (t, w1, w2, sum), or `None`, before the plane normal and the division,
-    /// where no lane of `live` is inside the triangle's edges (most pairs).
+    /// `(0, t_max]` with (t, w1, w2, sum), or `None`, before the plane's distance, where no lane
+    /// of `live` is inside the triangle's edges (most pairs), or, before the division, where none
+    /// has the plane ahead.
     ///
     /// Inside is taken as `min(w) >= 0 || max(w) <= 0` (7 operations, not the scalar test's 11
     /// compares and logic): without a NaN the same, and a NaN edge function makes the sum NaN,
