@@ -237,10 +237,14 @@ mod avx2 {
         let w1 = dot(d, c(1));
         let w2 = dot(d, c(2));
         let zero = _mm256_setzero_ps();
-        // Inside as `min(w) >= 0 || max(w) <= 0`: see `packet8::avx2::watertight_in`.
-        let lo = _mm256_min_ps(_mm256_min_ps(w0, w1), w2);
-        let hi = _mm256_max_ps(_mm256_max_ps(w0, w1), w2);
-        let (positive, negative) = (_mm256_cmp_ps::<_CMP_GE_OQ>(lo, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(hi, zero));
+        let positive = _mm256_and_ps(
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_GE_OQ>(w1, zero)),
+            _mm256_cmp_ps::<_CMP_GE_OQ>(w2, zero),
+        );
+        let negative = _mm256_and_ps(
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(w1, zero)),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
+        );
         // Most triangles of a block are missed by every lane: those end before the division.
         let inside = _mm256_and_ps(_mm256_or_ps(positive, negative), mv);
         if _mm256_movemask_ps(inside) == 0 {
