@@ -1,18 +1,20 @@
 //! Coherent packets of 8 rays (a 4 x 2 pixel block) through the wide BVH ([`crate::bvh8`]) with
-//! AVX2, the way Embree's `rtcIntersect8` walks a coherent packet. The lanes are split by the
-//! signs of their directions (one walk per octant; a lane with an axis-parallel direction goes
-//! alone). Per walk a frustum bounds the lanes' origins and reciprocal directions; at a node one
-//! 8-wide sequence tests all 8 children against the frustum (no child a lane enters fails it),
-//! one more tests them exactly against the first live lane; an inner child that lane enters takes
-//! all the node's lanes along, the other children only the lanes their exact per-lane test lets
-//! in, and a leaf block always only those. Children are visited nearest first by the frustum's
-//! entry distance (closest hit), deferred ones on a stack of (node, lane bits, distance). A leaf
-//! block is tested one triangle at a time against the lanes, or, where fewer than 1.25 times as
-//! many lanes as triangles reach it and the lanes do not share an origin, one lane at a time
-//! against all its triangles (the single-ray block test). Where all lanes share an origin
-//! (primary rays) the part of the triangle test that does not depend on the direction is
-//! computed once per block, 8 triangles at a time. A triangle test stops before its division where no lane is inside the
-//! triangle's edges (most triangles of a block, for every lane). A subtree reached by at most
+//! AVX2, the way Embree's `rtcIntersect8` walks a coherent packet. The lanes are split by the signs
+//! of their directions (one walk per octant; a lane with an axis-parallel direction goes alone).
+//! Per walk a frustum bounds the lanes' origins and reciprocal directions; at a node one 8-wide
+//! sequence tests all 8 children against the frustum (no child a lane enters fails it), one more
+//! tests them exactly against the first live lane; an inner child that lane enters takes all the
+//! node's lanes along, the other children only the lanes their exact per-lane test lets in, and a
+//! leaf block always only those. Children are visited nearest first by the frustum's entry distance
+//! (closest hit; any hit: last to first, as Embree), deferred ones on a stack of (node, lane bits,
+//! distance). A leaf block is tested one triangle at a time against the lanes, or, where the lanes
+//! do not share an origin and that takes fewer vector tests (by 1.25 times), one lane at a time
+//! against all its triangles (the single-ray block test), or 2 or 4 lanes at a time against a block
+//! of at most 4 or 2 triangles. Where all lanes share an origin (primary rays) the part of the
+//! triangle test that does not depend on the direction is computed once per block, 8 triangles at a
+//! time. A triangle test stops before its division where no lane is inside the triangle's edges
+//! (most triangles of a block, for every lane) or, for lanes without a shared origin, where none
+//! has the triangle's plane ahead (a shadow ray's own triangle). A subtree reached by at most
 //! [`SPARSE`] live lanes is finished one ray at a time on the wide BVH's single-ray traversal.
 //!
 //! Every lane computes what the scalar path computes (the slab test and the triangle tests of
@@ -111,9 +113,7 @@ mod avx2 {
     use crate::geometry;
     use crate::geometry::Hit;
     use crate::geometry::{Cost, TriangleTest};
-    use crate::packet::avx2::{
-        Best, Packet, add, any, count, intersect_in, keep, may_hold, mul, packet_of, splat, sub, test,
-    };
+    use crate::packet::avx2::{Best, Packet, add, any, count, keep, may_hold, mul, packet_of, splat, sub, test};
     use crate::packet::{Entry, LANES, Rays, Results};
     use crate::traverse::Stack;
     use render_spec::Intersect;
@@ -604,12 +604,32 @@ mod avx2 {
         let full =
             !_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(index, _mm256_set1_epi32(-1)))) as u32 & 0xff;
         // Shared-origin lanes keep the per-triangle test, whose scalar part is done once per
-        // block (one lane at a time measured no faster for them). The others go one lane at a
-        // time below 1.25 lanes per triangle: the branch-free block test beat the per-triangle
-        // one there (shadow rays on the VM: bunny +5%, dragon +12% against "fewer lanes than
-        // triangles"; every lane alone, or below 0.5 or 0.625 per triangle, measured slower).
-        if shared.is_none() && lanes.count_ones() * 4 < full.count_ones() * 5 {
-            return leaf_by_lane::<ANY, T>(block, full, pk, lanes, st);
+        // block (one lane at a time measured no faster for them). The others go one lane (or
+        // lane group) at a time below 1.25 vector tests per triangle: the branch-free block test
+        // beat the per-triangle one there (shadow rays on the VM: bunny +5%, dragon +12% against
+        // "fewer lanes than triangles"; every lane alone, or below 0.5 or 0.625 per triangle,
+        // measured slower; by instruction counts 0.5 to 2 and always are within 4% of 1.25).
+        if shared.is_none() {
+            let (n_lanes, n_tris) = (lanes.count_ones(), full.count_ones());
+            if T::KIND == Intersect::Watertight {
+                // Vector tests of the block: lanes per test by the lanes the triangles fill.
+                let slot = if full < 1 << 2 {
+                    2
+                } else if full < 1 << 4 {
+                    4
+                } else {
+                    8
+                };
+                if n_lanes.div_ceil(WIDTH as u32 / slot) * 4 < n_tris * 5 {
+                    return match slot {
+                        2 => leaf_grouped::<ANY, 2>(block, full, pk, lanes, st),
+                        4 => leaf_grouped::<ANY, 4>(block, full, pk, lanes, st),
+                        _ => leaf_grouped::<ANY, 8>(block, full, pk, lanes, st),
+                    };
+                }
+            } else if n_lanes * 4 < n_tris * 5 {
+                return leaf_by_lane::<ANY, T>(block, full, pk, lanes, st);
+            }
         }
         let mut mv = mask_of(lanes);
         let mut won = _mm256_setzero_ps();
@@ -640,9 +660,11 @@ mod avx2 {
                     None => continue,
                 },
                 None if T::KIND == Intersect::Watertight => {
-                    let n = [n[0][l], n[1][l], n[2][l]];
-                    match intersect_in(&block.triangle(l), n, pk, mv, _mm256_setzero_ps(), st.best.t) {
-                        Some(found) => keep(found, i, mv, &mut st.best),
+                    let v = |k: usize| [splat(block.p[k][0][l]), splat(block.p[k][1][l]), splat(block.p[k][2][l])];
+                    let n = [splat(n[0][l]), splat(n[1][l]), splat(n[2][l])];
+                    match watertight_in(&[v(0), v(1), v(2)], &n, &pk.o, &pk.d, _mm256_movemask_ps(mv) as u32, st.best.t)
+                    {
+                        Some((hit, [t, w1, w2, sum])) => keep([mask_of(hit), t, w1, w2, sum], i, mv, &mut st.best),
                         None => continue,
                     }
                 }
@@ -663,7 +685,8 @@ mod avx2 {
 
     /// [`leaf`] one lane at a time, each against all of the block's triangles (`full`, bits) at
     /// once, as the single-ray traversal tests a block: cheaper than one test per triangle where
-    /// fewer than 1.25 times as many lanes as triangles reach the block.
+    /// fewer than 1.25 times as many lanes as triangles reach the block. Möller-Trumbore only
+    /// ([`leaf_grouped`] takes the edge-consistent test).
     #[target_feature(enable = "avx2,popcnt")]
     fn leaf_by_lane<const ANY: bool, T: TriangleTest>(
         block: &TriBlock,
@@ -719,6 +742,196 @@ mod avx2 {
                     _mm256_castsi256_ps(_mm256_set1_epi32(block.index[k] as i32)),
                     into,
                 ));
+            }
+        }
+        st.n_tris = _mm256_add_epi32(st.n_tris, _mm256_and_si256(_mm256_castps_si256(mask_of(lanes)), n));
+        let won = mask_of(won);
+        if ANY {
+            st.alive = _mm256_andnot_ps(won, st.alive);
+        }
+        st.hit_any = _mm256_or_ps(st.hit_any, won);
+        won
+    }
+
+    /// [`crate::geometry::intersect`] on 8 (ray, triangle) pairs, lane by lane its operations in
+    /// its order (as `bvh8::avx2::watertight`): vertices `p[vertex][axis]`, the rays' origins `o`
+    /// and directions `d`, each lane one pair. Returns the lanes of `live` (bits) that hit in
+    /// `(0, t_max]` with (t, w1, w2, sum), or `None`, before the plane's distance, where no lane
+    /// of `live` is inside the triangle's edges (most pairs), or, before the division, where none
+    /// has the plane ahead.
+    ///
+    /// Inside is taken as `min(w) >= 0 || max(w) <= 0` (7 operations, not the scalar test's 11
+    /// compares and logic): without a NaN the same, and a NaN edge function makes the sum NaN,
+    /// which fails `sum != 0` in both forms, so the hits are the scalar test's bit for bit.
+    /// Always inlined, without AVX2 of its own (as [`slab_signed`]).
+    #[inline(always)]
+    fn watertight_in(
+        p: &[[__m256; 3]; 3],
+        n: &[__m256; 3],
+        o: &[__m256; 3],
+        d: &[__m256; 3],
+        live: u32,
+        t_max: __m256,
+    ) -> Option<(u32, [__m256; 4])> {
+        // SAFETY: register arithmetic under the caller's AVX2.
+        unsafe {
+            let a0 = [sub(p[0][0], o[0]), sub(p[0][1], o[1]), sub(p[0][2], o[2])];
+            let a1 = [sub(p[1][0], o[0]), sub(p[1][1], o[1]), sub(p[1][2], o[2])];
+            let a2 = [sub(p[2][0], o[0]), sub(p[2][1], o[1]), sub(p[2][2], o[2])];
+            let w2 = edge_function(&a0, &a1, d);
+            let w0 = edge_function(&a1, &a2, d);
+            let w1 = edge_function(&a2, &a0, d);
+            let zero = _mm256_setzero_ps();
+            let lo = _mm256_min_ps(_mm256_min_ps(w0, w1), w2);
+            let hi = _mm256_max_ps(_mm256_max_ps(w0, w1), w2);
+            let inside = _mm256_or_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(lo, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(hi, zero));
+            if _mm256_movemask_ps(inside) as u32 & live == 0 {
+                return None;
+            }
+            let sum = add(add(w0, w1), w2);
+            let den = add(add(mul(n[0], d[0]), mul(n[1], d[1])), mul(n[2], d[2]));
+            let num = add(add(mul(n[0], a0[0]), mul(n[1], a0[1])), mul(n[2], a0[2]));
+            // `t = num / den` is above 0 only where num and den have one sign (a quotient's sign
+            // is theirs, zeros and infinities included): the pairs inside the edges of a
+            // triangle behind the origin (a shadow ray's own surface) end here, before the
+            // division.
+            if _mm256_movemask_ps(_mm256_andnot_ps(_mm256_xor_ps(num, den), inside)) as u32 & live == 0 {
+                return None;
+            }
+            let t = _mm256_div_ps(num, den);
+            let mut m = inside;
+            m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(sum, zero));
+            m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_NEQ_OQ>(den, zero));
+            m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_GT_OQ>(t, zero));
+            m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
+            Some((_mm256_movemask_ps(m) as u32 & live, [t, w1, w2, sum]))
+        }
+    }
+
+    /// `y * z' - z * y'` and so on: [`crate::geometry::edge_function`]'s cross product, in its order.
+    #[inline(always)]
+    fn cross(a: &[__m256; 3], b: &[__m256; 3]) -> [__m256; 3] {
+        [
+            sub(mul(a[1], b[2]), mul(a[2], b[1])),
+            sub(mul(a[2], b[0]), mul(a[0], b[2])),
+            sub(mul(a[0], b[1]), mul(a[1], b[0])),
+        ]
+    }
+
+    /// [`crate::geometry::edge_function`], operation by operation.
+    #[inline(always)]
+    fn edge_function(a: &[__m256; 3], b: &[__m256; 3], d: &[__m256; 3]) -> __m256 {
+        let e = [sub(a[0], b[0]), sub(a[1], b[1]), sub(a[2], b[2])];
+        let s = [add(a[0], b[0]), add(a[1], b[1]), add(a[2], b[2])];
+        let c = cross(&e, &s);
+        add(add(mul(d[0], c[0]), mul(d[1], c[1])), mul(d[2], c[2]))
+    }
+
+    /// Row `r` of a leaf block (8 triangles' coordinate) as `SLOT`-lane groups: the whole row
+    /// (`SLOT` 8), or its first 4 or 2 lanes repeated in every group.
+    #[inline(always)]
+    fn row<const SLOT: usize>(r: &[f32; WIDTH]) -> __m256 {
+        // SAFETY: reads of 8, 4 or 2 floats of `r`; AVX under the caller's AVX2.
+        unsafe {
+            match SLOT {
+                8 => _mm256_loadu_ps(r.as_ptr()),
+                4 => _mm256_broadcast_ps(&*r.as_ptr().cast::<__m128>()),
+                _ => _mm256_castpd_ps(_mm256_broadcast_sd(&*r.as_ptr().cast::<f64>())),
+            }
+        }
+    }
+
+    /// [`leaf`] for lanes without a shared origin with the edge-consistent test, one lane per
+    /// group of `SLOT` vector lanes against the block's triangles (all in its first `SLOT` lanes):
+    /// one lane at a time against the whole block where `SLOT` is 8, as the single-ray traversal
+    /// tests a block, and 2 or 4 lanes at a time against a block of at most 4 or 2 triangles, so
+    /// that no vector lane is spent on an empty slot of a small block. Per lane the same hit as
+    /// [`leaf_by_lane`] (the nearest of the block, ties to the lower index; for `ANY` the first
+    /// that beats the lane's best).
+    #[target_feature(enable = "avx2,popcnt")]
+    fn leaf_grouped<const ANY: bool, const SLOT: usize>(
+        block: &TriBlock,
+        full: u32,
+        pk: &Packet,
+        lanes: u32,
+        st: &mut State,
+    ) -> __m256 {
+        let per = WIDTH / SLOT;
+        let mut won = 0u32;
+        let mut m = lanes;
+        let n = _mm256_set1_epi32(full.count_ones() as i32);
+        let (t_best, tri_best) = (store(st.best.t), store_i(st.best.tri));
+        let p = [
+            [row::<SLOT>(&block.p[0][0]), row::<SLOT>(&block.p[0][1]), row::<SLOT>(&block.p[0][2])],
+            [row::<SLOT>(&block.p[1][0]), row::<SLOT>(&block.p[1][1]), row::<SLOT>(&block.p[1][2])],
+            [row::<SLOT>(&block.p[2][0]), row::<SLOT>(&block.p[2][1]), row::<SLOT>(&block.p[2][2])],
+        ];
+        // The plane normals, as geometry::plane_normal computes them.
+        let e1 = [sub(p[1][0], p[0][0]), sub(p[1][1], p[0][1]), sub(p[1][2], p[0][2])];
+        let e2 = [sub(p[2][0], p[0][0]), sub(p[2][1], p[0][1]), sub(p[2][2], p[0][2])];
+        let normal = cross(&e1, &e2);
+        // One byte of 1 per vector lane of a group.
+        let ones = (u64::MAX / 255) >> (64 - 8 * SLOT);
+        while m != 0 {
+            // The group's lanes, the last repeated where fewer are left.
+            let mut ids = [0u32; WIDTH];
+            let (mut bytes, mut live) = (0u64, 0u32);
+            let mut g = 0;
+            while g < per && m != 0 {
+                let lane = m.trailing_zeros();
+                m &= m - 1;
+                ids[g] = lane;
+                bytes |= (u64::from(lane) * ones) << (8 * SLOT * g);
+                live |= full << (SLOT * g);
+                g += 1;
+            }
+            let i = if SLOT == WIDTH {
+                _mm256_set1_epi32(ids[0] as i32)
+            } else {
+                _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(bytes as i64))
+            };
+            let at = |v: __m256| _mm256_permutevar8x32_ps(v, i);
+            let (o, d) = ([at(pk.o[0]), at(pk.o[1]), at(pk.o[2])], [at(pk.d[0]), at(pk.d[1]), at(pk.d[2])]);
+            let Some((hit, [t, w1, w2, sum])) = watertight_in(&p, &normal, &o, &d, live, at(st.best.t)) else {
+                continue;
+            };
+            if hit == 0 {
+                continue;
+            }
+            let ts = store(t);
+            for (j, &lane) in ids[..g].iter().enumerate() {
+                let l = lane as usize;
+                let mut h = hit >> (SLOT * j) & ((1 << SLOT) - 1);
+                let (mut tb, mut ib) = (t_best[l], tri_best[l] as u32);
+                let mut k_best = None;
+                // The block's hit that beats the lane's best: the nearest, ties to the lower index.
+                while h != 0 {
+                    let k = h.trailing_zeros() as usize;
+                    h &= h - 1;
+                    if Hit::beats(ts[SLOT * j + k], block.index[k], tb, ib) {
+                        (tb, ib) = (ts[SLOT * j + k], block.index[k]);
+                        k_best = Some(k);
+                        if ANY {
+                            break;
+                        }
+                    }
+                }
+                if let Some(k) = k_best {
+                    won |= 1 << lane;
+                    let into = mask_of(1 << lane);
+                    let from = _mm256_set1_epi32((SLOT * j + k) as i32);
+                    let pick = |v: __m256| _mm256_permutevar8x32_ps(v, from);
+                    let b = &mut st.best;
+                    b.t = _mm256_blendv_ps(b.t, pick(t), into);
+                    b.w1 = _mm256_blendv_ps(b.w1, pick(w1), into);
+                    b.w2 = _mm256_blendv_ps(b.w2, pick(w2), into);
+                    b.sum = _mm256_blendv_ps(b.sum, pick(sum), into);
+                    b.tri = _mm256_castps_si256(_mm256_blendv_ps(
+                        _mm256_castsi256_ps(b.tri),
+                        _mm256_castsi256_ps(_mm256_set1_epi32(block.index[k] as i32)),
+                        into,
+                    ));
+                }
             }
         }
         st.n_tris = _mm256_add_epi32(st.n_tris, _mm256_and_si256(_mm256_castps_si256(mask_of(lanes)), n));
@@ -814,12 +1027,19 @@ mod avx2 {
                                 continue 'walk;
                             }
                             if ANY {
+                                // Any hit: the last child first, the others popped last to
+                                // first, as Embree's any-hit walk takes them (measured: 2.7%
+                                // fewer instructions per bunny shadow packet than first to
+                                // last, 1.3% on the dragon's primary and shadow packets
+                                // together; nearest first cost 1.3% more).
+                                let last = (31 - hit.leading_zeros()) as usize;
+                                let mut rest = hit & !(1 << last);
                                 while rest != 0 {
                                     let slot = rest.trailing_zeros() as usize;
                                     rest &= rest - 1;
                                     items.push(Item { node: node.child[slot], mask: masks[slot], near: near[slot] });
                                 }
-                                (cur, cur_mask) = (node.child[first], masks[first]);
+                                (cur, cur_mask) = (node.child[last], masks[last]);
                                 continue 'walk;
                             }
                             // Nearest first: the others go on the stack farthest first. Sorted
