@@ -698,7 +698,7 @@ mod avx2 {
         let mut won = 0u32;
         let mut m = lanes;
         let n = _mm256_set1_epi32(full.count_ones() as i32);
-        let (mut t_best, mut tri_best) = (store(st.best.t), store_i(st.best.tri));
+        let (t_best, tri_best) = (store(st.best.t), store_i(st.best.tri));
         while m != 0 {
             let lane = m.trailing_zeros();
             m &= m - 1;
@@ -710,40 +710,69 @@ mod avx2 {
                 Intersect::Watertight => watertight(block, &r, _mm256_setzero_ps(), splat(t_best[l])),
                 Intersect::MollerTrumbore => moller_trumbore(block, &r, _mm256_setzero_ps(), splat(t_best[l])),
             };
-            let mut hit = _mm256_movemask_ps(hit) as u32 & full;
-            let mut k_best = None;
-            // The block's hit that beats the lane's best: the nearest, ties to the lower index.
-            if hit != 0 {
-                let t = store(t);
-                while hit != 0 {
-                    let k = hit.trailing_zeros() as usize;
-                    hit &= hit - 1;
-                    if Hit::beats(t[k], block.index[k], t_best[l], tri_best[l] as u32) {
-                        (t_best[l], tri_best[l]) = (t[k], block.index[k] as i32);
-                        k_best = Some(k);
-                        if ANY {
-                            break;
-                        }
-                    }
-                }
+            let hit = _mm256_movemask_ps(hit) as u32 & full;
+            if hit == 0 {
+                continue;
             }
-            if let Some(k) = k_best {
+            let ts = store(t);
+            if let Some(k) = block_best::<ANY>(hit, |k| ts[k], &block.index, t_best[l], tri_best[l] as u32) {
                 won |= 1 << lane;
-                let into = mask_of(1 << lane);
-                let from = _mm256_set1_epi32(k as i32);
-                let pick = |v: __m256| _mm256_permutevar8x32_ps(v, from);
-                let b = &mut st.best;
-                b.t = _mm256_blendv_ps(b.t, pick(t), into);
-                b.w1 = _mm256_blendv_ps(b.w1, pick(w1), into);
-                b.w2 = _mm256_blendv_ps(b.w2, pick(w2), into);
-                b.sum = _mm256_blendv_ps(b.sum, pick(sum), into);
-                b.tri = _mm256_castps_si256(_mm256_blendv_ps(
-                    _mm256_castsi256_ps(b.tri),
-                    _mm256_castsi256_ps(_mm256_set1_epi32(block.index[k] as i32)),
-                    into,
-                ));
+                keep_lane(&mut st.best, lane, k, [t, w1, w2, sum], block.index[k]);
             }
         }
+        settle::<ANY>(st, lanes, n, won)
+    }
+
+    /// Of the block's hits `hit` (bits of its triangles, distances `t(k)`), the one that beats the
+    /// lane's best (`t_best`, `tri_best`): the nearest, ties to the lower index; with `ANY` the
+    /// first that beats it.
+    #[inline(always)]
+    fn block_best<const ANY: bool>(
+        mut hit: u32,
+        t: impl Fn(usize) -> f32,
+        index: &[u32; WIDTH],
+        mut t_best: f32,
+        mut tri_best: u32,
+    ) -> Option<usize> {
+        let mut k_best = None;
+        while hit != 0 {
+            let k = hit.trailing_zeros() as usize;
+            hit &= hit - 1;
+            if Hit::beats(t(k), index[k], t_best, tri_best) {
+                (t_best, tri_best) = (t(k), index[k]);
+                k_best = Some(k);
+                if ANY {
+                    break;
+                }
+            }
+        }
+        k_best
+    }
+
+    /// Packet lane `lane`'s best hit becomes vector lane `from` of the test's (t, w1, w2, sum),
+    /// on triangle `tri`.
+    #[target_feature(enable = "avx2,popcnt")]
+    #[inline]
+    fn keep_lane(b: &mut Best, lane: u32, from: usize, [t, w1, w2, sum]: [__m256; 4], tri: u32) {
+        let into = mask_of(1 << lane);
+        let from = _mm256_set1_epi32(from as i32);
+        let pick = |v: __m256| _mm256_permutevar8x32_ps(v, from);
+        b.t = _mm256_blendv_ps(b.t, pick(t), into);
+        b.w1 = _mm256_blendv_ps(b.w1, pick(w1), into);
+        b.w2 = _mm256_blendv_ps(b.w2, pick(w2), into);
+        b.sum = _mm256_blendv_ps(b.sum, pick(sum), into);
+        b.tri = _mm256_castps_si256(_mm256_blendv_ps(
+            _mm256_castsi256_ps(b.tri),
+            _mm256_castsi256_ps(_mm256_set1_epi32(tri as i32)),
+            into,
+        ));
+    }
+
+    /// A block test's bookkeeping: `n` triangles counted for each lane of `lanes`, the lanes that
+    /// `won` (bits) marked as hit and, for any hit, ended. Returns `won` as a mask.
+    #[target_feature(enable = "avx2,popcnt")]
+    #[inline]
+    fn settle<const ANY: bool>(st: &mut State, lanes: u32, n: __m256i, won: u32) -> __m256 {
         st.n_tris = _mm256_add_epi32(st.n_tris, _mm256_and_si256(_mm256_castps_si256(mask_of(lanes)), n));
         let won = mask_of(won);
         if ANY {
@@ -901,46 +930,15 @@ mod avx2 {
             let ts = store(t);
             for (j, &lane) in ids[..g].iter().enumerate() {
                 let l = lane as usize;
-                let mut h = hit >> (SLOT * j) & ((1 << SLOT) - 1);
-                let (mut tb, mut ib) = (t_best[l], tri_best[l] as u32);
-                let mut k_best = None;
-                // The block's hit that beats the lane's best: the nearest, ties to the lower index.
-                while h != 0 {
-                    let k = h.trailing_zeros() as usize;
-                    h &= h - 1;
-                    if Hit::beats(ts[SLOT * j + k], block.index[k], tb, ib) {
-                        (tb, ib) = (ts[SLOT * j + k], block.index[k]);
-                        k_best = Some(k);
-                        if ANY {
-                            break;
-                        }
-                    }
-                }
-                if let Some(k) = k_best {
+                let h = hit >> (SLOT * j) & ((1 << SLOT) - 1);
+                if let Some(k) = block_best::<ANY>(h, |k| ts[SLOT * j + k], &block.index, t_best[l], tri_best[l] as u32)
+                {
                     won |= 1 << lane;
-                    let into = mask_of(1 << lane);
-                    let from = _mm256_set1_epi32((SLOT * j + k) as i32);
-                    let pick = |v: __m256| _mm256_permutevar8x32_ps(v, from);
-                    let b = &mut st.best;
-                    b.t = _mm256_blendv_ps(b.t, pick(t), into);
-                    b.w1 = _mm256_blendv_ps(b.w1, pick(w1), into);
-                    b.w2 = _mm256_blendv_ps(b.w2, pick(w2), into);
-                    b.sum = _mm256_blendv_ps(b.sum, pick(sum), into);
-                    b.tri = _mm256_castps_si256(_mm256_blendv_ps(
-                        _mm256_castsi256_ps(b.tri),
-                        _mm256_castsi256_ps(_mm256_set1_epi32(block.index[k] as i32)),
-                        into,
-                    ));
+                    keep_lane(&mut st.best, lane, SLOT * j + k, [t, w1, w2, sum], block.index[k]);
                 }
             }
         }
-        st.n_tris = _mm256_add_epi32(st.n_tris, _mm256_and_si256(_mm256_castps_si256(mask_of(lanes)), n));
-        let won = mask_of(won);
-        if ANY {
-            st.alive = _mm256_andnot_ps(won, st.alive);
-        }
-        st.hit_any = _mm256_or_ps(st.hit_any, won);
-        won
+        settle::<ANY>(st, lanes, n, won)
     }
 
     /// The walk of the lanes in `group` (finite inverse directions with one sign per axis):
