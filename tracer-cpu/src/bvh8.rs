@@ -816,12 +816,13 @@ pub(crate) mod avx2 {
 
     /// `y * z' - z * y'` and so on: the cross product, in the scalar tests' order.
     #[inline(always)]
-    fn cross<V: Vector>(a: &[V; 3], b: &[V; 3]) -> [V; 3] {
+    pub(crate) fn cross<V: Vector>(a: &[V; 3], b: &[V; 3]) -> [V; 3] {
         [a[1].mul(b[2]).sub(a[2].mul(b[1])), a[2].mul(b[0]).sub(a[0].mul(b[2])), a[0].mul(b[1]).sub(a[1].mul(b[0]))]
     }
 
+    /// [`crate::geometry::edge_function`], operation by operation.
     #[inline(always)]
-    fn edge_function<V: Vector>(a: &[V; 3], b: &[V; 3], d: &[V; 3]) -> V {
+    pub(crate) fn edge_function<V: Vector>(a: &[V; 3], b: &[V; 3], d: &[V; 3]) -> V {
         let e = [a[0].sub(b[0]), a[1].sub(b[1]), a[2].sub(b[2])];
         let s = [a[0].add(b[0]), a[1].add(b[1]), a[2].add(b[2])];
         dot(d, &cross(&e, &s))
@@ -829,7 +830,7 @@ pub(crate) mod avx2 {
 
     /// `x[0] * y[0] + x[1] * y[1] + x[2] * y[2]`, in that order.
     #[inline(always)]
-    fn dot<V: Vector>(x: &[V; 3], y: &[V; 3]) -> V {
+    pub(crate) fn dot<V: Vector>(x: &[V; 3], y: &[V; 3]) -> V {
         x[0].mul(y[0]).add(x[1].mul(y[1])).add(x[2].mul(y[2]))
     }
 

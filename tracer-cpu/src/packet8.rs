@@ -108,7 +108,7 @@ impl TraceLanes for Lanes<'_> {
 mod avx2 {
     use super::SPARSE;
 
-    use crate::bvh8::avx2::{Lanes, moller_trumbore, prefetch, watertight};
+    use crate::bvh8::avx2::{Lanes, cross, dot as dot3, edge_function, moller_trumbore, prefetch, watertight};
     use crate::bvh8::{Bvh8, LEAF, Simd, TriBlock, WIDTH};
     use crate::geometry;
     use crate::geometry::Hit;
@@ -818,8 +818,7 @@ mod avx2 {
                 return None;
             }
             let sum = add(add(w0, w1), w2);
-            let den = add(add(mul(n[0], d[0]), mul(n[1], d[1])), mul(n[2], d[2]));
-            let num = add(add(mul(n[0], a0[0]), mul(n[1], a0[1])), mul(n[2], a0[2]));
+            let (den, num) = (dot3(n, d), dot3(n, &a0));
             // `t = num / den` is above 0 only where num and den have one sign (a quotient's sign
             // is theirs, zeros and infinities included): the pairs inside the edges of a
             // triangle behind the origin (a shadow ray's own surface) end here, before the
@@ -835,25 +834,6 @@ mod avx2 {
             m = _mm256_and_ps(m, _mm256_cmp_ps::<_CMP_LE_OQ>(t, t_max));
             Some((_mm256_movemask_ps(m) as u32 & live, [t, w1, w2, sum]))
         }
-    }
-
-    /// `y * z' - z * y'` and so on: [`crate::geometry::edge_function`]'s cross product, in its order.
-    #[inline(always)]
-    fn cross(a: &[__m256; 3], b: &[__m256; 3]) -> [__m256; 3] {
-        [
-            sub(mul(a[1], b[2]), mul(a[2], b[1])),
-            sub(mul(a[2], b[0]), mul(a[0], b[2])),
-            sub(mul(a[0], b[1]), mul(a[1], b[0])),
-        ]
-    }
-
-    /// [`crate::geometry::edge_function`], operation by operation.
-    #[inline(always)]
-    fn edge_function(a: &[__m256; 3], b: &[__m256; 3], d: &[__m256; 3]) -> __m256 {
-        let e = [sub(a[0], b[0]), sub(a[1], b[1]), sub(a[2], b[2])];
-        let s = [add(a[0], b[0]), add(a[1], b[1]), add(a[2], b[2])];
-        let c = cross(&e, &s);
-        add(add(mul(d[0], c[0]), mul(d[1], c[1])), mul(d[2], c[2]))
     }
 
     /// Row `r` of a leaf block (8 triangles' coordinate) as `SLOT`-lane groups: the whole row
