@@ -10,6 +10,7 @@ use crate::packet::{LANES, Rays};
 use bvh_format::Triangle;
 use embree::sys::*;
 use std::ptr;
+use std::sync::atomic::{AtomicIsize, Ordering};
 
 /// Embree's scene flags that matter for the comparison.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -25,6 +26,17 @@ pub enum Flags {
 pub struct Scene {
     device: RTCDevice,
     scene: RTCScene,
+    /// Bytes Embree holds, as its memory monitor reports them (the monitor's user pointer).
+    held: Box<AtomicIsize>,
+    /// What the commit added to `held`: Embree's BVH and its copies of the triangles.
+    bvh_bytes: isize,
+}
+
+/// Embree's memory monitor: keeps the running total of what the device holds.
+unsafe extern "C" fn monitor(user: *mut std::os::raw::c_void, bytes: ssize_t, _post: bool) -> bool {
+    // SAFETY: the user pointer is the scene's `held`, which outlives the device.
+    unsafe { &*user.cast::<AtomicIsize>() }.fetch_add(bytes, Ordering::Relaxed);
+    true
 }
 
 // SAFETY: Embree allows any number of threads to trace a committed scene at once; nothing here
@@ -70,8 +82,10 @@ impl Scene {
             if device.is_null() {
                 return Err(format!("Embree: rtcNewDevice failed ({:?})", rtcGetDeviceError(ptr::null_mut())));
             }
+            let held = Box::new(AtomicIsize::new(0));
+            rtcSetDeviceMemoryMonitorFunction(device, Some(monitor), ptr::from_ref(&*held).cast_mut().cast());
             let scene = rtcNewScene(device);
-            let this = Self { device, scene };
+            let mut this = Self { device, scene, held, bvh_bytes: 0 };
             if flags == Flags::Robust {
                 rtcSetSceneFlags(scene, RTCSceneFlags::ROBUST);
             }
@@ -97,12 +111,20 @@ impl Scene {
             rtcCommitGeometry(geom);
             rtcAttachGeometry(scene, geom);
             rtcReleaseGeometry(geom);
+            let before = this.held.load(Ordering::Relaxed);
             rtcCommitScene(scene);
+            this.bvh_bytes = this.held.load(Ordering::Relaxed) - before;
             match rtcGetDeviceError(device) {
                 RTCError::NONE => Ok(this),
                 e => Err(format!("Embree: building the scene failed ({e:?})")),
             }
         }
+    }
+
+    /// Bytes the commit left allocated (Embree's memory monitor): its BVH with its own copy of
+    /// the triangles, the counterpart of [`crate::bvh8::WideBvh::bytes`].
+    pub fn bvh_bytes(&self) -> usize {
+        self.bvh_bytes.max(0) as usize
     }
 
     /// Closest hit in `[t_min, t_max]`: distance and triangle index.
