@@ -137,8 +137,7 @@ pub enum Simd {
     /// One lane at a time: any CPU.
     Portable,
     /// A node's boxes or a leaf's triangles per sequence of AVX2-encoded instructions: 256-bit
-    /// for the 8-wide BVH, 128-bit for the 4-wide one (and POPCNT for the work counts, FMA for
-    /// the node test's exit distances).
+    /// for the 8-wide BVH, 128-bit for the 4-wide one (and POPCNT for the work counts).
     Avx2,
     /// AVX-512 (F, VL, DQ): the near and far planes of all 8 children in one 16-lane register,
     /// mask registers and compress instructions for the children hit; the leaf test is AVX2's.
@@ -167,9 +166,9 @@ impl Simd {
             use std::arch::is_x86_feature_detected as has;
             match self {
                 Simd::Portable => true,
-                // POPCNT and FMA come with AVX2 on every CPU that has it (Intel since Haswell, AMD
-                // since Excavator); checked all the same, since the traversal is compiled with them.
-                Simd::Avx2 => has!("avx2") && has!("fma") && has!("popcnt"),
+                // POPCNT comes with AVX2 on every CPU that has it (Intel since Haswell, AMD since
+                // Excavator); checked all the same, since the traversal is compiled with it.
+                Simd::Avx2 => has!("avx2") && has!("popcnt"),
                 Simd::Avx512 => Simd::Avx2.supported() && has!("avx512f") && has!("avx512vl") && has!("avx512dq"),
             }
         }
@@ -684,23 +683,14 @@ pub(crate) mod avx2 {
         fn sub(self, o: Self) -> Self;
         fn mul(self, o: Self) -> Self;
         fn div(self, o: Self) -> Self;
-        /// `maxps`: `self > o ? self : o` (`o` where either is NaN).
-        fn max(self, o: Self) -> Self;
-        /// `minps`: `self < o ? self : o` (`o` where either is NaN).
-        fn min(self, o: Self) -> Self;
         fn and(self, o: Self) -> Self;
         fn or(self, o: Self) -> Self;
         fn cmp<const P: i32>(self, o: Self) -> Self;
         /// The lanes' sign bits.
         fn bits(self) -> u32;
-        /// `self * m + a`, rounded once (FMA).
-        fn fmadd(self, m: Self, a: Self) -> Self;
-        /// Lane by lane the larger and the smaller of the lanes' bits read as signed integers, and
-        /// the mask of `self > o` so read: for floats of clear sign bit the order of the floats,
-        /// in one cycle where the float instructions take four ([`trace`]'s node test).
+        /// Lane by lane the larger of the lanes' bits read as signed integers: for floats of clear
+        /// sign bit the larger float, in one cycle where the float `max` takes four.
         fn imax(self, o: Self) -> Self;
-        fn imin(self, o: Self) -> Self;
-        fn igt(self, o: Self) -> Self;
     }
 
     // SAFETY (every `unsafe` block in the impls): AVX2 register arithmetic, which the callers
@@ -709,9 +699,8 @@ pub(crate) mod avx2 {
     macro_rules! vector {
         ($v:ty, $n:literal, $vi:ty, $set1:ident, $setzero:ident, $loadu:ident, $storeu:ident,
          $loadu_si:ident, $set1_epi32:ident, $cmpeq_epi32:ident, $castsi_ps:ident,
-         $add:ident, $sub:ident, $mul:ident, $div:ident, $max:ident, $min:ident, $and:ident,
-         $or:ident, $cmp:ident, $movemask:ident, $fmadd:ident, $imax:ident, $imin:ident, $igt:ident,
-         $castps_si:ident) => {
+         $add:ident, $sub:ident, $mul:ident, $div:ident, $and:ident,
+         $or:ident, $cmp:ident, $movemask:ident, $imax:ident, $castps_si:ident) => {
             impl Vector for $v {
                 const N: usize = $n;
                 #[inline(always)]
@@ -759,14 +748,6 @@ pub(crate) mod avx2 {
                     unsafe { $div(self, o) }
                 }
                 #[inline(always)]
-                fn max(self, o: Self) -> Self {
-                    unsafe { $max(self, o) }
-                }
-                #[inline(always)]
-                fn min(self, o: Self) -> Self {
-                    unsafe { $min(self, o) }
-                }
-                #[inline(always)]
                 fn and(self, o: Self) -> Self {
                     unsafe { $and(self, o) }
                 }
@@ -783,36 +764,22 @@ pub(crate) mod avx2 {
                     unsafe { $movemask(self) as u32 }
                 }
                 #[inline(always)]
-                fn fmadd(self, m: Self, a: Self) -> Self {
-                    unsafe { $fmadd(self, m, a) }
-                }
-                #[inline(always)]
                 fn imax(self, o: Self) -> Self {
                     unsafe { $castsi_ps($imax($castps_si(self), $castps_si(o))) }
-                }
-                #[inline(always)]
-                fn imin(self, o: Self) -> Self {
-                    unsafe { $castsi_ps($imin($castps_si(self), $castps_si(o))) }
-                }
-                #[inline(always)]
-                fn igt(self, o: Self) -> Self {
-                    unsafe { $castsi_ps($igt($castps_si(self), $castps_si(o))) }
                 }
             }
         };
     }
     vector! {
         __m128, 4, __m128i, _mm_set1_ps, _mm_setzero_ps, _mm_loadu_ps, _mm_storeu_ps, _mm_loadu_si128, _mm_set1_epi32,
-        _mm_cmpeq_epi32, _mm_castsi128_ps, _mm_add_ps, _mm_sub_ps, _mm_mul_ps, _mm_div_ps, _mm_max_ps, _mm_min_ps,
-        _mm_and_ps, _mm_or_ps, _mm_cmp_ps, _mm_movemask_ps, _mm_fmadd_ps, _mm_max_epi32, _mm_min_epi32,
-        _mm_cmpgt_epi32, _mm_castps_si128
+        _mm_cmpeq_epi32, _mm_castsi128_ps, _mm_add_ps, _mm_sub_ps, _mm_mul_ps, _mm_div_ps,
+        _mm_and_ps, _mm_or_ps, _mm_cmp_ps, _mm_movemask_ps, _mm_max_epi32, _mm_castps_si128
     }
     vector! {
         __m256, 8, __m256i, _mm256_set1_ps, _mm256_setzero_ps, _mm256_loadu_ps, _mm256_storeu_ps, _mm256_loadu_si256,
         _mm256_set1_epi32, _mm256_cmpeq_epi32, _mm256_castsi256_ps, _mm256_add_ps, _mm256_sub_ps, _mm256_mul_ps,
-        _mm256_div_ps, _mm256_max_ps, _mm256_min_ps, _mm256_and_ps, _mm256_or_ps, _mm256_cmp_ps,
-        _mm256_movemask_ps, _mm256_fmadd_ps, _mm256_max_epi32, _mm256_min_epi32, _mm256_cmpgt_epi32,
-        _mm256_castps_si256
+        _mm256_div_ps, _mm256_and_ps, _mm256_or_ps, _mm256_cmp_ps,
+        _mm256_movemask_ps, _mm256_max_epi32, _mm256_castps_si256
     }
 
     /// The ray, splatted.
@@ -986,77 +953,31 @@ pub(crate) mod avx2 {
     /// [`WideBvh::trace`] with AVX2: the `W` children's boxes or a leaf's `W` triangles in
     /// registers `V` of `W` lanes (256-bit for the 8-wide BVH, 128-bit for the 4-wide one).
     ///
-    /// The box test is the scalar slab test's: per axis the entry and exit distances are
-    /// `(plane - origin) * inverse direction`; which plane is entered is known from the sign of
-    /// the inverse direction (for a finite one the rounding is monotonic, so it is the smaller
-    /// distance, as the scalar `min` finds). A NaN distance (`0 * inf`: the origin on the plane of
-    /// an axis the ray is parallel to) goes as the first operand of `max`/`min`, which then return
-    /// the second: the axis is ignored, as the scalar test ignores it (its other distance is then
-    /// infinite or NaN, and ignored alike).
+    /// The box test decides as the scalar slab test with [`crate::geometry::may_hold_wide`]: per
+    /// axis the entry and exit distances are `(plane - origin) * inverse direction`; which plane
+    /// is entered is known from the sign of the inverse direction (for a finite one the rounding
+    /// is monotonic, so it is the smaller distance, as the scalar `min` finds). A NaN distance
+    /// (`0 * inf`: the origin on the plane of an axis the ray is parallel to) leaves its axis out,
+    /// as the scalar test does. The distances are then reduced as Embree's node test does, not in
+    /// a chain of float `max` and `min` (four cycles each; the walk waits on that chain at every
+    /// node), child for child with the chain's decision:
+    /// - entry: the largest distance by the integer order of the floats' bits, from the integer
+    ///   0 (the float +0) up, in one-cycle `vpmaxsd`s. For a float of clear sign bit that order
+    ///   is the float order; a negative or -0 distance is below 0 in both, and so is a NaN made
+    ///   by `0 * inf` (the x86 default NaN, sign bit set), which the chain leaves out too. The
+    ///   entry distances are the chain's, bit for bit but a zero's sign.
+    /// - exit: rounding being monotonic, `entry <= min(exits, best) * EXIT_SCALE` holds exactly
+    ///   when `entry <= exit * EXIT_SCALE` holds for each exit and for the best hit's distance:
+    ///   four compares side by side instead of a chain; a NaN exit distance passes
+    ///   (`!(entry > NaN)`), as the chain's `min` drops it.
     ///
-    /// Rays with a finite origin and inverse direction, whose distances can hold no NaN (nearly
-    /// all), take the node test with integer `max`/`min`/compare instead ([`walk`]'s `INT`); the
-    /// others the float one above.
-    #[target_feature(enable = "avx2,fma,popcnt")]
+    /// A ray with a NaN direction hits nothing whichever way. On the H100 host's 16 threads this
+    /// gained 1-6 points against Embree on most rows of the ray report (docs/cpu-benchmark.md,
+    /// "the integer node test"); the walk's hits and work counts are the portable walk's, ray by
+    /// ray (the tests below, with rays from vertices, where exit distances are zeros, and along
+    /// the axes, where they are NaN).
+    #[target_feature(enable = "avx2,popcnt")]
     pub fn trace<const ANY: bool, T: TriangleTest, V: Vector, const W: usize>(
-        bvh: &WideBvh<W>,
-        start: u32,
-        ray: &Ray,
-        t_min: f32,
-        best: (f32, u32),
-        stack: &mut Stack,
-        cost: &mut Cost,
-    ) -> Option<Found> {
-        // `x - x` is 0 for a finite `x`, NaN for an infinite or NaN one: 12 instructions, where
-        // `is_finite` on both took 25 of a shadow ray's 420.
-        let (o, i) = (ray.origin, ray.inv_dir);
-        #[allow(clippy::eq_op)]
-        let zeros = (o - o) + (i - i);
-        if zeros.x + zeros.y + zeros.z != 0.0 {
-            return walk_float::<ANY, T, V, W>(bvh, start, ray, t_min, best, stack, cost);
-        }
-        walk::<ANY, T, V, W, true>(bvh, start, ray, t_min, best, stack, cost)
-    }
-
-    /// [`walk`] with the float node test, apart from [`trace`], whose one copy of the walk then
-    /// keeps its registers to itself (inlined, the rare rays' copy cost the common ones 40
-    /// instructions of set-up each).
-    #[target_feature(enable = "avx2,fma,popcnt")]
-    #[inline(never)]
-    fn walk_float<const ANY: bool, T: TriangleTest, V: Vector, const W: usize>(
-        bvh: &WideBvh<W>,
-        start: u32,
-        ray: &Ray,
-        t_min: f32,
-        best: (f32, u32),
-        stack: &mut Stack,
-        cost: &mut Cost,
-    ) -> Option<Found> {
-        walk::<ANY, T, V, W, false>(bvh, start, ray, t_min, best, stack, cost)
-    }
-
-    /// [`trace`]'s walk; with `INT` its node test compares the floats' bits as signed integers:
-    /// from a node's distances to the children's hit mask in three one-cycle steps (`vpmaxsd`,
-    /// `vpminsd`, `vpcmpgtd`) where the float `max`, `min` and compare take four cycles each, as
-    /// Embree's node test does. The walk waits on that chain at every node: on the H100 host's
-    /// 16 threads the closest-hit rows of the ray report gained 2-6 points against Embree, the
-    /// any-hit rows about nothing (docs/cpu-benchmark.md, "the integer node test"). It decides as
-    /// the float test does, child for child, for rays whose distances hold no NaN (the caller's
-    /// check: a NaN needs `0 * inf`, so an infinite inverse direction or origin):
-    /// - entry: a distance of set sign bit (negative or -0) is below the integer 0 the maximum
-    ///   starts from, as it is below or at the float 0 there; the others, and 0, are ordered as
-    ///   their floats;
-    /// - exit: each distance is scaled on its own by FMA, `d * EXIT_SCALE + 0` rounded once (the
-    ///   product, but +0 for -0), the best hit's as `t * EXIT_SCALE + 0`; rounding is monotonic,
-    ///   so the least of the scaled is the float test's scaled least, bit for bit but a zero's
-    ///   sign. Negative, so is its integer, below every entry distance: the child is missed, as
-    ///   the float test misses it (entry >= 0 > exit); otherwise both are ordered as floats.
-    ///
-    /// So both enter the same children with the same entry distances, and the work counts of
-    /// every path agree (the `bvh8` tests compare them ray by ray, from vertices too, where exit
-    /// distances are zeros of either sign: without the `+ 0` they fail).
-    #[target_feature(enable = "avx2,fma,popcnt")]
-    fn walk<const ANY: bool, T: TriangleTest, V: Vector, const W: usize, const INT: bool>(
         bvh: &WideBvh<W>,
         start: u32,
         ray: &Ray,
@@ -1083,25 +1004,14 @@ pub(crate) mod avx2 {
                 // SAFETY: the collapse refers only to nodes it made.
                 let node = unsafe { bvh.nodes.get_unchecked(cur as usize) };
                 let b = &node.bounds;
-                let (near, ok) = if INT {
-                    let n = |a: usize| dist(&b[near_plane[a]], &r, a);
-                    let f = |a: usize| dist(&b[far_plane[a]], &r, a).fmadd(exit_scale, zero);
-                    let near = n(0).imax(zero).imax(n(1).imax(n(2)));
-                    let far = f(0).imin(V::splat(best.t * EXIT_SCALE + 0.0)).imin(f(1).imin(f(2)));
-                    (near, !near.igt(far).bits())
-                } else {
-                    let t_best = V::splat(best.t);
-                    let near = dist(&b[near_plane[0]], &r, 0).max(zero);
-                    let near = dist(&b[near_plane[1]], &r, 1).max(near);
-                    let near = dist(&b[near_plane[2]], &r, 2).max(near);
-                    let far = dist(&b[far_plane[0]], &r, 0).min(t_best);
-                    let far = dist(&b[far_plane[1]], &r, 1).min(far);
-                    let far = dist(&b[far_plane[2]], &r, 2).min(far);
-                    // `geometry::may_hold_wide(near, far)` (`near` is 0 or more: the `max` with 0
-                    // above drops NaN).
-                    (near, near.cmp::<_CMP_LE_OQ>(far.mul(exit_scale)).bits())
-                };
-                let mut mask = ok & node.valid;
+                // `geometry::may_hold_wide` of the entry and exit distances, in a short chain (see
+                // the doc comment).
+                let n = |a: usize| dist(&b[near_plane[a]], &r, a);
+                let near = n(0).imax(zero).imax(n(1).imax(n(2)));
+                let before = |a: usize| near.cmp::<_CMP_NGT_UQ>(dist(&b[far_plane[a]], &r, a).mul(exit_scale));
+                let ok =
+                    before(0).and(before(1)).and(before(2).and(near.cmp::<_CMP_LE_OQ>(V::splat(best.t * EXIT_SCALE))));
+                let mut mask = ok.bits() & node.valid;
                 work.nodes += node.valid.count_ones();
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
@@ -1628,8 +1538,7 @@ mod tests {
                     continue;
                 }
                 // From a vertex, in any direction: an origin on the planes of every box the vertex
-                // bounds, whose exit distances there are zeros of either sign (the integer node
-                // test's case, `avx2::walk`).
+                // bounds, whose exit distances there are zeros of either sign.
                 2 if k % 8 == 2 => {
                     let t = &tris[rng.below(tris.len())];
                     let v = [t.p0, t.p1, t.p2][rng.below(3)];
