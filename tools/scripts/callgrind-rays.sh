@@ -6,7 +6,8 @@
 # instruction is not a cycle (stop 31: 4% fewer instructions moved no 16-thread row there).
 # Valgrind hides AVX-512, so Embree runs its AVX2 kernels under it.
 #
-# Usage: bash tools/scripts/callgrind-rays.sh KIND [SCENE] (default bunny), with the ray report
+# Usage, from the repository root: bash tools/scripts/callgrind-rays.sh KIND [SCENE] (default
+# bunny; scenes/SCENE.toml), with the ray report
 # built: cargo build --release -p tracer-cpu --features embree --example ray_report
 # (BIN overrides the binary). Needs valgrind (apt-get install -y valgrind). Prints ours, Embree's
 # and their ratio; leaves the profile in $OUT (default /tmp/callgrind-rays) for callgrind_annotate.

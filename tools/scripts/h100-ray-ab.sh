@@ -35,7 +35,7 @@ for r in $(seq 1 "$ROUNDS"); do
     name=${v%%:*}
     envs=()
     [ "$name" != "$v" ] && IFS=, read -ra envs <<<"${v#*:}"
-    tag=$(echo "$v" | tr ':=,' '_-_')
+    tag=$(echo "$v" | tr ':=,/' '_-__')
     echo "== $tag $r $(date -u +%H:%M:%S) load $(cut -d' ' -f1 /proc/loadavg)"
     env "${envs[@]}" ".bin/ray_report_$name" "${ARGS[@]}" --sizes "$SIZE" --threads "$THREADS" --reps "$REPS" \
       --kinds "$KINDS" --engines "$ENGINES" --out "$OUT/$tag-$r.md" >"$OUT/$tag-$r.log" 2>&1 ||
@@ -50,7 +50,7 @@ done
   for v in $VARIANTS; do printf -- "--:|"; done
   printf "\n"
   for v in $VARIANTS; do
-    tag=$(echo "$v" | tr ':=,' '_-_')
+    tag=$(echo "$v" | tr ':=,/' '_-__')
     for f in "$OUT/$tag"-*.md; do
       awk -F'|' -v col="$COLUMN" -v tag="$v" '
         /^\| scene \| size \| kind \| threads \|/ && !done { for (i = 1; i <= NF; i++) if ($i ~ "^ *" col " *$") c = i; on = c > 0; next }

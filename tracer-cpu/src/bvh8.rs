@@ -972,9 +972,9 @@ pub(crate) mod avx2 {
     ///   (`!(entry > NaN)`), as the chain's `min` drops it.
     ///
     /// A ray with a NaN direction hits nothing whichever way. On the H100 host's 16 threads this
-    /// gained 1-6 points against Embree on most rows of the ray report (docs/cpu-benchmark.md,
-    /// "the integer node test"); the walk's hits and work counts are the portable walk's, ray by
-    /// ray (the tests below, with rays from vertices, where exit distances are zeros, and along
+    /// gained 1-6 points against Embree on every row of the ray report, side by side with the
+    /// float chain (docs/cpu-benchmark.md, "the integer node test"); the walk's hits and work
+    /// counts are the portable walk's, ray by ray (the tests below, with rays from vertices, where exit distances are zeros, and along
     /// the axes, where they are NaN).
     #[target_feature(enable = "avx2,popcnt")]
     pub fn trace<const ANY: bool, T: TriangleTest, V: Vector, const W: usize>(
