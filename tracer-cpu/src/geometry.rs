@@ -339,6 +339,53 @@ mod tests {
         assert!(plain_broken > 1000, "only {plain_broken} plain cross products broke");
     }
 
+    /// The sum-and-difference form is the accurate one where a short edge is seen from afar (a
+    /// mesh's edges, from the camera): `a - b` is the short edge vector, nearly exact, where the
+    /// plain `cross(a, b)` of two long, nearly parallel vectors cancels. Relative errors against
+    /// f64 on the same f32 inputs; the plain form was tried for speed (docs/cpu-benchmark.md,
+    /// stop 33).
+    #[test]
+    fn edge_function_is_more_accurate_than_the_plain_cross_product_at_distant_edges() {
+        let plain = |a: [f32; 3], b: [f32; 3], d: Vec3| {
+            let c = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+            d.x * c[0] + d.y * c[1] + d.z * c[2]
+        };
+        let exact = |a: [f32; 3], b: [f32; 3], d: Vec3| {
+            let (a, b, d) = (Vec3::from(a).as_dvec3(), Vec3::from(b).as_dvec3(), d.as_dvec3());
+            d.dot(a.cross(b))
+        };
+        let mut rng = ::tests::Rng(0x5eed_ed9e);
+        for distance in [0.2f32, 10.0, 1000.0] {
+            let (mut ours_err, mut plain_err) = (Vec::new(), Vec::new());
+            for _ in 0..20_000 {
+                // An edge 1/200 of its distance long, the ray aimed near it.
+                let mid = Vec3::from(rng.direction()) * distance;
+                let half = Vec3::from(rng.signed3()) * distance * 0.0025;
+                let (a, b) = ((mid + half).to_array(), (mid - half).to_array());
+                let d = (mid + Vec3::from(rng.signed3()) * distance * 0.001).normalize();
+                let e = exact(a, b, d);
+                if e == 0.0 {
+                    continue;
+                }
+                // Ours is twice the edge function.
+                ours_err.push(((edge_function(a, b, d) as f64 * 0.5 - e) / e).abs());
+                plain_err.push(((plain(a, b, d) as f64 - e) / e).abs());
+            }
+            let median = |v: &mut Vec<f64>| {
+                v.sort_by(f64::total_cmp);
+                v[v.len() / 2]
+            };
+            let (ours, plain) = (median(&mut ours_err), median(&mut plain_err));
+            println!(
+                "edge {distance} away: median relative error {ours:.2e} (ours), {plain:.2e} (plain cross product)"
+            );
+            assert!(
+                ours * 10.0 < plain,
+                "at {distance}: median relative error {ours:e} (ours) against {plain:e} (plain)"
+            );
+        }
+    }
+
     /// Every exit distance's largest accepted entry under [`may_hold`] is accepted by
     /// [`may_hold_wide`] too: exit distances over the whole float range (every 509th bit pattern
     /// of the positive floats, subnormals, zeros and infinity included, and their negations).
