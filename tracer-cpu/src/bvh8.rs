@@ -789,6 +789,28 @@ pub(crate) mod avx2 {
         pub inv: [V; 3],
     }
 
+    /// `x`, read as one 4-byte load ([`read_ray`]).
+    #[inline(always)]
+    fn read_f32(x: &f32) -> f32 {
+        // SAFETY: `x` is a reference, valid for reads.
+        unsafe { std::ptr::read_volatile(x) }
+    }
+
+    /// The ray's nine floats, each read with a load of its own 4 bytes. A caller that has just
+    /// made the ray (`Ray::new` in the renderer's shading, just before the trace) leaves its
+    /// fields in the store buffer, written 4 or 8 bytes at a time, and the compiler, left to
+    /// itself, read them back 8 bytes at a time across two of those stores (`origin.z` with
+    /// `dir.x`, `dir.x` with `dir.y`): such a load is not forwarded from the store buffer and waits
+    /// for the stores to reach the cache, at the start of every ray's chain of dependent loads.
+    /// Tracing rays made just before cost the bunny's primary rays a quarter of their speed on
+    /// the VM (docs/cpu-benchmark.md, stop 33). A load of exactly one stored field is always
+    /// forwarded; volatile keeps the compiler from merging the nine.
+    #[inline(always)]
+    pub(crate) fn read_ray(ray: &Ray) -> Ray {
+        let v = |v: &glam::Vec3| glam::Vec3::new(read_f32(&v.x), read_f32(&v.y), read_f32(&v.z));
+        Ray { origin: v(&ray.origin), dir: v(&ray.dir), inv_dir: v(&ray.inv_dir) }
+    }
+
     impl<V: Vector> Lanes<V> {
         #[inline(always)]
         pub fn new(ray: &Ray) -> Self {
@@ -986,6 +1008,7 @@ pub(crate) mod avx2 {
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Found> {
+        let ray = &read_ray(ray);
         let r = Lanes::<V>::new(ray);
         let near_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { 3 + a } else { a });
         let far_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { a } else { 3 + a });
@@ -1134,6 +1157,7 @@ mod avx512 {
         stack: &mut Stack,
         cost: &mut Cost,
     ) -> Option<Found> {
+        let ray = &super::avx2::read_ray(ray);
         let r = Lanes::<__m256>::new(ray);
         let o16: [__m512; 3] = std::array::from_fn(|a| _mm512_set1_ps(ray.origin[a]));
         let inv16: [__m512; 3] = std::array::from_fn(|a| {

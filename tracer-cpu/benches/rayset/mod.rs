@@ -188,6 +188,7 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
                 let mut cost = Cost::default();
                 for (r, o) in rays.iter().zip(out.iter_mut()) {
                     let Some((ray, t_max)) = r else { continue };
+                    let ray = &like_embree(ray);
                     *o = if any {
                         if walk.occluded_with(test, ray, *t_max, stack, &mut cost) { 0.0 } else { f32::INFINITY }
                     } else {
@@ -200,6 +201,7 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
                 let mut cost = Cost::default();
                 for (r, o) in rays.iter().zip(out.iter_mut()) {
                     let Some((ray, t_max)) = r else { continue };
+                    let ray = &like_embree(ray);
                     *o = if any {
                         let hit = bvh.trace_on::<true, Watertight>(simd, ray, 0.0, *t_max, stack, &mut cost);
                         if hit.is_some() { 0.0 } else { f32::INFINITY }
@@ -261,6 +263,15 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
             }),
         },
     );
+}
+
+/// The ray as our single-ray walks get it from an origin and a direction, its inverse direction
+/// computed inside the timed loop: Embree's `rtcIntersect1` is handed only the origin and the
+/// direction and computes its inverse per call, so ours pays for it too (the packets compute
+/// theirs inside `trace` already).
+#[inline(always)]
+fn like_embree(ray: &Ray) -> Ray {
+    Ray::new(ray.origin, ray.dir)
 }
 
 /// Groups the slots of (up to) two rows into 4 x 2 packets as the renderer does, skipping
