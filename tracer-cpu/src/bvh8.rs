@@ -797,14 +797,15 @@ pub(crate) mod avx2 {
     }
 
     /// The ray's nine floats, each read with a load of its own 4 bytes. A caller that has just
-    /// made the ray (`Ray::new` in the renderer's shading, just before the trace) leaves its
-    /// fields in the store buffer, written 4 or 8 bytes at a time, and the compiler, left to
-    /// itself, read them back 8 bytes at a time across two of those stores (`origin.z` with
-    /// `dir.x`, `dir.x` with `dir.y`): such a load is not forwarded from the store buffer and waits
-    /// for the stores to reach the cache, at the start of every ray's chain of dependent loads.
-    /// Tracing rays made just before cost the bunny's primary rays a quarter of their speed on
-    /// the VM (docs/cpu-benchmark.md, stop 33). A load of exactly one stored field is always
-    /// forwarded; volatile keeps the compiler from merging the nine.
+    /// made the ray (`Ray::new` right before the trace) leaves its fields in the store buffer,
+    /// written 4 or 8 bytes at a time, and the compiler, left to itself, read them back 8 bytes at
+    /// a time across two of those stores (`origin.z` with `dir.x`, `dir.x` with `dir.y`): such a
+    /// load is not forwarded from the store buffer and waits for the stores to reach the cache, at
+    /// the start of every ray's chain of dependent loads. The ray report, which makes each ray's
+    /// inverse direction just before the trace as `rtcIntersect1` does, lost a quarter of the
+    /// bunny's primary-ray speed to it on the VM (docs/cpu-benchmark.md, stop 33); the renderer,
+    /// which makes its rays a stage ahead, measured the same with and without. A load of exactly
+    /// one stored field is always forwarded; volatile keeps the compiler from merging the nine.
     #[inline(always)]
     pub(crate) fn read_ray(ray: &Ray) -> Ray {
         let v = |v: &glam::Vec3| glam::Vec3::new(read_f32(&v.x), read_f32(&v.y), read_f32(&v.z));
