@@ -180,45 +180,55 @@ impl Scene {
         r.tfar == f32::NEG_INFINITY
     }
 
-    fn packet(rays: &Rays) -> (Valid, RTCRay8) {
-        let valid = Valid(std::array::from_fn(|i| if rays.valid[i] { -1 } else { 0 }));
-        let ray = RTCRay8 {
-            org_x: rays.origin[0],
-            org_y: rays.origin[1],
-            org_z: rays.origin[2],
-            tnear: [0.0; LANES],
-            dir_x: rays.dir[0],
-            dir_y: rays.dir[1],
-            dir_z: rays.dir[2],
-            time: [0.0; LANES],
-            tfar: rays.t_max,
-            mask: [u32::MAX; LANES],
-            id: [0; LANES],
-            flags: [0; LANES],
-        };
-        (valid, ray)
+    /// Writes the packet into `ray` in Embree's 8-ray layout, in place, and returns the valid
+    /// mask. In place rather than returned: a returned `RTCRay8` (384 bytes) was built on the
+    /// stack and copied into the call's argument, work a caller that fills its packet where
+    /// Embree reads it does not do.
+    #[inline(always)]
+    fn fill(rays: &Rays, ray: *mut RTCRay8) -> Valid {
+        // SAFETY: `ray` is valid for writes of a whole RTCRay8 (the caller's); each field is
+        // written once, every field is written.
+        unsafe {
+            (&raw mut (*ray).org_x).write(rays.origin[0]);
+            (&raw mut (*ray).org_y).write(rays.origin[1]);
+            (&raw mut (*ray).org_z).write(rays.origin[2]);
+            (&raw mut (*ray).tnear).write([0.0; LANES]);
+            (&raw mut (*ray).dir_x).write(rays.dir[0]);
+            (&raw mut (*ray).dir_y).write(rays.dir[1]);
+            (&raw mut (*ray).dir_z).write(rays.dir[2]);
+            (&raw mut (*ray).time).write([0.0; LANES]);
+            (&raw mut (*ray).tfar).write(rays.t_max);
+            (&raw mut (*ray).mask).write([u32::MAX; LANES]);
+            (&raw mut (*ray).id).write([0; LANES]);
+            (&raw mut (*ray).flags).write([0; LANES]);
+        }
+        Valid(std::array::from_fn(|i| if rays.valid[i] { -1 } else { 0 }))
     }
 
     /// Closest hits of a packet (`t_min` 0, like [`crate::packet::trace`]), coherent context.
     #[inline]
     pub fn intersect8(&self, rays: &Rays) -> [Option<(f32, u32)>; LANES] {
         let mut ctx = context(RTCIntersectContextFlags::COHERENT);
-        let (valid, ray) = Self::packet(rays);
-        let mut rh = RTCRayHit8 {
-            ray,
-            hit: RTCHit8 {
-                Ng_x: [0.0; LANES],
-                Ng_y: [0.0; LANES],
-                Ng_z: [0.0; LANES],
-                u: [0.0; LANES],
-                v: [0.0; LANES],
-                primID: [u32::MAX; LANES],
-                geomID: [u32::MAX; LANES],
-                instID: [[u32::MAX; LANES]],
-            },
+        let mut rh = std::mem::MaybeUninit::<RTCRayHit8>::uninit();
+        let p = rh.as_mut_ptr();
+        let no_hit = RTCHit8 {
+            Ng_x: [0.0; LANES],
+            Ng_y: [0.0; LANES],
+            Ng_z: [0.0; LANES],
+            u: [0.0; LANES],
+            v: [0.0; LANES],
+            primID: [u32::MAX; LANES],
+            geomID: [u32::MAX; LANES],
+            instID: [[u32::MAX; LANES]],
+        };
+        // SAFETY: `p` points to an RTCRayHit8; `fill` writes all of its ray, this its hit.
+        let (valid, rh) = unsafe {
+            let valid = Self::fill(rays, &raw mut (*p).ray);
+            (&raw mut (*p).hit).write(no_hit);
+            (valid, rh.assume_init_mut())
         };
         // SAFETY: the scene is committed; `valid` and `rh` have the alignment Embree needs.
-        unsafe { rtcIntersect8(valid.0.as_ptr(), self.scene, &mut ctx, &mut rh) };
+        unsafe { rtcIntersect8(valid.0.as_ptr(), self.scene, &mut ctx, rh) };
         std::array::from_fn(|i| {
             (rays.valid[i] && rh.hit.geomID[i] != u32::MAX).then_some((rh.ray.tfar[i], rh.hit.primID[i]))
         })
@@ -228,9 +238,12 @@ impl Scene {
     #[inline]
     pub fn occluded8(&self, rays: &Rays) -> [bool; LANES] {
         let mut ctx = context(RTCIntersectContextFlags::COHERENT);
-        let (valid, mut ray) = Self::packet(rays);
+        let mut ray = std::mem::MaybeUninit::<RTCRay8>::uninit();
+        let valid = Self::fill(rays, ray.as_mut_ptr());
+        // SAFETY: `fill` wrote every field.
+        let ray = unsafe { ray.assume_init_mut() };
         // SAFETY: as in `intersect8`.
-        unsafe { rtcOccluded8(valid.0.as_ptr(), self.scene, &mut ctx, &mut ray) };
+        unsafe { rtcOccluded8(valid.0.as_ptr(), self.scene, &mut ctx, ray) };
         std::array::from_fn(|i| rays.valid[i] && ray.tfar[i] == f32::NEG_INFINITY)
     }
 }
