@@ -802,7 +802,7 @@ pub(crate) mod avx2 {
     /// a time across two of those stores (`origin.z` with `dir.x`, `dir.x` with `dir.y`): such a
     /// load is not forwarded from the store buffer and waits for the stores to reach the cache, at
     /// the start of every ray's chain of dependent loads. The ray report, which makes each ray's
-    /// inverse direction just before the trace as `rtcIntersect1` does, lost a quarter of the
+    /// inverse direction just before the trace as `rtcIntersect1` does, lost a fifth of the
     /// bunny's primary-ray speed to it on the VM (docs/cpu-benchmark.md, stop 33); the renderer,
     /// which makes its rays a stage ahead, measured the same with and without. A load of exactly
     /// one stored field is always forwarded; volatile keeps the compiler from merging the nine.
