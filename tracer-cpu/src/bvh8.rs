@@ -4,8 +4,8 @@
 //! structure of arrays, so one sequence tests the ray against all of a leaf's triangles with the
 //! frame's triangle test. Two widths share every line of it ([`WideBvh`]): [`Bvh8`] (8 children,
 //! one 256-bit AVX2 sequence per node or leaf) and [`Bvh4`] (4 children, one 128-bit sequence).
-//! Three paths ([`Simd`]): AVX2 (the default where the CPU has it), AVX-512 (on request; the
-//! 8-wide BVH only) and a portable one; `crate::packet8` traces coherent packets of 8 rays
+//! Three paths ([`Simd`]): AVX-512 and AVX2 (the same walk compiled for each; the widest the CPU
+//! has is the default) and a portable one; `crate::packet8` traces coherent packets of 8 rays
 //! through the 8-wide tree.
 //!
 //! The collapse (Ylitie, Karras and Laine, "Efficient Incoherent Ray Traversal on GPUs Through
@@ -139,10 +139,10 @@ pub enum Simd {
     /// A node's boxes or a leaf's triangles per sequence of AVX2-encoded instructions: 256-bit
     /// for the 8-wide BVH, 128-bit for the 4-wide one (and POPCNT for the work counts).
     Avx2,
-    /// AVX-512 (F, VL, DQ): the near and far planes of all 8 children in one 16-lane register,
-    /// mask registers and compress instructions for the children hit; the leaf test is AVX2's.
-    /// Only on request ([`Simd::detect`] says why). The 4-wide BVH, whose 4 children's near and
-    /// far planes fit one 256-bit register, runs its AVX2 path.
+    /// The AVX2 path compiled for AVX-512 (F, VL, DQ, BW): the same operations on the same
+    /// registers' widths, with 32 of them instead of 16 and mask registers for the compares.
+    /// The default where the CPU has it (a few points faster on both machines measured,
+    /// docs/cpu-benchmark.md).
     Avx512,
 }
 
@@ -169,7 +169,13 @@ impl Simd {
                 // POPCNT comes with AVX2 on every CPU that has it (Intel since Haswell, AMD since
                 // Excavator); checked all the same, since the traversal is compiled with it.
                 Simd::Avx2 => has!("avx2") && has!("popcnt"),
-                Simd::Avx512 => Simd::Avx2.supported() && has!("avx512f") && has!("avx512vl") && has!("avx512dq"),
+                Simd::Avx512 => {
+                    Simd::Avx2.supported()
+                        && has!("avx512f")
+                        && has!("avx512vl")
+                        && has!("avx512dq")
+                        && has!("avx512bw")
+                }
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
@@ -183,15 +189,12 @@ impl Simd {
         Simd::ALL.into_iter().filter(|s| s.supported()).collect()
     }
 
-    /// The path [`WideBvh::trace`] takes: AVX2 where the CPU has it, else the portable one; the
-    /// environment variable `TRACER_CPU_SIMD` (`portable`, `avx2` or `avx512`) asks for another,
-    /// taken where the CPU runs it (else the widest below it that it runs; a name it does not
-    /// know is ignored). AVX-512 is not the default: on the 2-core AMD EPYC (Zen 4) VM it traces
-    /// about 10% fewer rays per second than AVX2 (docs/cpu-benchmark.md; the ray report times
-    /// both side by side on every machine, so a CPU where it wins shows it).
+    /// The path [`WideBvh::trace`] takes: the widest this CPU has; the environment variable
+    /// `TRACER_CPU_SIMD` (`portable`, `avx2` or `avx512`) asks for a narrower one (a wider one
+    /// than the CPU runs gets the widest it runs; a name it does not know is ignored).
     pub fn detect() -> Simd {
         let asked = std::env::var("TRACER_CPU_SIMD").ok().and_then(|v| Simd::parse(&v));
-        Simd::best_up_to(asked.unwrap_or(Simd::Avx2))
+        Simd::best_up_to(asked.unwrap_or(Simd::Avx512))
     }
 
     /// The path `name` names (case and surrounding blanks ignored).
@@ -404,14 +407,6 @@ impl<const W: usize> WideBvh<W> {
         self.trace_from::<ANY, T>(simd, self.root, ray, t_min, (t_max, u32::MAX), stack, cost).map(Found::hit)
     }
 
-    /// This BVH as the 8-wide one, where it is (the AVX-512 traversal is written for 8 only).
-    #[cfg(target_arch = "x86_64")]
-    #[inline(always)]
-    fn as_bvh8(&self) -> Option<&Bvh8> {
-        // SAFETY: with `W` = 8, `Self` is `Bvh8`.
-        (W == WIDTH).then(|| unsafe { &*(self as *const Self).cast::<Bvh8>() })
-    }
-
     /// The subtree `start`'s hits that beat `best` (distance, triangle; [`Hit::beats`]), the
     /// packets' way to finish a lane alone, on the path `simd`, which this CPU must support.
     #[inline]
@@ -429,14 +424,21 @@ impl<const W: usize> WideBvh<W> {
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::x86_64::{__m128, __m256};
-            if simd == Simd::Avx512
-                && let Some(bvh) = self.as_bvh8()
-            {
-                // SAFETY: the callers pass a supported path: AVX-512 F, VL and DQ and AVX2.
-                return unsafe { avx512::trace::<ANY, T>(bvh, start, ray, t_min, best, stack, cost) };
+            // SAFETY (all four): the callers pass a supported path (AVX2, or AVX-512 F, VL, DQ
+            // and BW with AVX2). The register holds `W` lanes.
+            if simd == Simd::Avx512 {
+                if W == 8 {
+                    return unsafe {
+                        avx2::trace_evex::<ANY, T, __m256, W>(self, start, ray, t_min, best, stack, cost)
+                    };
+                }
+                if W == 4 {
+                    return unsafe {
+                        avx2::trace_evex::<ANY, T, __m128, W>(self, start, ray, t_min, best, stack, cost)
+                    };
+                }
             }
             if simd >= Simd::Avx2 {
-                // SAFETY (both): the callers pass a supported path: AVX2. The register holds `W` lanes.
                 if W == 8 {
                     return unsafe { avx2::trace::<ANY, T, __m256, W>(self, start, ray, t_min, best, stack, cost) };
                 }
@@ -1005,6 +1007,41 @@ pub(crate) mod avx2 {
         start: u32,
         ray: &Ray,
         t_min: f32,
+        best: (f32, u32),
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Found> {
+        walk::<ANY, T, V, W>(bvh, start, ray, t_min, best, stack, cost)
+    }
+
+    /// [`trace`] compiled for AVX-512 (F, VL, DQ, BW): the same 256-bit (or 128-bit) operations in
+    /// the same order, so the same hits bit for bit, but with 32 vector registers instead of 16,
+    /// where the AVX2 build reloads the ray and the planes' offsets from the stack at every node
+    /// (the inlined leaf test needs every register), and compares straight into mask registers.
+    /// On the H100 host's Xeon 1-4 points more of Embree on every row of the ray report, side by
+    /// side (docs/cpu-benchmark.md, "AVX-512's registers"); a walk written for 16-lane
+    /// registers lost 3-20 points to it there and was removed.
+    #[target_feature(enable = "avx2,popcnt,avx512f,avx512vl,avx512dq,avx512bw")]
+    pub fn trace_evex<const ANY: bool, T: TriangleTest, V: Vector, const W: usize>(
+        bvh: &WideBvh<W>,
+        start: u32,
+        ray: &Ray,
+        t_min: f32,
+        best: (f32, u32),
+        stack: &mut Stack,
+        cost: &mut Cost,
+    ) -> Option<Found> {
+        walk::<ANY, T, V, W>(bvh, start, ray, t_min, best, stack, cost)
+    }
+
+    /// The body of [`trace`] and [`trace_evex`]: always inlined, without target features of its
+    /// own, so each compiles it with its own (as [`leaf`]).
+    #[inline(always)]
+    fn walk<const ANY: bool, T: TriangleTest, V: Vector, const W: usize>(
+        bvh: &WideBvh<W>,
+        start: u32,
+        ray: &Ray,
+        t_min: f32,
         (t_max, tri): (f32, u32),
         stack: &mut Stack,
         cost: &mut Cost,
@@ -1111,150 +1148,6 @@ pub(crate) mod avx2 {
                         *cost += work;
                         return found.then_some(best);
                     }
-                    Some((c, near)) if may_hold(near, best.t) => {
-                        cur = c;
-                        break;
-                    }
-                    Some(_) => {}
-                }
-            }
-        }
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-mod avx512 {
-    use super::avx2::{Lanes, Vector, leaf, prefetch};
-    use super::{Bvh8, Found, LEAF, WIDTH};
-    use crate::geometry::{Cost, EXIT_SCALE, Ray, TriangleTest, may_hold};
-    use crate::traverse::Stack;
-    use std::arch::x86_64::*;
-
-    /// Lanes 0-7 from `lo`, 8-15 from `hi`.
-    #[target_feature(enable = "avx2,avx512f,avx512vl,avx512dq")]
-    #[inline]
-    fn join(lo: &[f32; WIDTH], hi: &[f32; WIDTH]) -> __m512 {
-        // SAFETY: both hold 8 floats.
-        unsafe {
-            _mm512_insertf32x8::<1>(_mm512_castps256_ps512(_mm256_loadu_ps(lo.as_ptr())), _mm256_loadu_ps(hi.as_ptr()))
-        }
-    }
-
-    /// [`Bvh8::trace`] with AVX-512: per axis, lanes 0-7 hold the distances to the 8 children's
-    /// entry planes and lanes 8-15 the negated distances to their exit planes (the inverse
-    /// direction negated there: `x * -y` is exactly `-(x * y)`), so one `max` per axis makes both
-    /// the entry distance (the largest) and the exit distance (the smallest, negated): the same
-    /// operations in the same order as the AVX2 traversal, with `max(-a, -b) = -min(a, b)` bit for
-    /// bit, NaN and zeros included (the second operand wins on NaN and on equality in both). The
-    /// children hit are packed together with compress instructions, in slot order; the nearest is
-    /// entered and the others go on the stack farthest first, the order of the AVX2 traversal.
-    #[target_feature(enable = "avx2,popcnt,avx512f,avx512vl,avx512dq")]
-    pub fn trace<const ANY: bool, T: TriangleTest>(
-        bvh: &Bvh8,
-        start: u32,
-        ray: &Ray,
-        t_min: f32,
-        (t_max, tri): (f32, u32),
-        stack: &mut Stack,
-        cost: &mut Cost,
-    ) -> Option<Found> {
-        let ray = &super::avx2::read_ray(ray);
-        let r = Lanes::<__m256>::new(ray);
-        let o16: [__m512; 3] = std::array::from_fn(|a| _mm512_set1_ps(ray.origin[a]));
-        let inv16: [__m512; 3] = std::array::from_fn(|a| {
-            _mm512_insertf32x8::<1>(_mm512_set1_ps(ray.inv_dir[a]), _mm256_set1_ps(-ray.inv_dir[a]))
-        });
-        let near_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { 3 + a } else { a });
-        let far_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { a } else { 3 + a });
-        let sign = _mm256_set1_ps(-0.0);
-        let exit_scale = _mm256_set1_ps(EXIT_SCALE);
-        let t_min_v = _mm256_set1_ps(t_min);
-        let mut best = Found { t: t_max, tri, w1: 0.0, w2: 0.0, sum: 1.0 };
-        let mut found = false;
-        stack.clear();
-        let mut cur = start;
-        loop {
-            if cur & LEAF == 0 {
-                let node = &bvh.nodes[cur as usize];
-                let b = &node.bounds;
-                // Entry distances start at 0, exit distances at the best hit's (negated).
-                let mut acc = _mm512_maskz_mov_ps(0xff00, _mm512_set1_ps(-best.t));
-                for a in 0..3 {
-                    let d = _mm512_mul_ps(_mm512_sub_ps(join(&b[near_plane[a]], &b[far_plane[a]]), o16[a]), inv16[a]);
-                    acc = _mm512_max_ps(d, acc);
-                }
-                let near = _mm512_castps512_ps256(acc);
-                let far = _mm256_xor_ps(_mm512_extractf32x8_ps::<1>(acc), sign);
-                // `geometry::may_hold_wide(near, far)`, as the AVX2 traversal.
-                let ok = _mm256_cmp_ps_mask::<_CMP_LE_OQ>(near, _mm256_mul_ps(far, exit_scale));
-                let mask = ok as u32 & node.valid;
-                cost.nodes += node.valid.count_ones();
-                if mask != 0 {
-                    let first = mask.trailing_zeros() as usize;
-                    let rest = mask & (mask - 1);
-                    if rest == 0 {
-                        cur = node.child[first];
-                        continue;
-                    }
-                    let mut all = mask;
-                    while all != 0 {
-                        prefetch(bvh, node.child[all.trailing_zeros() as usize]);
-                        all &= all - 1;
-                    }
-                    // SAFETY: a load of 8 ints.
-                    let child = unsafe { _mm256_loadu_si256(node.child.as_ptr().cast()) };
-                    let n = mask.count_ones() as usize;
-                    // The register form: compress to memory is microcoded on some CPUs (AMD Zen 4).
-                    let dists = _mm256_maskz_compress_ps(mask as u8, near).store::<WIDTH>();
-                    let mut kids = [0u32; WIDTH];
-                    // SAFETY: a store of 8 ints.
-                    unsafe {
-                        _mm256_storeu_si256(kids.as_mut_ptr().cast(), _mm256_maskz_compress_epi32(mask as u8, child))
-                    };
-                    if ANY {
-                        // Any hit ends the ray: no order needed.
-                        for k in 1..n {
-                            stack.push((kids[k], dists[k]));
-                        }
-                        cur = kids[0];
-                        continue;
-                    }
-                    if n == 2 {
-                        let (push, enter) = if dists[0] < dists[1] { (1, 0) } else { (0, 1) };
-                        stack.push((kids[push], dists[push]));
-                        cur = kids[enter];
-                        continue;
-                    }
-                    // Farthest first, ties in slot order (the AVX2 traversal's insertion sort).
-                    let mut hits = [(0f32, 0u32); WIDTH];
-                    hits[0] = (dists[0], kids[0]);
-                    for j in 1..n {
-                        let e = (dists[j], kids[j]);
-                        let mut k = j;
-                        while k > 0 && hits[k - 1].0 < e.0 {
-                            hits[k] = hits[k - 1];
-                            k -= 1;
-                        }
-                        hits[k] = e;
-                    }
-                    for &(d, c) in &hits[..n - 1] {
-                        stack.push((c, d));
-                    }
-                    cur = hits[n - 1].1;
-                    continue;
-                }
-            } else {
-                let block = &bvh.blocks[(cur & !LEAF) as usize];
-                if leaf::<ANY, T, __m256, WIDTH>(block, &r, t_min_v, &mut best, cost) {
-                    found = true;
-                    if ANY {
-                        return Some(best);
-                    }
-                }
-            }
-            loop {
-                match stack.pop() {
-                    None => return found.then_some(best),
                     Some((c, near)) if may_hold(near, best.t) => {
                         cur = c;
                         break;

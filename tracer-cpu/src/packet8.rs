@@ -561,8 +561,15 @@ mod avx2 {
             m &= m - 1;
             let ray = rays.ray(i);
             let mut cost = Cost::default();
-            let found =
-                bvh.trace_from::<ANY, T>(Simd::Avx2, start, &ray, 0.0, (t[i], tri[i] as u32), single, &mut cost);
+            let found = bvh.trace_from::<ANY, T>(
+                bvh.simd().max(Simd::Avx2),
+                start,
+                &ray,
+                0.0,
+                (t[i], tri[i] as u32),
+                single,
+                &mut cost,
+            );
             nodes[i] += cost.nodes as i32;
             tris[i] += cost.tris as i32;
             if let Some(f) = found {
