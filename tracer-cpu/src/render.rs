@@ -187,11 +187,13 @@ impl<'t> Walk<'t> {
 
     /// Closest hit in `(t_min, t_max]` with the default (watertight) triangle test; adds the work
     /// done to `cost`.
+    #[inline]
     pub fn closest(&self, ray: &Ray, t_min: f32, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> Option<Hit> {
         self.closest_with(Intersect::Watertight, ray, t_min, t_max, stack, cost)
     }
 
     /// [`Self::closest`] with the triangle test `test`.
+    #[inline]
     pub fn closest_with(
         &self,
         test: Intersect,
@@ -208,11 +210,13 @@ impl<'t> Walk<'t> {
     }
 
     /// Whether anything lies in `(0, t_max]` along the ray, with the default (watertight) test.
+    #[inline]
     pub fn occluded(&self, ray: &Ray, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> bool {
         self.occluded_with(Intersect::Watertight, ray, t_max, stack, cost)
     }
 
     /// [`Self::occluded`] with the triangle test `test`.
+    #[inline]
     pub fn occluded_with(&self, test: Intersect, ray: &Ray, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> bool {
         match test {
             Intersect::Watertight => self.trace::<true, Watertight>(ray, 0.0, t_max, stack, cost),
@@ -222,6 +226,7 @@ impl<'t> Walk<'t> {
     }
 
     /// This walk's traversal with the triangle test `T`.
+    #[inline]
     pub(crate) fn trace<const ANY: bool, T: TriangleTest>(
         &self,
         ray: &Ray,
