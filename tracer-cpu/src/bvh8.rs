@@ -975,64 +975,68 @@ pub(crate) mod avx2 {
     }
     const PREFETCH_LINES: usize = 8;
 
-    /// [`WideBvh::trace`] with AVX2: the `W` children's boxes or a leaf's `W` triangles in
-    /// registers `V` of `W` lanes (256-bit for the 8-wide BVH, 128-bit for the 4-wide one).
-    ///
-    /// The box test decides as the scalar slab test with [`crate::geometry::may_hold_wide`]: per
-    /// axis the entry and exit distances are `(plane - origin) * inverse direction`; which plane
-    /// is entered is known from the sign of the inverse direction (for a finite one the rounding
-    /// is monotonic, so it is the smaller distance, as the scalar `min` finds). A NaN distance
-    /// (`0 * inf`: the origin on the plane of an axis the ray is parallel to) leaves its axis out,
-    /// as the scalar test does. The distances are then reduced as Embree's node test does, not in
-    /// a chain of float `max` and `min` (four cycles each; the walk waits on that chain at every
-    /// node), child for child with the chain's decision:
-    /// - entry: the largest distance by the integer order of the floats' bits, from the integer
-    ///   0 (the float +0) up, in one-cycle `vpmaxsd`s. For a float of clear sign bit that order
-    ///   is the float order; a negative or -0 distance is below 0 in both, and so is a NaN made
-    ///   by `0 * inf` (the x86 default NaN, sign bit set), which the chain leaves out too. The
-    ///   entry distances are the chain's, bit for bit but a zero's sign.
-    /// - exit: rounding being monotonic, `entry <= min(exits, best) * EXIT_SCALE` holds exactly
-    ///   when `entry <= exit * EXIT_SCALE` holds for each exit and for the best hit's distance:
-    ///   four compares side by side instead of a chain; a NaN exit distance passes
-    ///   (`!(entry > NaN)`), as the chain's `min` drops it.
-    ///
-    /// A ray with a NaN direction hits nothing whichever way. On the H100 host's 16 threads this
-    /// gained 1-6 points against Embree on every row of the ray report, side by side with the
-    /// float chain (docs/cpu-benchmark.md, "the integer node test"); the walk's hits and work
-    /// counts are the portable walk's, ray by ray (the tests below, with rays from vertices, where exit distances are zeros, and along
-    /// the axes, where they are NaN).
-    #[target_feature(enable = "avx2,popcnt")]
-    pub fn trace<const ANY: bool, T: TriangleTest, V: Vector, const W: usize>(
-        bvh: &WideBvh<W>,
-        start: u32,
-        ray: &Ray,
-        t_min: f32,
-        best: (f32, u32),
-        stack: &mut Stack,
-        cost: &mut Cost,
-    ) -> Option<Found> {
-        walk::<ANY, T, V, W>(bvh, start, ray, t_min, best, stack, cost)
+    /// Defines an entry to [`walk`] compiled with the target features `$features`.
+    macro_rules! walk_compiled_for {
+        ($(#[$doc:meta])* $name:ident, $features:literal) => {
+            $(#[$doc])*
+            #[target_feature(enable = $features)]
+            pub fn $name<const ANY: bool, T: TriangleTest, V: Vector, const W: usize>(
+                bvh: &WideBvh<W>,
+                start: u32,
+                ray: &Ray,
+                t_min: f32,
+                best: (f32, u32),
+                stack: &mut Stack,
+                cost: &mut Cost,
+            ) -> Option<Found> {
+                walk::<ANY, T, V, W>(bvh, start, ray, t_min, best, stack, cost)
+            }
+        };
     }
 
-    /// [`trace`] compiled for AVX-512 (F, VL, DQ, BW): the same 256-bit (or 128-bit) operations in
-    /// the same order, so the same hits bit for bit, but with 32 vector registers instead of 16,
-    /// where the AVX2 build reloads the ray and the planes' offsets from the stack at every node
-    /// (the inlined leaf test needs every register), and compares straight into mask registers.
-    /// On the H100 host's Xeon 1-4 points more of Embree on every row of the ray report, side by
-    /// side (docs/cpu-benchmark.md, "AVX-512's registers"); a walk written for 16-lane
-    /// registers lost 3-20 points to it there and was removed.
-    #[target_feature(enable = "avx2,popcnt,avx512f,avx512vl,avx512dq,avx512bw")]
-    pub fn trace_evex<const ANY: bool, T: TriangleTest, V: Vector, const W: usize>(
-        bvh: &WideBvh<W>,
-        start: u32,
-        ray: &Ray,
-        t_min: f32,
-        best: (f32, u32),
-        stack: &mut Stack,
-        cost: &mut Cost,
-    ) -> Option<Found> {
-        walk::<ANY, T, V, W>(bvh, start, ray, t_min, best, stack, cost)
-    }
+    walk_compiled_for!(
+        /// [`WideBvh::trace`] with AVX2: the `W` children's boxes or a leaf's `W` triangles in
+        /// registers `V` of `W` lanes (256-bit for the 8-wide BVH, 128-bit for the 4-wide one).
+        ///
+        /// The box test decides as the scalar slab test with [`crate::geometry::may_hold_wide`]: per
+        /// axis the entry and exit distances are `(plane - origin) * inverse direction`; which plane
+        /// is entered is known from the sign of the inverse direction (for a finite one the rounding
+        /// is monotonic, so it is the smaller distance, as the scalar `min` finds). A NaN distance
+        /// (`0 * inf`: the origin on the plane of an axis the ray is parallel to) leaves its axis out,
+        /// as the scalar test does. The distances are then reduced as Embree's node test does, not in
+        /// a chain of float `max` and `min` (four cycles each; the walk waits on that chain at every
+        /// node), child for child with the chain's decision:
+        /// - entry: the largest distance by the integer order of the floats' bits, from the integer
+        ///   0 (the float +0) up, in one-cycle `vpmaxsd`s. For a float of clear sign bit that order
+        ///   is the float order; a negative or -0 distance is below 0 in both, and so is a NaN made
+        ///   by `0 * inf` (the x86 default NaN, sign bit set), which the chain leaves out too. The
+        ///   entry distances are the chain's, bit for bit but a zero's sign.
+        /// - exit: rounding being monotonic, `entry <= min(exits, best) * EXIT_SCALE` holds exactly
+        ///   when `entry <= exit * EXIT_SCALE` holds for each exit and for the best hit's distance:
+        ///   four compares side by side instead of a chain; a NaN exit distance passes
+        ///   (`!(entry > NaN)`), as the chain's `min` drops it.
+        ///
+        /// A ray with a NaN direction hits nothing whichever way. On the H100 host's 16 threads this
+        /// gained 1-6 points against Embree on every row of the ray report, side by side with the
+        /// float chain (docs/cpu-benchmark.md, "the integer node test"); the walk's hits and work
+        /// counts are the portable walk's, ray by ray (the tests below, with rays from vertices, where exit distances are zeros, and along
+        /// the axes, where they are NaN).
+        trace,
+        "avx2,popcnt"
+    );
+
+    walk_compiled_for!(
+        /// [`trace`] compiled for AVX-512 (F, VL, DQ, BW): the same 256-bit (or 128-bit)
+        /// operations in the same order, so the same hits bit for bit, but with 32 vector
+        /// registers instead of 16, where the AVX2 build reloads the ray and the planes' offsets
+        /// from the stack at every node (the inlined leaf test needs every register), and compares
+        /// straight into mask registers. On the H100 host's Xeon 0-5 points more of Embree on
+        /// every row of the ray report, side by side in three runs (docs/cpu-benchmark.md,
+        /// "AVX-512's registers and the walk's entry"); a walk written for 16-lane registers
+        /// traced 3-20% fewer rays than this one there and was removed.
+        trace_evex,
+        "avx2,popcnt,avx512f,avx512vl,avx512dq,avx512bw"
+    );
 
     /// The body of [`trace`] and [`trace_evex`]: always inlined, without target features of its
     /// own, so each compiles it with its own (as [`leaf`]).
