@@ -432,8 +432,9 @@ fn markdown(
         s,
         "- Each figure: rays traced / median {} of one pass over the whole ray set. Passes of the {} \
          tracers are interleaved round by round (so load changes hit all alike), after one untimed pass \
-         of each on all threads; at least {} rounds ({} for scenes over 500k triangles at 1920x1440) and \
-         at least {MIN_SECONDS} s of passes per row, at most {MAX_ROUNDS} rounds",
+         of each on all threads, and each timed pass right after an untimed one of the same tracer (its \
+         own data in the caches); at least {} rounds ({} for scenes over 500k triangles at 1920x1440) \
+         and at least {MIN_SECONDS} s of timed passes per row, at most {MAX_ROUNDS} rounds",
         match opts.clock {
             rayset::Clock::Wall => "wall-clock time",
             rayset::Clock::Cpu => "CPU time of all threads (rays per CPU-second)",

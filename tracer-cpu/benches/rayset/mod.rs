@@ -360,8 +360,14 @@ fn cpu_seconds() -> f64 {
 
 /// Times passes of several tracers interleaved (one pass of each per round), so that a change in
 /// the machine's load during the measurement hits all of them alike: at least `reps` rounds and
-/// enough to fill `min_seconds`, at most `max_rounds`. Returns each one's median pass in seconds
-/// of wall-clock time. The caller warms up first.
+/// enough to fill `min_seconds` of timed passes, at most `max_rounds`. Returns each one's median
+/// pass in seconds of wall-clock time. The caller warms up first.
+///
+/// Each timed pass comes right after an untimed pass of the same tracer, so that every tracer is
+/// timed with its own data in the caches, as when it renders alone. Without it each was timed
+/// after another's pass, and the one that followed a tracer of the same scene data (ours after
+/// ours) read up to 9% faster on incoherent rays than in another place (docs/cpu-benchmark.md,
+/// stop 34).
 pub fn interleaved_medians(
     reps: usize,
     min_seconds: f64,
@@ -384,6 +390,7 @@ pub fn interleaved_medians_on(
     let mut elapsed = 0.0;
     loop {
         for (p, s) in passes.iter_mut().zip(samples.iter_mut()) {
+            p();
             let start = clock.now();
             p();
             let t = clock.now() - start;
