@@ -274,7 +274,7 @@ fn like_embree(ray: &Ray) -> Ray {
     Ray::new(ray.origin, ray.dir)
 }
 
-/// The distance of a closest hit, its barycentrics made all the same: `rtcIntersect1` writes
+/// The distance of a closest hit, its barycentrics computed all the same: `rtcIntersect1` writes
 /// them into every hit it returns, and the renderer reads them; inlined into the loop, ours
 /// would otherwise be left out as unused.
 fn hit_t(h: Hit) -> f32 {
