@@ -165,22 +165,34 @@ fn wide_packet<T: TriangleTest>(
         .map(|&(o, d)| walk.closest_with(T::KIND, &Ray::new(o, d), 0.0, f32::INFINITY, stack, &mut c))
         .collect();
     let mut single = Stack::default();
-    let res = packet8::trace::<false, T>(bvh8, &p, pstack, &mut single);
-    for (i, (&(o, d), a)) in rays.iter().zip(&want).enumerate() {
-        assert_eq!(res.get(i), *a, "{name}: wide packet and ordered disagree on lane {i}: origin {o:?} dir {d:?}");
-    }
-    for (i, r) in res.hit.iter().enumerate().skip(rays.len()) {
-        assert!(!r, "{name}: lane {i} holds no ray but hit");
-    }
-    for shorten in [1.0, 1.0 - 1e-3] {
-        let mut q = p;
-        for (i, a) in want.iter().enumerate() {
-            q.t_max[i] = a.map_or(f32::INFINITY, |h| h.t * shorten);
+    let paths = packet8::paths();
+    assert!(!paths.is_empty(), "wide packets are only compared where the CPU runs them");
+    for &simd in &paths {
+        let res = packet8::trace_on::<false, T>(simd, bvh8, &p, pstack, &mut single);
+        for (i, (&(o, d), a)) in rays.iter().zip(&want).enumerate() {
+            assert_eq!(
+                res.get(i),
+                *a,
+                "{name}: wide packet ({simd:?}) and ordered disagree on lane {i}: origin {o:?} dir {d:?}"
+            );
         }
-        let res = packet8::trace::<true, T>(bvh8, &q, pstack, &mut single);
-        for (i, &(o, d)) in rays.iter().enumerate() {
-            let blocked = walk.occluded_with(T::KIND, &Ray::new(o, d), q.t_max[i], stack, &mut c);
-            assert_eq!(res.hit[i], blocked, "{name}: wide packet any hit to {} on origin {o:?} dir {d:?}", q.t_max[i]);
+        for (i, r) in res.hit.iter().enumerate().skip(rays.len()) {
+            assert!(!r, "{name}: lane {i} holds no ray but hit ({simd:?})");
+        }
+        for shorten in [1.0, 1.0 - 1e-3] {
+            let mut q = p;
+            for (i, a) in want.iter().enumerate() {
+                q.t_max[i] = a.map_or(f32::INFINITY, |h| h.t * shorten);
+            }
+            let res = packet8::trace_on::<true, T>(simd, bvh8, &q, pstack, &mut single);
+            for (i, &(o, d)) in rays.iter().enumerate() {
+                let blocked = walk.occluded_with(T::KIND, &Ray::new(o, d), q.t_max[i], stack, &mut c);
+                assert_eq!(
+                    res.hit[i], blocked,
+                    "{name}: wide packet ({simd:?}) any hit to {} on origin {o:?} dir {d:?}",
+                    q.t_max[i]
+                );
+            }
         }
     }
 }
