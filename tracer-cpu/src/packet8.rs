@@ -1011,7 +1011,7 @@ macro_rules! packet_walk_compiled_for {
                             t_far = largest(st.best.t, _mm256_and_ps(group_v, st.alive));
                         }
                     } else {
-                        let node = &bvh.nodes[cur as usize];
+                        let node = bvh.node(cur);
                         let b = &node.bounds;
                         let mv = mask_of(cur_mask);
                         st.n_nodes = _mm256_add_epi32(
@@ -1105,7 +1105,7 @@ macro_rules! packet_walk_compiled_for {
                         }
                     }
                 } else {
-                    let won = leaf::<ANY, T>(&bvh.blocks[(cur & !LEAF) as usize], pk, shared, cur_mask, st);
+                    let won = leaf::<ANY, T>(bvh.block(cur), pk, shared, cur_mask, st);
                     if !ANY && any(won) {
                         t_far = largest(st.best.t, _mm256_and_ps(group_v, st.alive));
                     }
