@@ -285,6 +285,23 @@ pub(crate) mod avx2 {
         intersect_in(tri, n, pk, all, t_min, t_max).unwrap_or([_mm256_setzero_ps(); 5])
     }
 
+    /// Lanes where the three edge functions agree in sign, a zero counting as either: the ray
+    /// passes inside the triangle's edges or on one (the scalar test's condition; NaN lanes fail).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(crate) fn inside_edges(w0: __m256, w1: __m256, w2: __m256) -> __m256 {
+        let zero = _mm256_setzero_ps();
+        let positive = _mm256_and_ps(
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_GE_OQ>(w1, zero)),
+            _mm256_cmp_ps::<_CMP_GE_OQ>(w2, zero),
+        );
+        let negative = _mm256_and_ps(
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(w1, zero)),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
+        );
+        _mm256_or_ps(positive, negative)
+    }
+
     /// [`intersect_with_normal`] for the lanes of `mv`: `None`, before the division, where none
     /// of them is inside the triangle's edges (the other lanes' results are not used).
     #[target_feature(enable = "avx2")]
@@ -308,15 +325,7 @@ pub(crate) mod avx2 {
         let w0 = edge_function(&a1, &a2, d);
         let w1 = edge_function(&a2, &a0, d);
         let zero = _mm256_setzero_ps();
-        let positive = _mm256_and_ps(
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_GE_OQ>(w1, zero)),
-            _mm256_cmp_ps::<_CMP_GE_OQ>(w2, zero),
-        );
-        let negative = _mm256_and_ps(
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(w1, zero)),
-            _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
-        );
-        let inside = _mm256_and_ps(_mm256_or_ps(positive, negative), mv);
+        let inside = _mm256_and_ps(inside_edges(w0, w1, w2), mv);
         if _mm256_movemask_ps(inside) == 0 {
             return None;
         }

@@ -1,5 +1,6 @@
 //! Coherent packets of 8 rays (a 4 x 2 pixel block) through the wide BVH ([`crate::bvh8`]) with
-//! AVX2, the way Embree's `rtcIntersect8` walks a coherent packet. The lanes are split by the signs
+//! AVX2 (compiled twice: for AVX2, and for AVX-512's registers where the CPU has them), the way
+//! Embree's `rtcIntersect8` walks a coherent packet. The lanes are split by the signs
 //! of their directions (one walk per octant; a lane with an axis-parallel direction goes alone).
 //! Per walk a frustum bounds the lanes' origins and reciprocal directions; at a node one 8-wide
 //! sequence tests all 8 children against the frustum (no child a lane enters fails it), one more
@@ -158,7 +159,9 @@ macro_rules! packet_walk_compiled_for {
         use crate::geometry;
         use crate::geometry::Hit;
         use crate::geometry::{Cost, TriangleTest};
-        use crate::packet::avx2::{Best, Packet, add, any, count, keep, may_hold, mul, packet_of, splat, sub, test};
+        use crate::packet::avx2::{
+            Best, Packet, add, any, count, inside_edges, keep, may_hold, mul, packet_of, splat, sub, test,
+        };
         use crate::packet::{Entry, LANES, Rays, Results};
         use crate::traverse::Stack;
         use render_spec::Intersect;
@@ -282,16 +285,8 @@ macro_rules! packet_walk_compiled_for {
             let w1 = dot(d, c(1));
             let w2 = dot(d, c(2));
             let zero = _mm256_setzero_ps();
-            let positive = _mm256_and_ps(
-                _mm256_and_ps(_mm256_cmp_ps::<_CMP_GE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_GE_OQ>(w1, zero)),
-                _mm256_cmp_ps::<_CMP_GE_OQ>(w2, zero),
-            );
-            let negative = _mm256_and_ps(
-                _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(w0, zero), _mm256_cmp_ps::<_CMP_LE_OQ>(w1, zero)),
-                _mm256_cmp_ps::<_CMP_LE_OQ>(w2, zero),
-            );
             // Most triangles of a block are missed by every lane: those end before the division.
-            let inside = _mm256_and_ps(_mm256_or_ps(positive, negative), mv);
+            let inside = _mm256_and_ps(inside_edges(w0, w1, w2), mv);
             if _mm256_movemask_ps(inside) == 0 {
                 return None;
             }
