@@ -273,10 +273,6 @@ impl<const W: usize> WideBvh<W> {
     pub fn from_source(nodes: &[Node], tris: &(impl TriangleSource + ?Sized)) -> Self {
         // `valid` holds a bit per slot; a binary node opens into at least 2.
         const { assert!(W >= 2 && W <= 32) };
-        const {
-            assert!(size_of::<WideNode<W>>().is_multiple_of(64) && align_of::<WideNode<W>>() <= 64);
-            assert!(size_of::<TriBlock<W>>().is_multiple_of(64) && align_of::<TriBlock<W>>() <= 64);
-        };
         let lines = (nodes.len() / (W - 2).max(1) + 1) * size_of::<WideNode<W>>() / 64
             + (tris.len() / (W / 2) + 1) * size_of::<TriBlock<W>>() / 64;
         let mut out = Self { lines: Vec::with_capacity(lines), counts: (0, 0), root: LEAF, simd: Simd::detect() };
@@ -346,10 +342,11 @@ impl<const W: usize> WideBvh<W> {
 
     /// Appends `v` (a node or a block) to the arena; returns its first line.
     fn push<T: Copy>(&mut self, v: T) -> u32 {
+        const { assert!(size_of::<T>().is_multiple_of(64) && align_of::<T>() <= 64) };
         let at = self.lines.len();
         self.lines.resize(at + size_of::<T>() / 64, Line([0; 64]));
-        // SAFETY: the lines just added hold `size_of::<T>()` bytes (asserted a multiple of 64),
-        // aligned to 64 (at least `T`'s alignment).
+        // SAFETY: the lines just added hold `size_of::<T>()` bytes (a multiple of 64, asserted
+        // above), aligned to 64 (at least `T`'s alignment).
         unsafe { self.lines.as_mut_ptr().add(at).cast::<T>().write(v) };
         u32::try_from(at).expect("a wide BVH of fewer than 2^31 lines")
     }
@@ -358,8 +355,9 @@ impl<const W: usize> WideBvh<W> {
     #[inline(always)]
     pub(crate) fn node(&self, r: u32) -> &WideNode<W> {
         let lines = &self.lines[r as usize..r as usize + size_of::<WideNode<W>>() / 64];
-        // SAFETY: the lines hold a whole node (the collapse refers only to nodes it wrote), and
-        // are aligned to 64.
+        // SAFETY: the slice (bounds-checked) holds a node's bytes, aligned to 64; a node is
+        // floats and integers only, so any bytes are a valid one (a wrong `r` reads garbage,
+        // never undefined behaviour).
         unsafe { &*lines.as_ptr().cast::<WideNode<W>>() }
     }
 
