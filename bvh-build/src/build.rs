@@ -201,6 +201,24 @@ pub fn bounds_of(refs: &[PrimRef]) -> NodeBounds {
     nb
 }
 
+/// The box of a set of primitives' centroids, the same as [`bounds_of`]'s. Two boxes grow side by
+/// side (the min and max chains are the loop's latency), and the halving of the box's corner
+/// sums waits until the end: halving is exact and monotonic, so it commutes with min and max.
+pub fn centroid_bounds(refs: &[PrimRef]) -> Aabb {
+    let sum = |r: &PrimRef| Vec3A::from(r.min) + Vec3A::from(r.max);
+    let (mut a, mut b) = (Aabb::EMPTY, Aabb::EMPTY);
+    let mut pairs = refs.chunks_exact(2);
+    for pair in &mut pairs {
+        a.grow_point(sum(&pair[0]));
+        b.grow_point(sum(&pair[1]));
+    }
+    for r in pairs.remainder() {
+        a.grow_point(sum(r));
+    }
+    let both = a.union(&b);
+    if refs.is_empty() { both } else { Aabb { min: both.min * 0.5, max: both.max * 0.5 } }
+}
+
 /// A node's box and the box of its primitives' centroids.
 #[derive(Clone, Copy, Debug)]
 pub struct NodeBounds {
@@ -650,10 +668,41 @@ fn build_presorted<S: Splitter, const N: usize>(
     slot: usize,
     bounds: NodeBounds,
 ) -> (u32, u32) {
-    let n = refs.len();
-    let set = Presorted::<N>::new(refs);
-    let sub = Subtree { ctx, ids: &set.ids, boxes: &set.boxes };
-    sub.node::<N>(set.orders.each_ref().map(|o| &o[..n]), &set.local[..n], order, first, slots, slot, bounds)
+    crate::isa::fastest(
+        #[inline(always)]
+        || {
+            let n = refs.len();
+            let set = Presorted::<N>::new(refs);
+            let sub = Subtree { ctx, ids: &set.ids, boxes: &set.boxes };
+            let root = Part {
+                orders: set.orders.each_ref().map(|o| &o[..n]),
+                slice: &set.local[..n],
+                order,
+                first,
+                slots,
+                slot,
+            };
+            #[cfg(target_arch = "x86_64")]
+            if crate::isa::avx2() {
+                // SAFETY: the processor has the features `node_avx2` is compiled for.
+                return unsafe { sub.node_avx2::<N>(root, bounds) };
+            }
+            sub.node::<N>(root, bounds)
+        },
+    )
+}
+
+/// One node of a [`build_presorted`] subtree: its primitives (local indices) in the order of each
+/// axis, and in the order the per-node build would hold them in its slice (`slice`: the parent's
+/// chosen axis order; the slice's own order at the subtree's root), which the leaves keep; its
+/// part of the leaf order, and its slots (the first at absolute slot `slot`).
+struct Part<'a> {
+    orders: [&'a [u8]; 3],
+    slice: &'a [u8],
+    order: &'a mut [MaybeUninit<u32>],
+    first: usize,
+    slots: &'a mut [MaybeUninit<Slot>],
+    slot: usize,
 }
 
 /// What every node of a [`build_presorted`] subtree shares: its primitives' input ids and boxes,
@@ -665,20 +714,31 @@ struct Subtree<'a, 'c, S: Splitter> {
 }
 
 impl<S: Splitter> Subtree<'_, '_, S> {
-    /// One node: its primitives (local indices) in the order of each axis, and in the order the
-    /// per-node build would hold them in its slice (`slice`: the parent's chosen axis order; the
-    /// slice's own order at the subtree's root), which the leaves keep.
-    #[allow(clippy::too_many_arguments)]
-    fn node<const N: usize>(
+    /// The subtree of `part`, compiled for the baseline.
+    fn node<const N: usize>(&self, part: Part<'_>, bounds: NodeBounds) -> (u32, u32) {
+        self.node_with::<N>(part, bounds, &|s, p, b| s.node::<N>(p, b))
+    }
+
+    /// [`Subtree::node`] compiled for AVX2 ([`crate::isa`]).
+    ///
+    /// # Safety
+    /// The processor must have the features named here ([`crate::isa::avx2`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn node_avx2<const N: usize>(&self, part: Part<'_>, bounds: NodeBounds) -> (u32, u32) {
+        // SAFETY: the caller's contract, passed on to the children.
+        self.node_with::<N>(part, bounds, &|s, p, b| unsafe { s.node_avx2::<N>(p, b) })
+    }
+
+    /// One node, its children built by `child` (the copy compiled for the same features).
+    #[inline(always)]
+    fn node_with<const N: usize>(
         &self,
-        orders: [&[u8]; 3],
-        slice: &[u8],
-        order: &mut [MaybeUninit<u32>],
-        first: usize,
-        slots: &mut [MaybeUninit<Slot>],
-        slot: usize,
+        part: Part<'_>,
         bounds: NodeBounds,
+        child: &impl Fn(&Self, Part<'_>, NodeBounds) -> (u32, u32),
     ) -> (u32, u32) {
+        let Part { orders, slice, order, first, slots, slot } = part;
         let ctx = self.ctx;
         let n = slice.len();
         let may_leaf = n <= ctx.costs.max_leaf_size;
@@ -726,12 +786,26 @@ impl<S: Splitter> Subtree<'_, '_, S> {
         let left_orders = lefts.each_ref().map(|o| &o[..mid]);
         let right_orders = rights.each_ref().map(|o| &o[..n - mid]);
         let left_slots = &mut below[..2 * mid - 1];
-        let (l, lh) = self.node::<N>(left_orders, left_slice, left_order, first, left_slots, slot + 1, left_nb);
+        let left = Part {
+            orders: left_orders,
+            slice: left_slice,
+            order: left_order,
+            first,
+            slots: left_slots,
+            slot: slot + 1,
+        };
+        let (l, lh) = child(self, left, left_nb);
         // Packed, as [`build_node`] below [`PARALLEL_SUBTREES`].
         let right_slot = slot + 1 + l as usize;
-        let right_slots = &mut below[l as usize..];
-        let (r, rh) =
-            self.node::<N>(right_orders, right_slice, right_order, first + mid, right_slots, right_slot, right_nb);
+        let right = Part {
+            orders: right_orders,
+            slice: right_slice,
+            order: right_order,
+            first: first + mid,
+            slots: &mut below[l as usize..],
+            slot: right_slot,
+        };
+        let (r, rh) = child(self, right, right_nb);
         let (nodes, height) = (1 + l + r, 1 + lh.max(rh));
         here.write(Slot { min, max, count: height, index: right_slot as u32, nodes });
         (nodes, height)
@@ -1038,6 +1112,29 @@ mod tests {
         }
         tris.extend(soup(n));
         tris
+    }
+
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn both_copies_build_the_same_tree() {
+        assert!(crate::isa::detected(), "this processor lacks AVX2, so the two copies cannot be compared here");
+        // 100,000 triangles: the parallel splits and their scatter too.
+        for tris in [soup(100_000), ties_and_duplicates(3000), soup_on_floor(5000), soup_in_a_room(2000)] {
+            for p in [params(Strategy::Binned, 16, 8), params(Strategy::Binned, 4, 1), params(Strategy::Sweep, 16, 8)] {
+                let build = |baseline| {
+                    crate::isa::baseline_only(baseline);
+                    let t = crate::compile::tree_with(&tris, &p, None, true).expect("builds");
+                    crate::isa::baseline_only(false);
+                    t
+                };
+                let (baseline, avx2) = (build(true), build(false));
+                check_shape(Tree::child_pair(&avx2.nodes), tris.len() as u32).expect("valid tree");
+                let what = format!("{} triangles, {:?} {} bins", tris.len(), p.strategy, p.bins);
+                assert_eq!(baseline.nodes, avx2.nodes, "{what}: the same nodes");
+                assert_eq!(baseline.order, avx2.order, "{what}: the same leaf order");
+                assert_eq!(baseline.escape, avx2.escape, "{what}: the same escape layout");
+            }
+        }
     }
 
     #[test]

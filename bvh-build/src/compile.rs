@@ -71,7 +71,7 @@ pub fn build_tree_with_progress(
     tree_with(positions, p, progress, false)
 }
 
-fn tree_with(
+pub(crate) fn tree_with(
     positions: &[[glam::Vec3; 3]],
     p: &BuildParams,
     progress: Option<&AtomicUsize>,

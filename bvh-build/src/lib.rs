@@ -11,6 +11,7 @@ pub mod binned;
 pub mod build;
 mod compile;
 pub mod import;
+mod isa;
 #[cfg(feature = "compare")]
 pub mod peers;
 pub mod scene;

@@ -189,6 +189,7 @@ fn sort_keys<const N: usize>(keys: &mut [u64; N], n: usize) {
 }
 
 impl<const N: usize> Presorted<N> {
+    #[inline(always)]
     pub(crate) fn new(prims: &[PrimRef]) -> Presorted<N> {
         let n = prims.len();
         debug_assert!(n <= N && N <= PRESORTED_MAX && N >= 2);
