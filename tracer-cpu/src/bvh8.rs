@@ -31,7 +31,7 @@
 //! `examples/ray_report.rs` prints it per scene and width), not stored in the file. Arrays of
 //! 32 MiB or more ask for transparent huge pages, as Embree's allocator does (see `HUGE_TREE`).
 
-use crate::geometry::{self, Cost, Hit, Ray, Tally, TriangleTest, may_hold};
+use crate::geometry::{self, Cost, Hit, Ray, TriangleTest, may_hold};
 use crate::traverse::Stack;
 use crate::vertices::TriangleSource;
 use bvh_format::{Node, Triangle};
@@ -471,7 +471,7 @@ impl<const W: usize> WideBvh<W> {
         t_min: f32,
         t_max: f32,
         stack: &mut Stack,
-        cost: &mut impl Tally,
+        cost: &mut Cost,
     ) -> Option<Hit> {
         self.trace_from::<ANY, T>(self.simd, self.root, ray, t_min, (t_max, u32::MAX), stack, cost).map(Found::hit)
     }
@@ -486,7 +486,7 @@ impl<const W: usize> WideBvh<W> {
         t_min: f32,
         t_max: f32,
         stack: &mut Stack,
-        cost: &mut impl Tally,
+        cost: &mut Cost,
     ) -> Option<Hit> {
         let simd = Simd::best_up_to(simd);
         self.trace_from::<ANY, T>(simd, self.root, ray, t_min, (t_max, u32::MAX), stack, cost).map(Found::hit)
@@ -504,7 +504,7 @@ impl<const W: usize> WideBvh<W> {
         t_min: f32,
         best: (f32, u32),
         stack: &mut Stack,
-        cost: &mut impl Tally,
+        cost: &mut Cost,
     ) -> Option<Found> {
         #[cfg(target_arch = "x86_64")]
         {
@@ -533,7 +533,7 @@ impl<const W: usize> WideBvh<W> {
             }
         }
         let _ = simd;
-        crate::traverse::counted(cost, |work| self.portable::<ANY, T>(start, ray, t_min, best, stack, work))
+        self.portable::<ANY, T>(start, ray, t_min, best, stack, cost)
     }
 
     /// [`Self::trace`] without SIMD, for CPUs without AVX2 and as the tests' second opinion.
@@ -543,12 +543,11 @@ impl<const W: usize> WideBvh<W> {
         t_min: f32,
         t_max: f32,
         stack: &mut Stack,
-        cost: &mut impl Tally,
+        cost: &mut Cost,
     ) -> Option<Hit> {
         self.trace_on::<ANY, T>(Simd::Portable, ray, t_min, t_max, stack, cost)
     }
 
-    #[inline(always)]
     fn portable<const ANY: bool, T: TriangleTest>(
         &self,
         start: u32,
@@ -747,7 +746,7 @@ fn leaf_indices(nodes: &[Node], b: u32, out: &mut Vec<u32>, stack: &mut Vec<u32>
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod avx2 {
     use super::{Found, LEAF, TriBlock, WideBvh, WideNode};
-    use crate::geometry::{Cost, EXIT_SCALE, Hit, Ray, Tally, TriangleTest, may_hold};
+    use crate::geometry::{Cost, EXIT_SCALE, Hit, Ray, TriangleTest, may_hold};
     use crate::traverse::Stack;
     use render_spec::Intersect;
     use std::arch::x86_64::*;
@@ -1070,7 +1069,7 @@ pub(crate) mod avx2 {
                 t_min: f32,
                 best: (f32, u32),
                 stack: &mut Stack,
-                cost: &mut impl Tally,
+                cost: &mut Cost,
             ) -> Option<Found> {
                 walk::<ANY, T, V, W>(bvh, start, ray, t_min, best, stack, cost)
             }
@@ -1131,7 +1130,7 @@ pub(crate) mod avx2 {
         t_min: f32,
         (t_max, tri): (f32, u32),
         stack: &mut Stack,
-        cost: &mut impl Tally,
+        cost: &mut Cost,
     ) -> Option<Found> {
         let ray = &read_ray(ray);
         let r = Lanes::<V>::new(ray);
@@ -1222,7 +1221,7 @@ pub(crate) mod avx2 {
                 if leaf::<ANY, T, V, W>(block, &r, t_min_v, &mut best, &mut work) {
                     found = true;
                     if ANY {
-                        cost.add(work);
+                        *cost += work;
                         return Some(best);
                     }
                 }
@@ -1230,7 +1229,7 @@ pub(crate) mod avx2 {
             loop {
                 match stack.pop() {
                     None => {
-                        cost.add(work);
+                        *cost += work;
                         return found.then_some(best);
                     }
                     Some((c, near)) if may_hold(near, best.t) => {
@@ -1587,9 +1586,6 @@ mod tests {
                 let got = bvh.trace_on::<false, Watertight>(simd, ray, 0.0, f32::INFINITY, stack, &mut cost);
                 assert_eq!(got, want, "{simd:?}, width {W}, on {ray:?}");
                 assert_eq!(cost, want_cost, "{simd:?}, width {W}, on {ray:?}");
-                // The walk compiled without counting (`Tally for ()`), as the ray report times it.
-                let uncounted = bvh.trace_on::<false, Watertight>(simd, ray, 0.0, f32::INFINITY, stack, &mut ());
-                assert_eq!(uncounted, want, "{simd:?}, width {W}, uncounted, on {ray:?}");
                 let mt = bvh.trace_on::<false, MollerTrumbore>(simd, ray, 0.0, f32::INFINITY, stack, &mut cost);
                 assert_eq!(mt, want_mt, "{simd:?}, width {W} (Möller-Trumbore) on {ray:?}");
                 let limits = want.map_or(vec![1.0, f32::INFINITY], |h| vec![h.t, h.t * (1.0 - 1e-3), f32::INFINITY]);

@@ -53,27 +53,6 @@ impl std::ops::AddAssign for Cost {
     }
 }
 
-/// Where a traversal adds the work it does: a [`Cost`] counts it, `()` throws it away, and a
-/// traversal given `()` is compiled without the counting (its counts feed nothing, so the
-/// compiler drops them). The renderer's cost AOVs need the counts; the ray report's timed walks,
-/// like Embree's, count nothing (on the VM the counting cost `bvh8` 1-4 points of Embree's
-/// speed, docs/cpu-benchmark.md).
-pub trait Tally {
-    fn add(&mut self, work: Cost);
-}
-
-impl Tally for Cost {
-    #[inline(always)]
-    fn add(&mut self, work: Cost) {
-        *self += work;
-    }
-}
-
-impl Tally for () {
-    #[inline(always)]
-    fn add(&mut self, _: Cost) {}
-}
-
 /// Whether a box entered at `near` may still hold a hit at `t` or nearer ([`T_SLACK`] says why
 /// with a slack).
 #[inline(always)]

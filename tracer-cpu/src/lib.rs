@@ -31,7 +31,7 @@ pub mod vertices;
 pub mod whitted;
 pub mod wide;
 
-pub use geometry::{Cost, Hit, Ray, Tally};
+pub use geometry::{Cost, Hit, Ray};
 pub use render::{Tracer, Walk, render, render_with_progress};
 pub use render_spec::Vertices;
 

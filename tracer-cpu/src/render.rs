@@ -3,7 +3,7 @@
 
 use crate::Method;
 use crate::bvh8::{Bvh4, Bvh8};
-use crate::geometry::{Hit, MollerTrumbore, Ray, Tally, TriangleTest, Watertight};
+use crate::geometry::{Cost, Hit, MollerTrumbore, Ray, TriangleTest, Watertight};
 use crate::lanes::{Mixed, OneByOne, Packets, Stage, TraceLanes};
 use crate::packet::{LANES, Rays, Results};
 use crate::shade;
@@ -188,7 +188,7 @@ impl<'t> Walk<'t> {
     /// Closest hit in `(t_min, t_max]` with the default (watertight) triangle test; adds the work
     /// done to `cost`.
     #[inline]
-    pub fn closest(&self, ray: &Ray, t_min: f32, t_max: f32, stack: &mut Stack, cost: &mut impl Tally) -> Option<Hit> {
+    pub fn closest(&self, ray: &Ray, t_min: f32, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> Option<Hit> {
         self.closest_with(Intersect::Watertight, ray, t_min, t_max, stack, cost)
     }
 
@@ -201,7 +201,7 @@ impl<'t> Walk<'t> {
         t_min: f32,
         t_max: f32,
         stack: &mut Stack,
-        cost: &mut impl Tally,
+        cost: &mut Cost,
     ) -> Option<Hit> {
         match test {
             Intersect::Watertight => self.trace::<false, Watertight>(ray, t_min, t_max, stack, cost),
@@ -211,20 +211,13 @@ impl<'t> Walk<'t> {
 
     /// Whether anything lies in `(0, t_max]` along the ray, with the default (watertight) test.
     #[inline]
-    pub fn occluded(&self, ray: &Ray, t_max: f32, stack: &mut Stack, cost: &mut impl Tally) -> bool {
+    pub fn occluded(&self, ray: &Ray, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> bool {
         self.occluded_with(Intersect::Watertight, ray, t_max, stack, cost)
     }
 
     /// [`Self::occluded`] with the triangle test `test`.
     #[inline]
-    pub fn occluded_with(
-        &self,
-        test: Intersect,
-        ray: &Ray,
-        t_max: f32,
-        stack: &mut Stack,
-        cost: &mut impl Tally,
-    ) -> bool {
+    pub fn occluded_with(&self, test: Intersect, ray: &Ray, t_max: f32, stack: &mut Stack, cost: &mut Cost) -> bool {
         match test {
             Intersect::Watertight => self.trace::<true, Watertight>(ray, 0.0, t_max, stack, cost),
             Intersect::MollerTrumbore => self.trace::<true, MollerTrumbore>(ray, 0.0, t_max, stack, cost),
@@ -240,7 +233,7 @@ impl<'t> Walk<'t> {
         t_min: f32,
         t_max: f32,
         stack: &mut Stack,
-        cost: &mut impl Tally,
+        cost: &mut Cost,
     ) -> Option<Hit> {
         // One branch per ray on the form; each form's traversal is compiled on its own.
         match (self.layout, self.tracer.triangles()) {
@@ -1274,7 +1267,8 @@ mod tests {
                     let first =
                         frame.sample_direction(0, 0, render_spec::accuracy::sample_positions(spp).next().unwrap());
                     let mut stack = Stack::default();
-                    let hit = walk.closest(&Ray::new(frame.eye, first), 0.0, f32::INFINITY, &mut stack, &mut ());
+                    let hit =
+                        walk.closest(&Ray::new(frame.eye, first), 0.0, f32::INFINITY, &mut stack, &mut Cost::default());
                     assert_eq!(a.t[0], hit.map_or(f32::INFINITY, |h| h.t));
                     assert!(a.nodes.iter().sum::<u32>() > b.nodes.iter().sum::<u32>() * (spp - 1));
                 }

@@ -2,7 +2,7 @@
 //! stackless walk of the escape-pointer layout. Both exist in a closest-hit and an any-hit form,
 //! each compiled for one [`TriangleTest`].
 
-use crate::geometry::{Cost, Hit, Ray, Tally, TriangleTest, may_hold, slab};
+use crate::geometry::{Cost, Hit, Ray, TriangleTest, may_hold, slab};
 use crate::vertices::TriangleSource;
 use bvh_format::Node;
 
@@ -69,16 +69,6 @@ fn leaf<const ANY: bool, T: TriangleTest>(
     false
 }
 
-/// Runs a traversal that counts into a local [`Cost`], then hands the count to `cost`: where that
-/// is `()`, nothing reads the local and the compiler drops the counting.
-#[inline(always)]
-pub(crate) fn counted<R>(cost: &mut impl Tally, walk: impl FnOnce(&mut Cost) -> R) -> R {
-    let mut work = Cost::default();
-    let r = walk(&mut work);
-    cost.add(work);
-    r
-}
-
 fn no_hit(t_max: f32) -> Hit {
     Hit { t: t_max, tri: u32::MAX, u: 0.0, v: 0.0 }
 }
@@ -87,19 +77,6 @@ fn no_hit(t_max: f32) -> Hit {
 /// and the farther pushed with its entry distance, so that a pop can skip it once a nearer hit
 /// was found.
 pub fn child_pair<const ANY: bool, T: TriangleTest>(
-    nodes: &[Node],
-    tris: &(impl TriangleSource + ?Sized),
-    ray: &Ray,
-    t_min: f32,
-    t_max: f32,
-    stack: &mut Stack,
-    cost: &mut impl Tally,
-) -> Option<Hit> {
-    counted(cost, |work| child_pair_counting::<ANY, T>(nodes, tris, ray, t_min, t_max, stack, work))
-}
-
-#[inline(always)]
-fn child_pair_counting<const ANY: bool, T: TriangleTest>(
     nodes: &[Node],
     tris: &(impl TriangleSource + ?Sized),
     ray: &Ray,
@@ -158,18 +135,6 @@ fn child_pair_counting<const ANY: bool, T: TriangleTest>(
 /// Stackless traversal of the escape-pointer layout (Smits 1998; thesis 4.3.4): walk the array
 /// front to back, jumping to the escape index past every inner node whose box is missed.
 pub fn escape<const ANY: bool, T: TriangleTest>(
-    nodes: &[Node],
-    tris: &(impl TriangleSource + ?Sized),
-    ray: &Ray,
-    t_min: f32,
-    t_max: f32,
-    cost: &mut impl Tally,
-) -> Option<Hit> {
-    counted(cost, |work| escape_counting::<ANY, T>(nodes, tris, ray, t_min, t_max, work))
-}
-
-#[inline(always)]
-fn escape_counting<const ANY: bool, T: TriangleTest>(
     nodes: &[Node],
     tris: &(impl TriangleSource + ?Sized),
     ray: &Ray,

@@ -185,8 +185,7 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
         || (Stack::default(), Vec::with_capacity(128)),
         |(stack, pstack), (rays, out)| match engine {
             Engine::Scalar(walk, test) => {
-                // Like Embree's, the timed walks count no work (`Tally for ()`).
-                let mut cost = ();
+                let mut cost = Cost::default();
                 for (r, o) in rays.iter().zip(out.iter_mut()) {
                     let Some((ray, t_max)) = r else { continue };
                     let ray = &like_embree(ray);
@@ -199,7 +198,7 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
             }
             Engine::Bvh8(tracer, simd) => {
                 let bvh = tracer.bvh8().expect("the scene has the child-pair layout");
-                let mut cost = ();
+                let mut cost = Cost::default();
                 for (r, o) in rays.iter().zip(out.iter_mut()) {
                     let Some((ray, t_max)) = r else { continue };
                     let ray = &like_embree(ray);
