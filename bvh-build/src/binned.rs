@@ -200,7 +200,8 @@ impl BinnedSah {
     /// Neighbouring primitives tend to fall into the same bin, and with one set each would wait
     /// for the previous one's update of that bin to come back from memory; two sets halve those
     /// chains. The sets are summed into the first at the end (min, max and counts are exact in
-    /// any order, so the bins do not depend on this).
+    /// any order, so the bins do not depend on this). Always inlined, so that the callers'
+    /// [`crate::isa::fastest`] compiles it for AVX2 too (likewise `choose` and `split_with`).
     #[inline(always)]
     fn bin_into(&self, prims: &[PrimRef], grid: &Grid, k: usize, bins: &mut Bins) {
         let (first_b, second_b) = bins.bounds.split_at_mut(3 * k + 1);

@@ -189,6 +189,7 @@ fn sort_keys<const N: usize>(keys: &mut [u64; N], n: usize) {
 }
 
 impl<const N: usize> Presorted<N> {
+    /// Always inlined, so that `build_presorted`'s [`crate::isa::fastest`] compiles it for AVX2 too.
     #[inline(always)]
     pub(crate) fn new(prims: &[PrimRef]) -> Presorted<N> {
         let n = prims.len();
