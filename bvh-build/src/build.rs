@@ -204,7 +204,7 @@ pub fn bounds_of(refs: &[PrimRef]) -> NodeBounds {
 /// The box of a set of primitives' centroids, the same as [`bounds_of`]'s. Two boxes grow side by
 /// side (the min and max chains are the loop's latency), and the halving of the box's corner
 /// sums waits until the end: halving is exact and monotonic, so it commutes with min and max.
-pub fn centroid_bounds(refs: &[PrimRef]) -> Aabb {
+pub(crate) fn centroid_bounds(refs: &[PrimRef]) -> Aabb {
     let sum = |r: &PrimRef| Vec3A::from(r.min) + Vec3A::from(r.max);
     let (mut a, mut b) = (Aabb::EMPTY, Aabb::EMPTY);
     let mut pairs = refs.chunks_exact(2);
