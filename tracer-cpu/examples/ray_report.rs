@@ -1,14 +1,16 @@
 //! The whole CPU ray-throughput report: primary, shadow, secondary, AO and diffuse rays per second
 //! on the bunny, the dragon and the million-triangle scene at 640 x 480 and 1920 x 1440, one
 //! thread and all threads, ours (ordered, AVX2 packets, the wide BVH) against Embree (single rays,
-//! default and robust scene flags, and 8-ray packets) tracing the same rays on the same triangles. Writes
-//! `docs/cpu-benchmark.md` and prints the same markdown to stdout; progress goes to stderr.
+//! default and robust scene flags, and 8-ray packets) tracing the same rays on the same triangles. Prints
+//! the report as markdown to stdout, and writes it to the file `--out` names; progress goes to
+//! stderr. (docs/cpu-benchmark.md is written by hand from such reports; the report never writes it.)
 //!
 //! ```text
 //! cargo run --release -p tracer-cpu --features embree --example ray_report -- [options]
 //!   --scene NAME=PATH   a scene to measure (repeatable; default bunny, dragon and million from
 //!                       scenes/, or from the checkout's scenes/ when ./scenes does not exist)
-//!   --out PATH          where to write the markdown (default docs/cpu-benchmark.md; - for none)
+//!   --out PATH          also write the markdown to this file (default: none; - for none), whole
+//!                       or not at all
 //!   --reps N            least timed rounds per measurement, the median is reported (default 5;
 //!                       scenes over 500k triangles at 1920 x 1440 use half, at least 2; quick
 //!                       cases run more rounds, up to 2 s)
@@ -94,7 +96,7 @@ fn parse_args() -> Result<Options, String> {
     let dir = if Path::new("scenes").is_dir() { PathBuf::from("scenes") } else { rayset::scenes_dir() };
     let mut o = Options {
         scenes: Vec::new(),
-        out: Some(PathBuf::from("docs/cpu-benchmark.md")),
+        out: None,
         reps: 5,
         threads: if all > 1 { vec![1, all] } else { vec![1] },
         sizes: vec![(640, 480), (1920, 1440)],
@@ -327,12 +329,12 @@ fn main() {
     let md = markdown(&opts, &rows, &agreements, &scene_lines, &load_before, started.elapsed().as_secs_f64());
     print!("{md}");
     if let Some(out) = &opts.out {
-        if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-            let _ = std::fs::create_dir_all(dir);
-        }
-        match std::fs::write(out, &md) {
+        match rayset::write_report(out, &md) {
             Ok(()) => eprintln!("wrote {}", out.display()),
-            Err(e) => eprintln!("ray_report: cannot write {}: {e}", out.display()),
+            Err(e) => {
+                eprintln!("ray_report: {e}.");
+                std::process::exit(1);
+            }
         }
     }
 }

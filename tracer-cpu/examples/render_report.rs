@@ -307,7 +307,7 @@ fn main() {
     let md = markdown(&opts, &rows, &load_before, started.elapsed().as_secs_f64());
     print!("{md}");
     if let Some(p) = &opts.out {
-        std::fs::write(p, &md).unwrap_or_else(|e| fail(&format!("cannot write {}: {e}", p.display())));
+        rayset::write_report(p, &md).unwrap_or_else(|e| fail(&format!("{e}.")));
     }
 }
 

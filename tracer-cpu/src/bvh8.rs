@@ -20,7 +20,7 @@
 //! (30% of the dragon's) and boxes a block's far-apart triangles together. Per ray the SAH
 //! collapse enters 1-3% fewer nodes and tests 6-10% fewer triangles, and on one thread of the
 //! 2-core VM gained on 12 of the ray report's 15 rows against Embree (the million-triangle
-//! scene's 6-16 points; docs/cpu-benchmark.md, "Issue 11: the SAH collapse"). The boxes are the file's own, so every box a wide traversal tests is one the
+//! scene's 6-16 points; docs/cpu-benchmark-log.md, "Issue 11: the SAH collapse"). The boxes are the file's own, so every box a wide traversal tests is one the
 //! ordered traversal tests too, entered wherever the ordered traversal enters it (and within a
 //! rounding of the exit beyond: `geometry::may_hold_wide`), and the triangle test is the scalar
 //! one, lane by lane, in the same operations: both find exactly the same hits (closest hit: the nearest, ties to the lower
@@ -120,7 +120,7 @@ pub(crate) struct Line([u8; 64]);
 /// inner children's subtrees in slot order, so that a node and the blocks a ray tests next to it
 /// lie together. Against nodes and blocks in two arrays (each depth first) the single rays gained
 /// 0 to 3 points against Embree on every row of the H100 host's report and 1 to 2 on the VM
-/// (docs/cpu-benchmark.md, stop 35).
+/// (docs/cpu-benchmark-log.md, stop 35).
 pub struct WideBvh<const W: usize> {
     /// Nodes ([`WideNode`], 4 lines for the 8-wide BVH) and blocks ([`TriBlock`], 5 lines); a
     /// reference is the line a node or (with [`LEAF`]) a block starts at.
@@ -155,7 +155,7 @@ pub enum Simd {
     /// The AVX2 path compiled for AVX-512 (F, VL, DQ, BW): the same operations on the same
     /// registers' widths, with 32 of them instead of 16 and mask registers for the compares.
     /// The default where the CPU has it (a few points faster on both machines measured,
-    /// docs/cpu-benchmark.md).
+    /// docs/cpu-benchmark-log.md, stop 34).
     Avx512,
 }
 
@@ -253,7 +253,7 @@ enum Work {
 /// an incoherent walk of a tree of tens of MB takes a TLB miss on most nodes and blocks with
 /// 4 KiB pages (Zen 4's L2 TLB covers 12 MB of them), a page walk before the cache miss. A tree
 /// the TLB covers gains nothing (the bunny's 5 MB traced AO and diffuse rays about 10 points
-/// slower with them on the VM, docs/cpu-benchmark.md, branch sr11).
+/// slower with them on the VM, docs/cpu-benchmark-log.md, branch sr11).
 const HUGE_TREE: usize = 32 << 20;
 
 /// Half the surface area of a box, the SAH's measure of how likely a ray enters it.
@@ -625,7 +625,7 @@ impl<const W: usize> WideBvh<W> {
 /// enters it): testing a wide node's boxes ([`NODE_COST`]) and a leaf block's triangles
 /// ([`BLOCK_COST`]), each one SIMD sequence whatever the number of lanes in use. A block loads 5
 /// cache lines to a node's 4 and runs about three times the operations; 2 and 3 traced alike on
-/// the 2-core VM, 1 was slower (docs/cpu-benchmark.md, "Issue 11: the SAH collapse").
+/// the 2-core VM, 1 was slower (docs/cpu-benchmark-log.md, "Issue 11: the SAH collapse").
 const NODE_COST: f32 = 1.0;
 const BLOCK_COST: f32 = 2.0;
 
@@ -891,7 +891,7 @@ pub(crate) mod avx2 {
     /// load is not forwarded from the store buffer and waits for the stores to reach the cache, at
     /// the start of every ray's chain of dependent loads. The ray report, which makes each ray's
     /// inverse direction just before the trace as `rtcIntersect1` does, lost a fifth of the
-    /// bunny's primary-ray speed to it on the VM (docs/cpu-benchmark.md, stop 33); the renderer,
+    /// bunny's primary-ray speed to it on the VM (docs/cpu-benchmark-log.md, stop 33); the renderer,
     /// which makes its rays a stage ahead, measured the same with and without. A load of exactly
     /// one stored field is always forwarded; volatile keeps the compiler from merging the nine.
     #[inline(always)]
@@ -1101,7 +1101,7 @@ pub(crate) mod avx2 {
         ///
         /// A ray with a NaN direction hits nothing whichever way. On the H100 host's 16 threads this
         /// gained 1-6 points against Embree on every row of the ray report, side by side with the
-        /// float chain (docs/cpu-benchmark.md, "the integer node test"); the walk's hits and work
+        /// float chain (docs/cpu-benchmark-log.md, "the integer node test"); the walk's hits and work
         /// counts are the portable walk's, ray by ray (the tests below, with rays from vertices, where exit distances are zeros, and along
         /// the axes, where they are NaN).
         trace,
@@ -1114,7 +1114,7 @@ pub(crate) mod avx2 {
         /// registers instead of 16, where the AVX2 build reloads the ray and the planes' offsets
         /// from the stack at every node (the inlined leaf test needs every register), and compares
         /// straight into mask registers. On the H100 host's Xeon 0-5 points more of Embree on
-        /// every row of the ray report, side by side in three runs (docs/cpu-benchmark.md,
+        /// every row of the ray report, side by side in three runs (docs/cpu-benchmark-log.md,
         /// "AVX-512's registers and the walk's entry"); a walk written for 16-lane registers
         /// traced 3-20% fewer rays than this one there and was removed.
         trace_evex,

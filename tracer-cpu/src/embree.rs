@@ -59,7 +59,7 @@ fn context(flags: RTCIntersectContextFlags) -> RTCIntersectContext {
 /// from the store buffer: it waits for them to reach the cache. Built field by field, the
 /// compiler stored `org_x, org_y` as 8 bytes and `org_z`, `tnear` as 4 bytes each, and
 /// `rtcIntersect1` on the bunny's primary rays ran at 71-72% of the speed the same library
-/// reaches with the ray stored whole (docs/cpu-benchmark.md, stop 33): the benchmark handicapped Embree.
+/// reaches with the ray stored whole (docs/cpu-benchmark-log.md, stop 33): the benchmark handicapped Embree.
 /// The stores are volatile only so that the compiler keeps each one whole instead of splitting it
 /// back into the fields it sees.
 #[inline(always)]

@@ -342,7 +342,7 @@ mod tests {
     /// The sum-and-difference form is the accurate one where a short edge is seen from afar (a
     /// mesh's edges, from the camera): `a - b` is the short edge vector, nearly exact, where the
     /// plain `cross(a, b)` of two long, nearly parallel vectors cancels. Relative errors against
-    /// f64 on the same f32 inputs; the plain form was tried for speed (docs/cpu-benchmark.md,
+    /// f64 on the same f32 inputs; the plain form was tried for speed (docs/cpu-benchmark-log.md,
     /// stop 33).
     #[test]
     fn edge_function_is_more_accurate_than_the_plain_cross_product_at_distant_edges() {

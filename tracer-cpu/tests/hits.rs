@@ -264,7 +264,7 @@ fn bunny_fast_paths_match_the_reference() {
 /// apart is a ray that hits two triangles of a shared edge where the nearer hit, its distance
 /// measured from a plane the ray grazes, lies further outside its leaf's box than the slab test's
 /// slack: an order that finds the farther triangle first prunes that box. The plain cross
-/// product's edge function (branch `plaincross`, docs/cpu-benchmark.md) rounded to exactly 0 on
+/// product's edge function (branch `plaincross`, docs/cpu-benchmark-log.md) rounded to exactly 0 on
 /// such an edge, letting both triangles hit, for 6 of 800,000 of these rays, and this test
 /// failed; the default edge function: none of 2.8 million.
 #[test]

@@ -366,7 +366,7 @@ fn cpu_seconds() -> f64 {
 /// Each timed pass comes right after an untimed pass of the same tracer, so that every tracer is
 /// timed with its own data in the caches, as when it renders alone. Without it each was timed
 /// after another's pass, and the one that followed a tracer of the same scene data (ours after
-/// ours) read up to 9% faster on incoherent rays than in another place (docs/cpu-benchmark.md,
+/// ours) read up to 9% faster on incoherent rays than in another place (docs/cpu-benchmark-log.md,
 /// stop 34).
 pub fn interleaved_medians(
     reps: usize,
@@ -431,4 +431,19 @@ pub fn cpu_model() -> String {
             s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_owned())
         })
         .unwrap_or_else(|| "?".into())
+}
+
+/// Writes a report to `path` whole: under a temporary name beside it, renamed over `path` only
+/// once complete, so that a failed or interrupted write leaves what was there before. The reports
+/// are written only where `--out` names a file: the hand-written docs beside them are not theirs.
+pub fn write_report(path: &Path, text: &str) -> Result<(), String> {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create the folder {}: {e}", dir.display()))?;
+    let name = path.file_name().ok_or_else(|| format!("{} names no file", path.display()))?;
+    let tmp = dir.join(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
+    let written = std::fs::write(&tmp, text).and_then(|()| std::fs::rename(&tmp, path));
+    written.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        format!("cannot write {}: {e}", path.display())
+    })
 }
