@@ -29,9 +29,9 @@
 # robust, the 8th and 9th Embree 8 and robust, the 12th bvh4), and at the end of stdout the packet
 # target's rows: primary and shadow, bvh8 packet / Embree 8 and / Embree 8 robust (issue 11 item 2:
 # >= 100%), packet (binary tree) / Embree 8.
-# Expected run time: about 4 minutes for seven tracers at REPS=5, about 6 for all 12 at REPS=3 (1920x1440 only; the one-thread passes
-# over the dragon's and million's sets are most of it). SIZES=640x480,1920x1440 adds the small
-# size (about 2 more minutes).
+# Expected run time at 1920x1440: about 4 minutes for seven tracers at REPS=5, about 6 for all 12
+# at REPS=3 (the one-thread passes over the dragon's and million's sets are most of it).
+# SIZES=640x480,1920x1440 adds the small size (about 2 more minutes).
 set -euo pipefail
 OUT=${OUT:-out/h100-simd}
 SIZES=${SIZES:-1920x1440}
