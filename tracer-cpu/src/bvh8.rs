@@ -22,7 +22,7 @@
 //! 2-core VM gained on 12 of the ray report's 15 rows against Embree (the million-triangle
 //! scene's 6-16 points; docs/cpu-benchmark-log.md, "Issue 11: the SAH collapse"). The boxes are the file's own, so every box a wide traversal tests is one the
 //! ordered traversal tests too, entered wherever the ordered traversal enters it (and within a
-//! rounding of the exit beyond: `geometry::may_hold_wide`), and the triangle test is the scalar
+//! rounding of the exit beyond: `geometry::exit_bound`), and the triangle test is the scalar
 //! one, lane by lane, in the same operations: both find exactly the same hits (closest hit: the nearest, ties to the lower
 //! triangle index, whatever the order of the tests; `tests/hits.rs` holds every path to that).
 //!
@@ -179,9 +179,10 @@ impl Simd {
             use std::arch::is_x86_feature_detected as has;
             match self {
                 Simd::Portable => true,
-                // POPCNT comes with AVX2 on every CPU that has it (Intel since Haswell, AMD since
-                // Excavator); checked all the same, since the traversal is compiled with it.
-                Simd::Avx2 => has!("avx2") && has!("popcnt"),
+                // POPCNT and FMA come with AVX2 on every CPU that has it (Intel since Haswell,
+                // AMD since Excavator); checked all the same, since the traversal is compiled
+                // with them.
+                Simd::Avx2 => has!("avx2") && has!("popcnt") && has!("fma"),
                 Simd::Avx512 => {
                     Simd::Avx2.supported()
                         && has!("avx512f")
@@ -560,6 +561,7 @@ impl<const W: usize> WideBvh<W> {
     ) -> Option<Found> {
         let mut best = Hit { t: t_max, tri, u: 0.0, v: 0.0 };
         let mut found = false;
+        let inv_far = ray.inv_dir.to_array().map(geometry::inv_far);
         stack.clear();
         let mut cur = start;
         loop {
@@ -571,8 +573,14 @@ impl<const W: usize> WideBvh<W> {
                     cost.nodes += 1;
                     let lane = |k: usize| [node.bounds[k][slot], node.bounds[k + 1][slot], node.bounds[k + 2][slot]];
                     let child = Node { min: lane(0), count: 0, max: lane(3), index: 0 };
-                    let (near, far) = geometry::slab_range(&child, ray, best.t);
-                    if geometry::may_hold_wide(near, far) {
+                    // The entry as the binary traversals compute it, the exits as the SIMD walk
+                    // compares them (`geometry::before_exit`).
+                    let (near, _) = geometry::slab_range(&child, ray, best.t);
+                    let leaves_after = |a: usize| {
+                        let plane = if ray.inv_dir[a].is_sign_negative() { child.min[a] } else { child.max[a] };
+                        geometry::before_exit(near, plane, ray.origin[a], inv_far[a])
+                    };
+                    if leaves_after(0) && leaves_after(1) && leaves_after(2) && geometry::may_hold_wide(near, best.t) {
                         hits[n] = (near, node.child[slot]);
                         n += 1;
                     }
@@ -747,7 +755,7 @@ fn leaf_indices(nodes: &[Node], b: u32, out: &mut Vec<u32>, stack: &mut Vec<u32>
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod avx2 {
     use super::{Found, LEAF, TriBlock, WideBvh, WideNode};
-    use crate::geometry::{Cost, EXIT_SCALE, Hit, Ray, TriangleTest, may_hold};
+    use crate::geometry::{self, Cost, EXIT_SCALE, Hit, Ray, TriangleTest, may_hold};
     use crate::traverse::Stack;
     use render_spec::Intersect;
     use std::arch::x86_64::*;
@@ -779,6 +787,8 @@ pub(crate) mod avx2 {
         /// Lane by lane the larger of the lanes' bits read as signed integers: for floats of clear
         /// sign bit the larger float, in one cycle where the float `max` takes four.
         fn imax(self, o: Self) -> Self;
+        /// `self * b + c`, rounded once.
+        fn fmadd(self, b: Self, c: Self) -> Self;
     }
 
     // SAFETY (every `unsafe` block in the impls): AVX2 register arithmetic, which the callers
@@ -788,7 +798,7 @@ pub(crate) mod avx2 {
         ($v:ty, $n:literal, $vi:ty, $set1:ident, $setzero:ident, $loadu:ident, $storeu:ident,
          $loadu_si:ident, $set1_epi32:ident, $cmpeq_epi32:ident, $castsi_ps:ident,
          $add:ident, $sub:ident, $mul:ident, $div:ident, $and:ident,
-         $or:ident, $cmp:ident, $movemask:ident, $imax:ident, $castps_si:ident) => {
+         $or:ident, $cmp:ident, $movemask:ident, $imax:ident, $castps_si:ident, $fmadd:ident) => {
             impl Vector for $v {
                 const N: usize = $n;
                 #[inline(always)]
@@ -855,19 +865,23 @@ pub(crate) mod avx2 {
                 fn imax(self, o: Self) -> Self {
                     unsafe { $castsi_ps($imax($castps_si(self), $castps_si(o))) }
                 }
+                #[inline(always)]
+                fn fmadd(self, b: Self, c: Self) -> Self {
+                    unsafe { $fmadd(self, b, c) }
+                }
             }
         };
     }
     vector! {
         __m128, 4, __m128i, _mm_set1_ps, _mm_setzero_ps, _mm_loadu_ps, _mm_storeu_ps, _mm_loadu_si128, _mm_set1_epi32,
         _mm_cmpeq_epi32, _mm_castsi128_ps, _mm_add_ps, _mm_sub_ps, _mm_mul_ps, _mm_div_ps,
-        _mm_and_ps, _mm_or_ps, _mm_cmp_ps, _mm_movemask_ps, _mm_max_epi32, _mm_castps_si128
+        _mm_and_ps, _mm_or_ps, _mm_cmp_ps, _mm_movemask_ps, _mm_max_epi32, _mm_castps_si128, _mm_fmadd_ps
     }
     vector! {
         __m256, 8, __m256i, _mm256_set1_ps, _mm256_setzero_ps, _mm256_loadu_ps, _mm256_storeu_ps, _mm256_loadu_si256,
         _mm256_set1_epi32, _mm256_cmpeq_epi32, _mm256_castsi256_ps, _mm256_add_ps, _mm256_sub_ps, _mm256_mul_ps,
         _mm256_div_ps, _mm256_and_ps, _mm256_or_ps, _mm256_cmp_ps,
-        _mm256_movemask_ps, _mm256_max_epi32, _mm256_castps_si256
+        _mm256_movemask_ps, _mm256_max_epi32, _mm256_castps_si256, _mm256_fmadd_ps
     }
 
     /// The ray, splatted.
@@ -1097,15 +1111,19 @@ pub(crate) mod avx2 {
         /// - exit: rounding being monotonic, `entry <= min(exits, best) * EXIT_SCALE` holds exactly
         ///   when `entry <= exit * EXIT_SCALE` holds for each exit and for the best hit's distance:
         ///   four compares side by side instead of a chain; a NaN exit distance passes
-        ///   (`!(entry > NaN)`), as the chain's `min` drops it.
+        ///   (`!(entry > NaN)`), as the chain's `min` drops it. Each exit is then compared as
+        ///   [`crate::geometry::exit_bound`], which accepts whatever `exit * EXIT_SCALE` accepts
+        ///   in one multiply-add (the scale folded into the inverse direction, `geometry::inv_far`),
+        ///   and the portable walk compares the same numbers.
         ///
         /// A ray with a NaN direction hits nothing whichever way. On the H100 host's 16 threads this
         /// gained 1-6 points against Embree on every row of the ray report, side by side with the
-        /// float chain (docs/cpu-benchmark-log.md, "the integer node test"); the walk's hits and work
-        /// counts are the portable walk's, ray by ray (the tests below, with rays from vertices, where exit distances are zeros, and along
-        /// the axes, where they are NaN).
+        /// float chain (docs/cpu-benchmark-log.md, "the integer node test"), and the folded exit
+        /// 2-4 more on shadow rays ("the exit scale folded into the inverse"); the walk's hits and
+        /// work counts are the portable walk's, ray by ray (the tests below, with rays from
+        /// vertices, where exit distances are zeros, and along the axes, where they are NaN).
         trace,
-        "avx2,popcnt"
+        "avx2,popcnt,fma"
     );
 
     walk_compiled_for!(
@@ -1118,7 +1136,7 @@ pub(crate) mod avx2 {
         /// "AVX-512's registers and the walk's entry"); a walk written for 16-lane registers
         /// traced 3-20% fewer rays than this one there and was removed.
         trace_evex,
-        "avx2,popcnt,avx512f,avx512vl,avx512dq,avx512bw"
+        "avx2,popcnt,fma,avx512f,avx512vl,avx512dq,avx512bw"
     );
 
     /// The body of [`trace`] and [`trace_evex`]: always inlined, without target features of its
@@ -1138,7 +1156,14 @@ pub(crate) mod avx2 {
         let near_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { 3 + a } else { a });
         let far_plane: [usize; 3] = std::array::from_fn(|a| if ray.inv_dir[a].is_sign_negative() { a } else { 3 + a });
         let zero = V::zero();
-        let exit_scale = V::splat(EXIT_SCALE);
+        // Splatted one by one: a closure (`map`) would run out of line, without the target's
+        // instructions.
+        let inv_far = [
+            V::splat(geometry::inv_far(ray.inv_dir[0])),
+            V::splat(geometry::inv_far(ray.inv_dir[1])),
+            V::splat(geometry::inv_far(ray.inv_dir[2])),
+        ];
+        let tiny = V::splat(f32::MIN_POSITIVE);
         let t_min_v = V::splat(t_min);
         let mut best = Found { t: t_max, tri, w1: 0.0, w2: 0.0, sum: 1.0 };
         let mut found = false;
@@ -1155,7 +1180,10 @@ pub(crate) mod avx2 {
                 // the doc comment).
                 let n = |a: usize| dist(&b[near_plane[a]], &r, a);
                 let near = n(0).imax(zero).imax(n(1).imax(n(2)));
-                let before = |a: usize| near.cmp::<_CMP_NGT_UQ>(dist(&b[far_plane[a]], &r, a).mul(exit_scale));
+                let before = |a: usize| {
+                    let exit = V::load(&b[far_plane[a]]).sub(r.o[a]).fmadd(inv_far[a], tiny);
+                    near.cmp::<_CMP_NGT_UQ>(exit)
+                };
                 let ok =
                     before(0).and(before(1)).and(before(2).and(near.cmp::<_CMP_LE_OQ>(V::splat(best.t * EXIT_SCALE))));
                 let mut mask = ok.bits() & node.valid;

@@ -97,7 +97,8 @@ pub fn slab_range(node: &Node, ray: &Ray, t_max: f32) -> (f32, f32) {
 }
 
 /// The wide traversals' form of [`may_hold`] on a box's exit distance (`bvh8`: one multiply
-/// instead of a multiply and an add on the path from a node's boxes to the next node's address).
+/// instead of a multiply and an add on the path from a node's boxes to the next node's address;
+/// on the exit planes the walk folds even that multiply into the inverse, [`exit_bound`]).
 /// It accepts every box [`may_hold`] accepts, so that they find every hit the binary traversals
 /// find: for `far` of 0 or more, the exact `far * (1 + 2 T_SLACK)` is at least the exact
 /// `far + round(far * T_SLACK)` (the product's rounding error is at most the product, subnormals
@@ -112,6 +113,56 @@ pub fn may_hold_wide(near: f32, far: f32) -> bool {
 
 /// `1 + 2 T_SLACK`, exactly ([`may_hold_wide`]).
 pub const EXIT_SCALE: f32 = 1.0 + 2.0 * T_SLACK;
+
+/// The single-ray wide walks' exit test on one axis (`bvh8`): whether a box entered at `near` may
+/// hold a hit before the ray leaves the slab whose far plane is `plane`, given `inv_far =`
+/// [`inv_far`]`(inverse direction)`. One multiply-add from the plane to the compared number,
+/// where [`may_hold_wide`] on the exit distance takes a subtract and two multiplies, a multiply's
+/// latency less on the walk's critical path (on the H100 host's Xeon 2-4 points more shadow rays
+/// per second: docs/cpu-benchmark-log.md, "the exit scale folded into the inverse").
+///
+/// It accepts whatever [`may_hold_wide`]`(near, exit)` accepts for the exit distance
+/// `exit = (plane - origin) * inv`, so that the walk still finds every hit the binary traversals
+/// find (it may enter a box more, never fewer). With `x = plane - origin` (the same float in both),
+/// `y = x * inv` exact and `u = 2^-24`, for an inverse direction whose components are 0, infinite
+/// or at least `2^-126` in magnitude (every direction component below `2^126`):
+/// - `may_hold_wide` compares with `round(round(y) * EXIT_SCALE)`, at most
+///   `y * EXIT_SCALE * (1 + u)^2 + 2^-149` (relative rounding, or half a subnormal step);
+/// - this compares with `round(x * round(inv * K) + 2^-126)` (`K` = [`EXIT_SCALE_FOLDED`], one
+///   rounding of the fused multiply-add), at least `round(y * K * (1 - u) + 2^-126)` for `y > 0`;
+///   `K * (1 - u) >= EXIT_SCALE * (1 + u)^2` (`K` is `EXIT_SCALE` plus 4 ulps of 1, 8u) and
+///   `2^-126` covers the subnormal term, so by monotonic rounding it is never the smaller;
+/// - for `y <= 0` `may_hold_wide` accepts only `near = 0`, and only where `round(y)` is a zero
+///   (`|y|` at most `2^-150`); there `x * round(inv * K)` is below `2^-148` in magnitude and the
+///   `2^-126` makes this number positive;
+/// - a NaN (`0 * inf`: the origin on the plane of an axis the ray is parallel to) passes in both
+///   (`!(near > NaN)`); an infinite `inv_far` from a finite `inv` gives `+inf` or NaN where the
+///   other's number is positive or zero, `-inf` only where it is negative.
+///
+/// `geometry::tests::the_folded_exit_test_accepts_what_may_hold_wide_accepts` checks it on
+/// ordinary, extreme and special numbers.
+#[inline(always)]
+pub fn exit_bound(plane: f32, origin: f32, inv_far: f32) -> f32 {
+    (plane - origin).mul_add(inv_far, f32::MIN_POSITIVE)
+}
+
+/// Whether `near` passes [`exit_bound`]: not above it, a NaN bound passing (the axis left out).
+#[inline(always)]
+pub fn before_exit(near: f32, plane: f32, origin: f32, inv_far: f32) -> bool {
+    // Not `<=`: a NaN bound must pass.
+    exit_bound(plane, origin, inv_far).partial_cmp(&near) != Some(std::cmp::Ordering::Less)
+}
+
+/// The inverse direction component [`exit_bound`] multiplies by: `inv` scaled by
+/// [`EXIT_SCALE_FOLDED`].
+#[inline(always)]
+pub fn inv_far(inv: f32) -> f32 {
+    inv * EXIT_SCALE_FOLDED
+}
+
+/// [`EXIT_SCALE`] plus 4 ulps of 1 (`2^-21`): the rounding of `inv * K` and of the multiply-add
+/// in [`exit_bound`] kept on the accepting side of [`may_hold_wide`]'s two roundings.
+pub const EXIT_SCALE_FOLDED: f32 = EXIT_SCALE + 4.0 * f32::EPSILON;
 
 /// The edge function of the edge from `a` to `b` (vertices relative to the ray origin) for the
 /// direction `d`: `dot(cross(a - b, a + b), d)`, which is twice `dot(cross(a, b), d)`, the signed
@@ -439,6 +490,47 @@ mod tests {
         assert!(slab(&flat, &Ray::new(Vec3::new(0.5, 1.0, 0.5), Vec3::NEG_Y), f32::INFINITY).is_some());
         // ... and a ray lying in the flat box's plane.
         assert!(slab(&flat, &Ray::new(Vec3::new(-1.0, 0.0, 0.5), Vec3::X), f32::INFINITY).is_some());
+    }
+
+    #[test]
+    fn the_folded_exit_test_accepts_what_may_hold_wide_accepts() {
+        // Floats of every sign and exponent (random bits), the specials, and planes, origins and
+        // inverses near one another so that `plane - origin` cancels to tiny or zero differences.
+        let mut rng = ::tests::Rng(0x2545f4914f6cdd1d);
+        let specials =
+            [0.0, -0.0, 1.0, -1.0, f32::MIN_POSITIVE, 1e-45, -1e-45, f32::MAX, f32::INFINITY, -f32::INFINITY];
+        let any = |rng: &mut ::tests::Rng| match rng.below(4) {
+            0 => specials[rng.below(specials.len())],
+            1 => f32::from_bits(rng.next_u64() as u32),
+            _ => rng.signed() * 2f32.powi(rng.below(40) as i32 - 20),
+        };
+        let (mut checked, mut nan) = (0, 0);
+        for _ in 0..2_000_000 {
+            let origin = any(&mut rng);
+            let plane = if rng.below(2) == 0 { any(&mut rng) } else { origin + origin * rng.signed() * 1e-6 };
+            let inv = any(&mut rng);
+            // The stated domain: inverse components of 0, infinite, or normal (and not NaN).
+            if inv.is_nan() || plane.is_nan() || origin.is_nan() || (inv != 0.0 && inv.abs() < f32::MIN_POSITIVE) {
+                continue;
+            }
+            let exit = (plane - origin) * inv;
+            let bound = exit_bound(plane, origin, inv_far(inv));
+            if exit.is_nan() {
+                assert!(bound.is_nan(), "{plane} {origin} {inv}: NaN exit, bound {bound}");
+                nan += 1;
+                continue;
+            }
+            // `may_hold_wide` accepts `near` from 0 up to `exit * EXIT_SCALE` (0 only, at -0);
+            // the largest such `near` must pass the folded test too.
+            if may_hold_wide(0.0, exit) {
+                let near = (exit * EXIT_SCALE).max(0.0);
+                assert!(may_hold_wide(near, exit));
+                let passes = before_exit(near, plane, origin, inv_far(inv));
+                assert!(passes, "{plane} - {origin} times {inv}: exit {exit}, bound {bound}");
+                checked += 1;
+            }
+        }
+        assert!(checked > 300_000 && nan > 1000, "too few cases: {checked} accepted, {nan} NaN");
     }
 
     #[test]
