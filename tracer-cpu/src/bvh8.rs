@@ -1119,7 +1119,7 @@ pub(crate) mod avx2 {
         /// A ray with a NaN direction hits nothing whichever way. On the H100 host's 16 threads this
         /// gained 1-6 points against Embree on every row of the ray report, side by side with the
         /// float chain (docs/cpu-benchmark-log.md, "the integer node test"), and the folded exit
-        /// 2-4 more on shadow rays ("the exit scale folded into the inverse"); the walk's hits and
+        /// 1-4 more on shadow rays ("the exit scale folded into the inverse"); the walk's hits and
         /// work counts are the portable walk's, ray by ray (the tests below, with rays from
         /// vertices, where exit distances are zeros, and along the axes, where they are NaN).
         trace,

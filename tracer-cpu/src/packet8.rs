@@ -37,7 +37,7 @@ use render_spec::Intersect;
 pub const SPARSE: u32 = 2;
 
 /// Whether this CPU runs wide packets (AVX2, as [`crate::packet`], and the single-ray AVX2
-/// traversal's POPCNT, which finish the sparse lanes).
+/// traversal's POPCNT and FMA, which finish the sparse lanes).
 pub fn available() -> bool {
     crate::packet::available() && Simd::Avx2.supported()
 }
