@@ -3,7 +3,7 @@
 use crate::RenderError;
 use crate::accuracy::Accuracy;
 use crate::camera::{CameraError, CameraSpec, Frame};
-use bvh_format::Light;
+use bvh_format::{Light, SceneFile};
 
 /// Ray casting, Whitted ray tracing, or one of the incoherent modes (docs/shading.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -141,6 +141,22 @@ pub struct Settings {
 }
 
 impl Settings {
+    /// A `width` x `height` frame of `scene` from `camera` in `mode`, lit by the scene's lights
+    /// and with its indirection count, without AOVs and at the default accuracy: what a frame is
+    /// unless a caller says otherwise (`Settings { aovs: true, ..Settings::of_scene(..) }`).
+    pub fn of_scene(scene: &SceneFile, camera: CameraSpec, mode: Mode, (width, height): (u32, u32)) -> Settings {
+        Settings {
+            width,
+            height,
+            camera,
+            mode,
+            lights: scene.lights.clone(),
+            max_indirections: scene.settings.max_indirections,
+            aovs: false,
+            accuracy: Accuracy::default(),
+        }
+    }
+
     /// Checks the image size, the indirections, the accuracy settings and the camera, and
     /// precomputes the camera for this image.
     pub fn frame(&self) -> Result<Frame, RenderError> {

@@ -21,16 +21,7 @@ fn compare(scene_name: &str, scene: &SceneFile, camera: &str, gpu: &Gpu, w: u32,
     let tracer = Tracer::new(scene);
     // The incoherent modes with issue 10's AO setting (8 rays of 10% of the diagonal).
     for mode in [Mode::Cast, Mode::Whitted, Mode::Ao(Ao::default()), Mode::Diffuse] {
-        let settings = Settings {
-            width: w,
-            height: h,
-            camera: cam,
-            mode,
-            lights: scene.lights.clone(),
-            max_indirections: scene.settings.max_indirections,
-            aovs: true,
-            accuracy: render_spec::Accuracy::default(),
-        };
+        let settings = Settings { aovs: true, ..Settings::of_scene(scene, cam, mode, (w, h)) };
         let cpu = tracer_cpu::render(&tracer, &settings, Method::Ordered).expect("the CPU renders");
         let wide = scene.wide.is_some().then_some(VkMethod::Cwbvh);
         let binary = [VkMethod::Lst, VkMethod::Stackless, VkMethod::Sst, VkMethod::SstSubgroup];
@@ -225,16 +216,7 @@ fn exact_kernels_equal_the_cpu_bit_for_bit() {
     for (name, camera, mode, method) in cases {
         let scene = compile_with(name, Layouts::ALL);
         let cam = CameraSpec::from(scene.camera(camera).expect("the camera exists"));
-        let settings = Settings {
-            width: 160,
-            height: 120,
-            camera: cam,
-            mode,
-            lights: scene.lights.clone(),
-            max_indirections: scene.settings.max_indirections,
-            aovs: false,
-            accuracy: Accuracy::default(),
-        };
+        let settings = Settings::of_scene(&scene, cam, mode, (160, 120));
         let cpu = tracer_cpu::render(&Tracer::new(&scene), &settings, Method::Ordered).expect("the CPU renders");
         let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the scene uploads");
         r.set_exact(true);
@@ -261,14 +243,9 @@ fn accuracy_settings_equal_the_cpu_bit_for_bit() {
     let cam = CameraSpec::from(scene.camera("close-up").expect("the camera exists"));
     let tracer = Tracer::new(&scene);
     let settings = |accuracy: Accuracy| Settings {
-        width: 96,
-        height: 72,
-        camera: cam,
-        mode: Mode::Whitted,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
         aovs: true,
         accuracy,
+        ..Settings::of_scene(&scene, cam, Mode::Whitted, (96, 72))
     };
     let default =
         tracer_cpu::render(&tracer, &settings(Accuracy::default()), Method::Ordered).expect("the CPU renders");
@@ -351,14 +328,13 @@ fn nodes_and_triangles_split_over_bindings_match_the_cpu() {
         // Whitted only: its primary rays are Cast's, and its shadow and secondary rays start
         // anywhere in the tree, so every chunk is read.
         let settings = Settings {
-            width: 64,
-            height: 48,
-            camera: CameraSpec::from(scene.camera("medium").expect("the camera exists")),
-            mode: Mode::Whitted,
-            lights: scene.lights.clone(),
-            max_indirections: scene.settings.max_indirections,
             aovs: true,
-            accuracy: Accuracy::default(),
+            ..Settings::of_scene(
+                scene,
+                CameraSpec::from(scene.camera("medium").expect("the camera exists")),
+                Mode::Whitted,
+                (64, 48),
+            )
         };
         let cpu = tracer_cpu::render(&Tracer::new(scene), &settings, Method::Ordered).expect("the CPU renders");
         let tri_bytes = scene.triangles.len() as u64 * 48;
@@ -394,14 +370,9 @@ fn incoherent_modes_equal_the_cpu_bit_for_bit() {
     let tracer = Tracer::new(&scene);
     let cam = CameraSpec::from(scene.camera("medium").expect("the camera exists"));
     let settings = |mode, spp| Settings {
-        width: 64,
-        height: 48,
-        camera: cam,
-        mode,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
         aovs: true,
         accuracy: Accuracy { spp, ..Default::default() },
+        ..Settings::of_scene(&scene, cam, mode, (64, 48))
     };
     let cast = tracer_cpu::render(&tracer, &settings(Mode::Cast, 1), Method::Ordered).expect("the CPU renders");
     let hits = cast.aov.as_ref().expect("AOVs").prim.iter().filter(|&&p| p != render_spec::NO_TRIANGLE).count() as u64;
@@ -465,16 +436,7 @@ fn the_indexed_vertex_form_renders_the_expanded_images_bit_for_bit() {
         assert!(indexed < expanded, "{}: indexed {indexed} bytes, expanded {expanded}", method.name());
         let mut r = Renderer::new(&gpu, &scene, method, (8, 8)).expect("the scene uploads");
         let modes = [Mode::Cast, Mode::Whitted, Mode::Ao(Ao { samples: 2, length: 0.1 }), Mode::Diffuse];
-        let settings = modes.map(|mode| Settings {
-            width: 48,
-            height: 36,
-            camera: cam,
-            mode,
-            lights: scene.lights.clone(),
-            max_indirections: scene.settings.max_indirections,
-            aovs: true,
-            accuracy: Accuracy::default(),
-        });
+        let settings = modes.map(|mode| Settings { aovs: true, ..Settings::of_scene(&scene, cam, mode, (48, 36)) });
         // One form at a time: each switch builds the other form's kernels.
         let expanded: Vec<_> = settings.iter().map(|s| r.render(s).expect("the GPU renders").image).collect();
         r.set_vertices(Vertices::Indexed).expect("the indexed form uploads");
@@ -513,14 +475,9 @@ fn persistent_kernels_render_the_plain_images_bit_for_bit() {
     let cam = CameraSpec::from(scene.camera("medium").expect("the camera exists"));
     let modes = [Mode::Cast, Mode::Whitted, Mode::Ao(Ao { samples: 3, length: 0.1 }), Mode::Diffuse];
     let settings = |mode: Mode, width: u32, height: u32, spp: u32| Settings {
-        width,
-        height,
-        camera: cam,
-        mode,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
         aovs: true,
         accuracy: Accuracy { spp, ..Accuracy::default() },
+        ..Settings::of_scene(&scene, cam, mode, (width, height))
     };
     for method in [VkMethod::Lst, VkMethod::Stackless] {
         // (workgroup, invocations launched, idle lanes of 32 before a refill, size, samples, tile
@@ -595,14 +552,9 @@ fn persistent_auto_renders_the_plain_images_bit_for_bit() {
     let cam = CameraSpec::from(scene.camera("medium").expect("the camera exists"));
     let modes = [Mode::Cast, Mode::Whitted, Mode::Ao(Ao { samples: 4, length: 0.2 }), Mode::Diffuse];
     let settings = |mode: Mode, width: u32, height: u32, spp: u32| Settings {
-        width,
-        height,
-        camera: cam,
-        mode,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
         aovs: true,
         accuracy: Accuracy { spp, ..Accuracy::default() },
+        ..Settings::of_scene(&scene, cam, mode, (width, height))
     };
     let coherent = [Stage::Cast, Stage::Primary, Stage::Shade, Stage::Bounce, Stage::Convert];
     for method in [VkMethod::Lst, VkMethod::Stackless] {

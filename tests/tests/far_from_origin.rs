@@ -24,14 +24,9 @@ fn at_origin() -> SceneFile {
 
 fn settings(scene: &SceneFile) -> Settings {
     Settings {
-        width: 160,
-        height: 120,
-        camera: CameraSpec::from(&scene.cameras[0]),
-        mode: Mode::Whitted,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
         aovs: true,
         accuracy: Default::default(),
+        ..Settings::of_scene(scene, CameraSpec::from(&scene.cameras[0]), Mode::Whitted, (160, 120))
     }
 }
 

@@ -19,14 +19,9 @@ fn scaled(s: f64) -> SceneFile {
 
 fn settings(scene: &SceneFile) -> Settings {
     Settings {
-        width: 64,
-        height: 48,
-        camera: CameraSpec::from(&scene.cameras[0]),
-        mode: Mode::Whitted,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
         aovs: true,
         accuracy: Default::default(),
+        ..Settings::of_scene(scene, CameraSpec::from(&scene.cameras[0]), Mode::Whitted, (64, 48))
     }
 }
 

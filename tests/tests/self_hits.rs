@@ -38,14 +38,8 @@ fn scene() -> SceneFile {
 
 fn settings(scene: &SceneFile, mode: Mode, offset: Offset) -> Settings {
     Settings {
-        width: 96,
-        height: 72,
-        camera: CameraSpec::from(scene.camera("view").expect("the camera")),
-        mode,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
-        aovs: false,
         accuracy: Accuracy { offset, ..Default::default() },
+        ..Settings::of_scene(scene, CameraSpec::from(scene.camera("view").expect("the camera")), mode, (96, 72))
     }
 }
 

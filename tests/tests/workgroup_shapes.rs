@@ -22,14 +22,13 @@ use tracer_vk::render::{MAX_WORKGROUP_INVOCATIONS, Renderer, allowed_workgroups}
 /// Room from its medium camera, Whitted with the scene's lights, AOVs on.
 fn settings(scene: &SceneFile, width: u32, height: u32) -> Settings {
     Settings {
-        width,
-        height,
-        camera: CameraSpec::from(scene.camera("medium").expect("room has a medium camera")),
-        mode: Mode::Whitted,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
         aovs: true,
-        accuracy: render_spec::Accuracy::default(),
+        ..Settings::of_scene(
+            scene,
+            CameraSpec::from(scene.camera("medium").expect("room has a medium camera")),
+            Mode::Whitted,
+            (width, height),
+        )
     }
 }
 

@@ -19,16 +19,7 @@ fn the_reference_writes_the_librarys_image() {
     let png = image::open(dir.join("r.png")).unwrap().to_rgb8();
 
     let room = bvh_format::read_file(&dir.join("room.bvh")).unwrap();
-    let settings = Settings {
-        width: 40,
-        height: 30,
-        camera: CameraSpec::from(&room.cameras[0]),
-        mode: Mode::Whitted,
-        lights: room.lights.clone(),
-        max_indirections: room.settings.max_indirections,
-        aovs: false,
-        accuracy: render_spec::Accuracy::default(),
-    };
+    let settings = Settings::of_scene(&room, CameraSpec::from(&room.cameras[0]), Mode::Whitted, (40, 30));
     let exact = tracer_cpu::reference::render(&room, &settings).unwrap();
     assert_eq!(png.pixels().map(|p| p.0).collect::<Vec<_>>(), exact.image.rgb);
     // Not a blank image: the room's walls, floor and objects differ.
@@ -61,14 +52,8 @@ fn the_references_exr_holds_its_unquantised_colour() {
 
     let room = bvh_format::read_file(&dir.join("room.bvh")).unwrap();
     let settings = Settings {
-        width: 20,
-        height: 15,
-        camera: CameraSpec::from(&room.cameras[0]),
-        mode: Mode::Whitted,
-        lights: room.lights.clone(),
-        max_indirections: room.settings.max_indirections,
-        aovs: false,
         accuracy: render_spec::Accuracy { spp: 4, ..Default::default() },
+        ..Settings::of_scene(&room, CameraSpec::from(&room.cameras[0]), Mode::Whitted, (20, 15))
     };
     let exact = tracer_cpu::reference::render(&room, &settings).unwrap();
     let exr = exr::prelude::read_all_flat_layers_from_file(dir.join("r.exr")).unwrap();

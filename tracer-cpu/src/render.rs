@@ -1171,14 +1171,8 @@ mod tests {
         for mode in [Mode::Cast, Mode::Whitted] {
             for method in [Method::Packet, Method::Ordered, Method::Stackless, Method::Bvh8] {
                 let settings = Settings {
-                    width: 61,
-                    height: 37,
-                    camera: CameraSpec::from(scene.camera("medium").unwrap()),
-                    mode,
-                    lights: scene.lights.clone(),
-                    max_indirections: scene.settings.max_indirections,
                     aovs: true,
-                    accuracy: render_spec::Accuracy::default(),
+                    ..Settings::of_scene(&scene, CameraSpec::from(scene.camera("medium").unwrap()), mode, (61, 37))
                 };
                 let tiles = Tiles { rows: 6, columns: 12 };
                 let walk = tracer.walk(method).unwrap();
@@ -1226,14 +1220,9 @@ mod tests {
         let (w, h) = (23, 14);
         for spp in [4, 9] {
             let settings = Settings {
-                width: w,
-                height: h,
-                camera: CameraSpec::from(scene.camera("medium").unwrap()),
-                mode: Mode::Whitted,
-                lights: scene.lights.clone(),
-                max_indirections: scene.settings.max_indirections,
                 aovs: true,
                 accuracy: render_spec::Accuracy { spp, ..Default::default() },
+                ..Settings::of_scene(&scene, CameraSpec::from(scene.camera("medium").unwrap()), Mode::Whitted, (w, h))
             };
             let one = Settings { accuracy: Default::default(), ..settings.clone() };
             let frame = settings.frame().unwrap();

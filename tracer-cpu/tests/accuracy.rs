@@ -26,14 +26,14 @@ fn sphere_scene() -> bvh_format::SceneFile {
 
 fn whitted(scene: &bvh_format::SceneFile, w: u32, h: u32, accuracy: Accuracy) -> Settings {
     Settings {
-        width: w,
-        height: h,
-        camera: CameraSpec::from(scene.camera("view").or(scene.cameras.first()).expect("a camera")),
-        mode: Mode::Whitted,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
         aovs: true,
         accuracy,
+        ..Settings::of_scene(
+            scene,
+            CameraSpec::from(scene.camera("view").or(scene.cameras.first()).expect("a camera")),
+            Mode::Whitted,
+            (w, h),
+        )
     }
 }
 

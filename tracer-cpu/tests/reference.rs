@@ -88,16 +88,7 @@ fn the_f64_walk_finds_brute_forces_hits_on_generated_meshes() {
 }
 
 fn settings(scene: &SceneFile, width: u32, height: u32, mode: Mode) -> Settings {
-    Settings {
-        width,
-        height,
-        camera: CameraSpec::from(&scene.cameras[0]),
-        mode,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
-        aovs: false,
-        accuracy: Accuracy::default(),
-    }
+    Settings::of_scene(scene, CameraSpec::from(&scene.cameras[0]), mode, (width, height))
 }
 
 /// Pixels whose largest channel differs by more than `by` 8-bit steps.

@@ -18,14 +18,8 @@ fn render(tracer: &Tracer<'_>, settings: &(Settings, Method)) -> Result<Image, r
 
 fn settings(scene: &SceneFile, camera: &str, mode: Mode, method: Method, w: u32, h: u32) -> (Settings, Method) {
     let settings = Settings {
-        width: w,
-        height: h,
-        camera: CameraSpec::from(scene.camera(camera).expect("camera exists")),
-        mode,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
         aovs: true,
-        accuracy: render_spec::Accuracy::default(),
+        ..Settings::of_scene(scene, CameraSpec::from(scene.camera(camera).expect("camera exists")), mode, (w, h))
     };
     (settings, method)
 }

@@ -12,14 +12,9 @@ use tracer_cpu::{Method, Tracer};
 
 fn settings(scene: &SceneFile, camera: &str, mode: Mode, intersect: Intersect) -> Settings {
     Settings {
-        width: 64,
-        height: 48,
-        camera: CameraSpec::from(scene.camera(camera).expect("the camera exists")),
-        mode,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
         aovs: true,
         accuracy: Accuracy { intersect, ..Accuracy::default() },
+        ..Settings::of_scene(scene, CameraSpec::from(scene.camera(camera).expect("the camera exists")), mode, (64, 48))
     }
 }
 

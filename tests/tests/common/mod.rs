@@ -40,14 +40,13 @@ pub fn gpu() -> Gpu {
 /// A frame of `scene` from its stored `camera` with the scene's lights and indirections, AOVs kept.
 pub fn frame_settings(scene: &SceneFile, camera: &str, width: u32, height: u32, mode: render_spec::Mode) -> Settings {
     Settings {
-        width,
-        height,
-        camera: render_spec::CameraSpec::from(scene.camera(camera).expect("the camera exists")),
-        mode,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
         aovs: true,
-        accuracy: render_spec::Accuracy::default(),
+        ..Settings::of_scene(
+            scene,
+            render_spec::CameraSpec::from(scene.camera(camera).expect("the camera exists")),
+            mode,
+            (width, height),
+        )
     }
 }
 

@@ -52,16 +52,7 @@ fn description(text: &str) -> SceneFile {
 
 /// A frame of `scene` from `cam` (Whitted, the scene's lights and indirections, with AOVs).
 pub fn shot(scene: &SceneFile, cam: CameraSpec, w: u32, h: u32) -> Settings {
-    Settings {
-        width: w,
-        height: h,
-        camera: cam,
-        mode: Mode::Whitted,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
-        aovs: true,
-        accuracy: Default::default(),
-    }
+    Settings { aovs: true, ..Settings::of_scene(scene, cam, Mode::Whitted, (w, h)) }
 }
 
 fn first_camera(scene: &SceneFile) -> CameraSpec {

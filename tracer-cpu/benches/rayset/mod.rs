@@ -89,16 +89,7 @@ pub fn open(path: &Path) -> Result<SceneFile, String> {
 /// A `width` x `height` frame of `scene` from `camera` in `mode`, as `trace-cpu render` makes it
 /// by default: the scene's lights and indirections, no AOVs, the default accuracy settings.
 pub fn frame_settings(scene: &SceneFile, camera: CameraSpec, (width, height): (u32, u32), mode: Mode) -> Settings {
-    Settings {
-        width,
-        height,
-        camera,
-        mode,
-        lights: scene.lights.clone(),
-        max_indirections: scene.settings.max_indirections,
-        aovs: false,
-        accuracy: Default::default(),
-    }
+    Settings::of_scene(scene, camera, mode, (width, height))
 }
 
 /// The ray sets of a scene at `width` x `height`, one of each [`Kind`] in [`Kind::ALL`]'s order.

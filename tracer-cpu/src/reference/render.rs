@@ -394,14 +394,9 @@ mod tests {
         let scene = bvh_build::import::load(&path, &Default::default()).unwrap();
         let scene = bvh_build::compile(&scene, &Default::default(), Default::default()).unwrap();
         let settings = Settings {
-            width: 23,
-            height: 17,
-            camera: render_spec::CameraSpec::from(&scene.cameras[0]),
-            mode: Mode::Whitted,
-            lights: scene.lights.clone(),
-            max_indirections: scene.settings.max_indirections,
             aovs: true,
             accuracy: render_spec::Accuracy { spp: 4, ..Default::default() },
+            ..Settings::of_scene(&scene, render_spec::CameraSpec::from(&scene.cameras[0]), Mode::Whitted, (23, 17))
         };
         let rows = std::sync::atomic::AtomicU32::new(0);
         let count = |n: u32| {
