@@ -118,7 +118,7 @@ pub const EXIT_SCALE: f32 = 1.0 + 2.0 * T_SLACK;
 /// hold a hit before the ray leaves the slab whose far plane is `plane`, given `inv_far =`
 /// [`inv_far`]`(inverse direction)`. One multiply-add from the plane to the compared number,
 /// where [`may_hold_wide`] on the exit distance takes a subtract and two multiplies, a multiply's
-/// latency less on the walk's critical path (on the H100 host's Xeon 2-4 points more shadow rays
+/// latency less on the walk's critical path (on the H100 host's Xeon 1-4 points more shadow rays
 /// per second: docs/cpu-benchmark-log.md, "the exit scale folded into the inverse").
 ///
 /// It accepts whatever [`may_hold_wide`]`(near, exit)` accepts for the exit distance
