@@ -574,13 +574,18 @@ impl<const W: usize> WideBvh<W> {
                     let lane = |k: usize| [node.bounds[k][slot], node.bounds[k + 1][slot], node.bounds[k + 2][slot]];
                     let child = Node { min: lane(0), count: 0, max: lane(3), index: 0 };
                     // The entry as the binary traversals compute it, the exits as the SIMD walk
-                    // compares them (`geometry::before_exit`).
-                    let (near, _) = geometry::slab_range(&child, ray, best.t);
+                    // compares them (for any hit `geometry::before_exit`, see `avx2::trace`).
+                    let (near, far) = geometry::slab_range(&child, ray, best.t);
                     let leaves_after = |a: usize| {
                         let plane = if ray.inv_dir[a].is_sign_negative() { child.min[a] } else { child.max[a] };
                         geometry::before_exit(near, plane, ray.origin[a], inv_far[a])
                     };
-                    if leaves_after(0) && leaves_after(1) && leaves_after(2) && geometry::may_hold_wide(near, best.t) {
+                    let enters = if ANY {
+                        leaves_after(0) && leaves_after(1) && leaves_after(2) && geometry::may_hold_wide(near, best.t)
+                    } else {
+                        geometry::may_hold_wide(near, far)
+                    };
+                    if enters {
                         hits[n] = (near, node.child[slot]);
                         n += 1;
                     }
@@ -1111,15 +1116,15 @@ pub(crate) mod avx2 {
         /// - exit: rounding being monotonic, `entry <= min(exits, best) * EXIT_SCALE` holds exactly
         ///   when `entry <= exit * EXIT_SCALE` holds for each exit and for the best hit's distance:
         ///   four compares side by side instead of a chain; a NaN exit distance passes
-        ///   (`!(entry > NaN)`), as the chain's `min` drops it. Each exit is then compared as
-        ///   [`crate::geometry::exit_bound`], which accepts whatever `exit * EXIT_SCALE` accepts
-        ///   in one multiply-add (the scale folded into the inverse direction, `geometry::inv_far`),
-        ///   and the portable walk compares the same numbers.
+        ///   (`!(entry > NaN)`), as the chain's `min` drops it. For any-hit rays (`ANY`) each exit
+        ///   is compared as [`crate::geometry::exit_bound`] instead, which accepts whatever
+        ///   `exit * EXIT_SCALE` accepts in one multiply-add (the scale folded into the inverse
+        ///   direction, `geometry::inv_far`); the portable walk compares the same numbers.
         ///
         /// A ray with a NaN direction hits nothing whichever way. On the H100 host's 16 threads this
         /// gained 1-6 points against Embree on every row of the ray report, side by side with the
         /// float chain (docs/cpu-benchmark-log.md, "the integer node test"), and the folded exit
-        /// 1-4 more on shadow rays ("the exit scale folded into the inverse"); the walk's hits and
+        /// 1-4 more on shadow and AO rays ("the exit scale folded into the inverse"); the walk's hits and
         /// work counts are the portable walk's, ray by ray (the tests below, with rays from
         /// vertices, where exit distances are zeros, and along the axes, where they are NaN).
         trace,
@@ -1164,6 +1169,7 @@ pub(crate) mod avx2 {
             V::splat(geometry::inv_far(ray.inv_dir[2])),
         ];
         let tiny = V::splat(f32::MIN_POSITIVE);
+        let exit_scale = V::splat(EXIT_SCALE);
         let t_min_v = V::splat(t_min);
         let mut best = Found { t: t_max, tri, w1: 0.0, w2: 0.0, sum: 1.0 };
         let mut found = false;
@@ -1181,7 +1187,11 @@ pub(crate) mod avx2 {
                 let n = |a: usize| dist(&b[near_plane[a]], &r, a);
                 let near = n(0).imax(zero).imax(n(1).imax(n(2)));
                 let before = |a: usize| {
-                    let exit = V::load(&b[far_plane[a]]).sub(r.o[a]).fmadd(inv_far[a], tiny);
+                    let exit = if ANY {
+                        V::load(&b[far_plane[a]]).sub(r.o[a]).fmadd(inv_far[a], tiny)
+                    } else {
+                        dist(&b[far_plane[a]], &r, a).mul(exit_scale)
+                    };
                     near.cmp::<_CMP_NGT_UQ>(exit)
                 };
                 let ok =

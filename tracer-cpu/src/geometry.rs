@@ -114,12 +114,14 @@ pub fn may_hold_wide(near: f32, far: f32) -> bool {
 /// `1 + 2 T_SLACK`, exactly ([`may_hold_wide`]).
 pub const EXIT_SCALE: f32 = 1.0 + 2.0 * T_SLACK;
 
-/// The single-ray wide walks' exit test on one axis (`bvh8`): whether a box entered at `near` may
-/// hold a hit before the ray leaves the slab whose far plane is `plane`, given `inv_far =`
-/// [`inv_far`]`(inverse direction)`. One multiply-add from the plane to the compared number,
-/// where [`may_hold_wide`] on the exit distance takes a subtract and two multiplies, a multiply's
-/// latency less on the walk's critical path (on the H100 host's Xeon 1-4 points more shadow rays
-/// per second: docs/cpu-benchmark-log.md, "the exit scale folded into the inverse").
+/// The single-ray wide walks' exit test on one axis for any-hit rays (`bvh8`): whether a box
+/// entered at `near` may hold a hit before the ray leaves the slab whose far plane is `plane`,
+/// given `inv_far =` [`inv_far`]`(inverse direction)`. One multiply-add from the plane to the
+/// compared number, where [`may_hold_wide`] on the exit distance takes a subtract and two
+/// multiplies, a multiply's latency less on the walk's critical path: on the H100 host's Xeon 1-4
+/// points more shadow and AO rays per second. Closest-hit rays keep `may_hold_wide`: there it
+/// gained nothing on the Xeon and cost 5-11 points on the 2-core VM's Zen 4, in three pairs of
+/// builds (docs/cpu-benchmark-log.md, "the exit scale folded into the inverse").
 ///
 /// It accepts whatever [`may_hold_wide`]`(near, exit)` accepts for the exit distance
 /// `exit = (plane - origin) * inv`, so that the walk still finds every hit the binary traversals
