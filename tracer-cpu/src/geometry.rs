@@ -120,7 +120,7 @@ pub const EXIT_SCALE: f32 = 1.0 + 2.0 * T_SLACK;
 /// compared number, where [`may_hold_wide`] on the exit distance takes a subtract and two
 /// multiplies, a multiply's latency less on the walk's critical path: on the H100 host's Xeon 1-4
 /// points more shadow and AO rays per second. Closest-hit rays keep `may_hold_wide`: there it
-/// gained nothing on the Xeon and cost 5-11 points on the 2-core VM's Zen 4, in three pairs of
+/// gained nothing on the Xeon and cost 3-11 points on the 2-core VM's Zen 4, in three pairs of
 /// builds (docs/cpu-benchmark-log.md, "the exit scale folded into the inverse").
 ///
 /// It accepts whatever [`may_hold_wide`]`(near, exit)` accepts for the exit distance
