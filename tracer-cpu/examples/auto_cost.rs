@@ -19,7 +19,7 @@
 #[path = "../benches/rayset/mod.rs"]
 mod rayset;
 
-use render_spec::{CameraSpec, Mode};
+use render_spec::{CameraSpec, Mode, Settings};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use tracer_cpu::lanes::Stage;
@@ -82,7 +82,7 @@ fn main() {
         let tracer = Tracer::new(&scene);
         let camera = CameraSpec::from(scene.camera("medium").unwrap_or_else(|| fail("no camera \"medium\"")));
         for &mode in &modes {
-            let settings = rayset::frame_settings(&scene, camera, size, mode);
+            let settings = Settings::of_scene(&scene, camera, mode, size);
             for &n in &threads {
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().expect("a thread pool");
                 let wall = rayset::Clock::Wall;

@@ -35,7 +35,7 @@ fn main() {
                     let settings = Settings {
                         aovs,
                         accuracy: Accuracy { spp, ..Default::default() },
-                        ..rayset::frame_settings(&scene, camera, (200, 150), mode)
+                        ..Settings::of_scene(&scene, camera, mode, (200, 150))
                     };
                     let image = tracer_cpu::render::render(&tracer, &settings, method).expect("renders");
                     // Everything but the cost AOVs, then those.

@@ -33,7 +33,7 @@
 mod rayset;
 
 use rayon::prelude::*;
-use render_spec::{CameraSpec, Intersect, Mode};
+use render_spec::{CameraSpec, Intersect, Mode, Settings};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -227,7 +227,7 @@ fn main() {
         let (w, h) = opts.size;
         for &mode in &opts.modes {
             for &method in &opts.methods {
-                let settings = rayset::frame_settings(&scene, camera, (w, h), mode);
+                let settings = Settings::of_scene(&scene, camera, mode, (w, h));
                 let sink = Mutex::new(Vec::new());
                 let image = one
                     .install(|| {

@@ -14,7 +14,7 @@
 #[path = "../benches/rayset/mod.rs"]
 mod rayset;
 
-use render_spec::{CameraSpec, Mode};
+use render_spec::{CameraSpec, Mode, Settings};
 use tracer_cpu::render::{Tiles, plan, render_with};
 use tracer_cpu::{Method, Tracer};
 
@@ -48,7 +48,7 @@ fn main() {
     );
     for mode in [Mode::Cast, Mode::Whitted] {
         let cam = CameraSpec::from(scene.camera(camera).expect("the scene has the camera"));
-        let settings = rayset::frame_settings(&scene, cam, (w, h), mode);
+        let settings = Settings::of_scene(&scene, cam, mode, (w, h));
         // The renderer's own tracing for `--method auto`, as measured once here.
         let plan = pool.install(|| plan(&tracer, &settings, Method::Auto)).expect("the scene has a layout");
         // Each band's cost on one thread (the progress call ends a band) in CPU time of that

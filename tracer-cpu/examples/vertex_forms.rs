@@ -22,7 +22,7 @@
 #[path = "../benches/rayset/mod.rs"]
 mod rayset;
 
-use render_spec::{CameraSpec, Mode, Vertices};
+use render_spec::{CameraSpec, Mode, Settings, Vertices};
 use std::path::PathBuf;
 use tracer_cpu::{Method, Tracer};
 
@@ -89,7 +89,7 @@ fn main() {
         let cam = CameraSpec::from(scene.camera(&camera).unwrap_or_else(|| fail("no such camera")));
         let n = scene.triangles.len() as f64;
         for &mode in &modes {
-            let s = rayset::frame_settings(&scene, cam, size, mode);
+            let s = Settings::of_scene(&scene, cam, mode, size);
             for &method in &methods {
                 let tracers = [Vertices::Expanded, Vertices::Indexed].map(|v| Tracer::with_vertices(&scene, v));
                 let images = tracers.each_ref().map(|t| tracer_cpu::render(t, &s, method).expect("the tracer renders"));

@@ -22,7 +22,8 @@
 //! 2-core VM gained on 12 of the ray report's 15 rows against Embree (the million-triangle
 //! scene's 6-16 points; docs/cpu-benchmark-log.md, "Issue 11: the SAH collapse"). The boxes are the file's own, so every box a wide traversal tests is one the
 //! ordered traversal tests too, entered wherever the ordered traversal enters it (and within a
-//! rounding of the exit beyond: `geometry::exit_bound`), and the triangle test is the scalar
+//! rounding of the exit beyond: `geometry::may_hold_wide`, `geometry::exit_bound` for any-hit
+//! rays), and the triangle test is the scalar
 //! one, lane by lane, in the same operations: both find exactly the same hits (closest hit: the nearest, ties to the lower
 //! triangle index, whatever the order of the tests; `tests/hits.rs` holds every path to that).
 //!
@@ -1124,9 +1125,9 @@ pub(crate) mod avx2 {
         /// A ray with a NaN direction hits nothing whichever way. On the H100 host's 16 threads this
         /// gained 1-6 points against Embree on every row of the ray report, side by side with the
         /// float chain (docs/cpu-benchmark-log.md, "the integer node test"), and the folded exit
-        /// 1-4 more on shadow and AO rays ("the exit scale folded into the inverse"); the walk's hits and
-        /// work counts are the portable walk's, ray by ray (the tests below, with rays from
-        /// vertices, where exit distances are zeros, and along the axes, where they are NaN).
+        /// 1-4 more on shadow and AO rays ("the exit scale folded into the inverse"); the walk's
+        /// hits and work counts are the portable walk's, ray by ray (the tests below, with rays
+        /// from vertices, where exit distances are zeros, and along the axes, where they are NaN).
         trace,
         "avx2,popcnt,fma"
     );

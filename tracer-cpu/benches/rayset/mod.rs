@@ -9,7 +9,7 @@
 use bvh_format::SceneFile;
 use glam::Vec3;
 use rayon::prelude::*;
-use render_spec::{CameraSpec, Intersect, Mode, Settings, sequence};
+use render_spec::{CameraSpec, Intersect, sequence};
 use std::path::Path;
 use std::time::Instant;
 use tracer_cpu::bvh8::Simd;
@@ -84,12 +84,6 @@ pub fn open(path: &Path) -> Result<SceneFile, String> {
     } else {
         load(path)
     }
-}
-
-/// A `width` x `height` frame of `scene` from `camera` in `mode`, as `trace-cpu render` makes it
-/// by default: the scene's lights and indirections, no AOVs, the default accuracy settings.
-pub fn frame_settings(scene: &SceneFile, camera: CameraSpec, (width, height): (u32, u32), mode: Mode) -> Settings {
-    Settings::of_scene(scene, camera, mode, (width, height))
 }
 
 /// The ray sets of a scene at `width` x `height`, one of each [`Kind`] in [`Kind::ALL`]'s order.
