@@ -591,6 +591,14 @@ impl<const W: usize> WideBvh<W> {
                         n += 1;
                     }
                 }
+                if ANY && n > 0 {
+                    // As the SIMD walk: no order, the lowest slot entered, the others pushed.
+                    for &(near, r) in &hits[1..n] {
+                        stack.push((r, near));
+                    }
+                    cur = hits[0].1;
+                    continue;
+                }
                 hits[..n].sort_by(|a, b| b.0.total_cmp(&a.0));
                 if n > 0 {
                     for &(near, r) in &hits[..n - 1] {
@@ -1630,9 +1638,17 @@ mod tests {
                 assert_eq!(mt, want_mt, "{simd:?}, width {W} (Möller-Trumbore) on {ray:?}");
                 let limits = want.map_or(vec![1.0, f32::INFINITY], |h| vec![h.t, h.t * (1.0 - 1e-3), f32::INFINITY]);
                 for t_max in limits {
-                    let any = bvh.trace_on::<true, Watertight>(simd, ray, 0.0, t_max, stack, &mut cost).is_some();
+                    let mut any_cost = Cost::default();
+                    let any = bvh.trace_on::<true, Watertight>(simd, ray, 0.0, t_max, stack, &mut any_cost);
                     let expected = want.is_some_and(|h| h.t <= t_max);
-                    assert_eq!(any, expected, "{simd:?}, width {W}: any hit to {t_max} on {ray:?}");
+                    assert_eq!(any.is_some(), expected, "{simd:?}, width {W}: any hit to {t_max} on {ray:?}");
+                    // Any-hit rays compare their exits in another form (`geometry::exit_bound`) and
+                    // visit children unordered: the portable walk's hit and work, ray by ray.
+                    let mut want_any_cost = Cost::default();
+                    let want_any =
+                        bvh.trace_on::<true, Watertight>(Simd::Portable, ray, 0.0, t_max, stack, &mut want_any_cost);
+                    assert_eq!(any, want_any, "{simd:?}, width {W}: any hit to {t_max} on {ray:?}");
+                    assert_eq!(any_cost, want_any_cost, "{simd:?}, width {W}: any hit to {t_max} on {ray:?}");
                 }
             }
         }
