@@ -13,6 +13,10 @@
 //! its throughput table becomes one group of bars per kind of ray and one bar per tracer (ours
 //! and Embree's), at the thread count `--threads` names (by default the largest in the file).
 //!
+//! Files that repeat one measurement (the rounds of `tools/scripts/h100-ray-ab.sh`, say) make one
+//! bar per setting at the median run's rate, with a whisker from the slowest run to the fastest,
+//! and the panels name the number of runs.
+//!
 //! ```text
 //! cargo run --release -p tools --example bench_chart -- CSV|ray-report.md... [--ray-types] [--threads N]
 //!     [-o chart.svg|chart.png]
@@ -21,7 +25,7 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::PathBuf;
-use tools::bench::{Row, read_csv, read_ray_report, significant};
+use tools::bench::{Repeated, Row, merge_repeats, read_csv, read_ray_report, significant};
 
 fn main() {
     let mut csvs = Vec::new();
@@ -58,13 +62,19 @@ fn main() {
         let read = if c.extension().is_some_and(|e| e == "md") { read_ray_report(c, threads) } else { read_csv(c) };
         rows.extend(read.unwrap_or_else(|e| fail(&e)));
     }
+    let mut rows = merge_repeats(&rows);
     if ray_types {
-        rows = by_ray_type(&rows);
+        // The kinds of ray from the runs' medians; their spread is not carried over.
+        let medians: Vec<Row> = rows.into_iter().map(|m| m.row).collect();
+        rows = by_ray_type(&medians)
+            .into_iter()
+            .map(|row| Repeated { runs: 1, slowest: row.mrays(), fastest: row.mrays(), row })
+            .collect();
     }
     if rows.is_empty() {
         fail("the CSV files hold no rows");
     }
-    let scenes = distinct(rows.iter().map(|r| r.scene.clone()));
+    let scenes = distinct(rows.iter().map(|r| r.row.scene.clone()));
     let size = (1100, 380 * scenes.len() as u32);
     let drawn = match out.extension().and_then(|e| e.to_str()) {
         Some("svg") => draw(&rows, &scenes, SVGBackend::new(&out, size).into_drawing_area()),
@@ -172,16 +182,18 @@ fn setting(r: &Row, several: bool) -> String {
     if several { format!("{} {}x{} {}", r.camera, r.width, r.height, r.mode) } else { r.mode.clone() }
 }
 
-fn draw<DB: DrawingBackend>(rows: &[Row], scenes: &[String], root: DrawingArea<DB, Shift>) -> Result<(), String>
+fn draw<DB: DrawingBackend>(rows: &[Repeated], scenes: &[String], root: DrawingArea<DB, Shift>) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
-    let series = series_of(rows);
+    let series = series_of(&rows.iter().map(|r| r.row.clone()).collect::<Vec<_>>());
     let colour = |i: usize| Palette99::pick(i).to_rgba();
     for (panel, scene) in root.split_evenly((scenes.len(), 1)).iter().zip(scenes) {
-        let mine: Vec<&Row> = rows.iter().filter(|r| &r.scene == scene).collect();
+        let repeated: Vec<&Repeated> = rows.iter().filter(|r| &r.row.scene == scene).collect();
+        let mine: Vec<&Row> = repeated.iter().map(|r| &r.row).collect();
+        let runs = repeated.iter().map(|r| r.runs).max().unwrap_or(1);
         let several = distinct(mine.iter().map(|r| format!("{} {}x{}", r.camera, r.width, r.height))).len() > 1;
         let settings = distinct(mine.iter().map(|r| setting(r, several)));
         let present: Vec<usize> = (0..series.len())
@@ -192,7 +204,8 @@ where
         // Each bar is a segment of its own; a setting's group is followed by one empty segment.
         let slots = present.len() + 1;
         let n = settings.len() * slots;
-        let rates: Vec<f64> = mine.iter().map(|r| r.mrays()).filter(|x| x.is_finite() && *x > 0.0).collect();
+        let rates: Vec<f64> =
+            repeated.iter().flat_map(|r| [r.slowest, r.fastest]).filter(|x| x.is_finite() && *x > 0.0).collect();
         let (lo, hi) = rates.iter().fold((f64::INFINITY, 0.0f64), |(l, h), &x| (l.min(x), h.max(x)));
         // Headroom above the tallest bar for the legend: on the logarithmic axis a third of the
         // panel, whether the rates span 2x (one tracer's methods) or 1000x (CPU beside GPU).
@@ -204,7 +217,14 @@ where
         };
         let triangles = mine.first().map_or(0, |r| r.triangles);
         let mut chart = ChartBuilder::on(panel)
-            .caption(format!("{scene} ({triangles} triangles)"), ("sans-serif", 20))
+            .caption(
+                if runs > 1 {
+                    format!("{scene} ({triangles} triangles): median of {runs} runs, whiskers slowest to fastest")
+                } else {
+                    format!("{scene} ({triangles} triangles)")
+                },
+                ("sans-serif", 20),
+            )
             .margin(10)
             .x_label_area_size(30)
             .y_label_area_size(60)
@@ -243,6 +263,18 @@ where
                 .map_err(err)?
                 .label(label(&series, s))
                 .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], colour(si).filled()));
+            let whiskers: Vec<PathElement<(SegmentValue<usize>, f64)>> = repeated
+                .iter()
+                .filter(|r| {
+                    r.runs > 1 && r.slowest > 0.0 && (&r.row.tracer, &r.row.method, &r.row.device) == (&s.0, &s.1, &s.2)
+                })
+                .filter_map(|r| {
+                    let g = settings.iter().position(|x| *x == setting(&r.row, several))?;
+                    let x = SegmentValue::CenterOf(g * slots + slot);
+                    Some(PathElement::new(vec![(x.clone(), r.slowest), (x, r.fastest)], BLACK.stroke_width(2)))
+                })
+                .collect();
+            chart.draw_series(whiskers).map_err(err)?;
         }
         chart
             .configure_series_labels()

@@ -7,9 +7,12 @@
 # VARIANTS: space-separated NAME or NAME:VAR=VALUE[,VAR=VALUE] (environment for that run); NAME
 # picks .bin/ray_report_NAME. Env: ENGINES (default "ours bvh8,Embree 1"), KINDS (default all),
 # SCENES (default bunny dragon million), SIZE (default 1920x1440), THREADS (default 1,16), REPS
-# (default 5), ROUNDS (default 2), COLUMN (the ratio column's header, default "bvh8 / Embree 1").
+# (default 5), ROUNDS (default 2), COLUMN (the ratio column's header, default "bvh8 / Embree 1";
+# several, comma-separated, make one table each).
 # Carry .bin with ray_report_NAME (or ray_report_NAME.xz) and embree.txz (h100-simd.sh says how
-# to make them). Writes $OUT: each run's Markdown, and summary.md (per row: each variant's median ratio).
+# to make them). Writes $OUT: each run's Markdown, and summary.md (per row: each variant's median
+# ratio over the rounds, the rounds in brackets). With SUMMARY_ONLY=1 it runs nothing and only
+# writes summary.md again from the Markdown already in $OUT (another COLUMN, say).
 set -uo pipefail
 OUT=${OUT:-out/h100-ray-ab}
 VARIANTS=${VARIANTS:?name the variants, e.g. VARIANTS="base new"}
@@ -22,12 +25,16 @@ REPS=${REPS:-5}
 ROUNDS=${ROUNDS:-2}
 COLUMN=${COLUMN:-bvh8 / Embree 1}
 mkdir -p "$OUT"
-if [ -f .bin/embree.txz ] && [ ! -d .bin/embree ]; then tar xJf .bin/embree.txz -C .bin; fi
-for f in .bin/ray_report_*.xz; do [ -e "$f" ] && xz -d "$f" && chmod +x "${f%.xz}"; done
-if [ -d .bin/embree/usr/lib/x86_64-linux-gnu ]; then
-  export LD_LIBRARY_PATH=$PWD/.bin/embree/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
+if [ "${SUMMARY_ONLY:-0}" = 1 ]; then
+  ROUNDS=0
+else
+  if [ -f .bin/embree.txz ] && [ ! -d .bin/embree ]; then tar xJf .bin/embree.txz -C .bin; fi
+  for f in .bin/ray_report_*.xz; do [ -e "$f" ] && xz -d "$f" && chmod +x "${f%.xz}"; done
+  if [ -d .bin/embree/usr/lib/x86_64-linux-gnu ]; then
+    export LD_LIBRARY_PATH=$PWD/.bin/embree/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
+  fi
+  { nproc; uptime; grep -m1 "model name" /proc/cpuinfo; cat /sys/kernel/mm/transparent_hugepage/enabled; } >"$OUT/host.txt"
 fi
-{ nproc; uptime; grep -m1 "model name" /proc/cpuinfo; cat /sys/kernel/mm/transparent_hugepage/enabled; } >"$OUT/host.txt"
 ARGS=()
 for s in $SCENES; do ARGS+=(--scene "$s=scenes/$s.toml"); done
 for r in $(seq 1 "$ROUNDS"); do
@@ -42,7 +49,10 @@ for r in $(seq 1 "$ROUNDS"); do
       { echo "$tag $r FAILED"; tail -5 "$OUT/$tag-$r.log"; }
   done
 done
-# The targets table: columns scene, size, kind, threads, then the ratios by header.
+# The targets table per COLUMN: columns scene, kind, threads, then each variant's median ratio.
+IFS=, read -ra COLUMNS <<<"$COLUMN"
+for COLUMN in "${COLUMNS[@]}"; do
+[ ${#COLUMNS[@]} -gt 1 ] && printf "\n### %s\n\n" "$COLUMN"
 {
   printf "| scene | kind | threads |"
   for v in $VARIANTS; do printf " %s |" "$v"; done
@@ -62,4 +72,5 @@ done
     { k = $2 "|" $3 "|" $4; r[$1, k] = r[$1, k] " " $5; if (!(k in seen)) { seen[k] = 1; o[++n] = k } }
     function med(s,   a, c, i, j, x) { c = split(s, a, " "); if (!c) return "-"; for (i = 1; i <= c; i++) for (j = i + 1; j <= c; j++) if (a[j] + 0 < a[i] + 0) { x = a[i]; a[i] = a[j]; a[j] = x }; return c % 2 ? a[(c + 1) / 2] "%" : (a[c / 2] + a[c / 2 + 1]) / 2 "%" }
     END { m = split(vars, vs, " "); for (i = 1; i <= n; i++) { split(o[i], p, "|"); printf "| %s | %s | %s |", p[1], p[2], p[3]; for (j = 1; j <= m; j++) printf " %s (%s) |", med(r[vs[j], o[i]]), substr(r[vs[j], o[i]], 2); printf "\n" } }'
-} | tee "$OUT/summary.md"
+}
+done | tee "$OUT/summary.md"

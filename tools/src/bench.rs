@@ -349,6 +349,52 @@ fn ray_report_rows(text: &str, threads: Option<u32>) -> Result<Vec<Row>, String>
     Ok(rows)
 }
 
+/// One measurement repeated: the rows of several runs (the rounds of an A/B run, say) that agree
+/// in every field but their times.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Repeated {
+    /// The first run's row with the median of the runs' median times and the least of their
+    /// minima, so that its rate is the median run's (the mean of the middle two for an even count).
+    pub row: Row,
+    pub runs: usize,
+    /// The slowest and the fastest run's rate, Mrays/s.
+    pub slowest: f64,
+    pub fastest: f64,
+}
+
+/// Merges rows that repeat one measurement, keeping the order in which each first appears. A
+/// chart or table of several runs then shows one median per setting, and the runs' spread beside
+/// it, instead of one bar per run.
+pub fn merge_repeats(rows: &[Row]) -> Vec<Repeated> {
+    let same = |a: &Row, b: &Row| {
+        Row { median_ms: 0.0, min_ms: 0.0, ..a.clone() } == Row { median_ms: 0.0, min_ms: 0.0, ..b.clone() }
+    };
+    let mut groups: Vec<Vec<&Row>> = Vec::new();
+    for r in rows {
+        match groups.iter_mut().find(|g| same(g[0], r)) {
+            Some(g) => g.push(r),
+            None => groups.push(vec![r]),
+        }
+    }
+    groups
+        .into_iter()
+        .map(|g| {
+            let mut ms: Vec<f64> = g.iter().map(|r| r.median_ms).collect();
+            ms.sort_by(f64::total_cmp);
+            let n = ms.len();
+            let median_ms = if n % 2 == 1 { ms[n / 2] } else { (ms[n / 2 - 1] + ms[n / 2]) / 2.0 };
+            let min_ms = g.iter().map(|r| r.min_ms).fold(f64::INFINITY, f64::min);
+            let rates: Vec<f64> = g.iter().map(|r| r.mrays()).collect();
+            Repeated {
+                row: Row { median_ms, min_ms, ..g[0].clone() },
+                runs: n,
+                slowest: rates.iter().copied().fold(f64::INFINITY, f64::min),
+                fastest: rates.iter().copied().fold(0.0, f64::max),
+            }
+        })
+        .collect()
+}
+
 /// Reads rows written by [`Row::csv`] (or by earlier versions of `trace-vk bench`, whose files have
 /// no `tracer` and `device` columns: those rows are `vk` on an unnamed device; nor `ao` and
 /// `diffuse`: those rows traced none).
@@ -637,6 +683,36 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    fn repeated_runs_merge_into_their_median_and_spread() {
+        let row = |scene: &str, ms: f64| Row {
+            scene: scene.into(),
+            triangles: 3,
+            camera: "medium".into(),
+            width: 10,
+            height: 10,
+            mode: "primary".into(),
+            lights: 1,
+            method: "bvh8".into(),
+            median_ms: ms,
+            min_ms: ms * 0.9,
+            rays: [1000, 0, 0, 0, 0],
+            tracer: "ours".into(),
+            device: "16 threads".into(),
+        };
+        let rows = [row("a", 2.0), row("b", 1.0), row("a", 4.0), row("a", 1.0), row("b", 3.0)];
+        let merged = merge_repeats(&rows);
+        assert_eq!(merged.len(), 2);
+        let (a, b) = (&merged[0], &merged[1]);
+        assert_eq!((a.row.scene.as_str(), a.runs, a.row.median_ms, a.row.min_ms), ("a", 3, 2.0, 0.9));
+        assert_eq!((a.slowest, a.fastest), (0.25, 1.0));
+        // An even count: the mean of the middle two times.
+        assert_eq!((b.row.scene.as_str(), b.runs, b.row.median_ms), ("b", 2, 2.0));
+        // A row that differs in anything but its times is a measurement of its own.
+        let other = Row { rays: [999, 0, 0, 0, 0], ..row("a", 2.0) };
+        assert_eq!(merge_repeats(&[row("a", 2.0), other]).len(), 2);
+    }
 
     #[test]
     fn modes_parse_and_name_themselves() {
