@@ -15,7 +15,9 @@
 //!
 //! Files that repeat one measurement (the rounds of `tools/scripts/h100-ray-ab.sh`, say) make one
 //! bar per setting at the median run's rate, with a whisker from the slowest run to the fastest,
-//! and the panels name the number of runs.
+//! and the panels name the number of runs. Rows are runs of one measurement when they agree in
+//! every column but the times; files with different triangle tests (the CSV's `intersect`) get
+//! bars of their own.
 //!
 //! ```text
 //! cargo run --release -p tools --example bench_chart -- CSV|ray-report.md... [--ray-types] [--threads N]
@@ -61,6 +63,13 @@ fn main() {
     for c in &csvs {
         let read = if c.extension().is_some_and(|e| e == "md") { read_ray_report(c, threads) } else { read_csv(c) };
         rows.extend(read.unwrap_or_else(|e| fail(&e)));
+    }
+    // Runs with different triangle tests (`bench --intersect`) are different measurements: where
+    // the files hold several, each method's bars name theirs.
+    if distinct(rows.iter().map(|r| r.intersect.clone())).len() > 1 {
+        for r in rows.iter_mut().filter(|r| !r.intersect.is_empty()) {
+            r.method = format!("{} ({})", r.method, r.intersect);
+        }
     }
     let mut rows = merge_repeats(&rows);
     if ray_types {

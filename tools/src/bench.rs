@@ -204,11 +204,14 @@ pub struct Row {
     pub rays: Rays,
     pub tracer: String,
     pub device: String,
+    /// The triangle test (`watertight`, `mt`); empty where the source does not say (CSV files
+    /// from before the column, the ray report, whose method names carry it).
+    pub intersect: String,
 }
 
 /// The CSV columns, in order.
 pub const CSV_HEADER: &str = "scene,triangles,camera,width,height,mode,lights,method,median_ms,min_ms,primary,shadow,\
-                              secondary,ao,diffuse,mrays_per_s,tracer,device";
+                              secondary,ao,diffuse,mrays_per_s,tracer,device,intersect";
 
 impl Row {
     pub fn total_rays(&self) -> u64 {
@@ -223,7 +226,7 @@ impl Row {
     pub fn csv(&self) -> String {
         let [p, s, r, a, d] = self.rays;
         format!(
-            "{},{},{},{},{},{},{},{},{:.4},{:.4},{p},{s},{r},{a},{d},{:.2},{},{}",
+            "{},{},{},{},{},{},{},{},{:.4},{:.4},{p},{s},{r},{a},{d},{:.2},{},{},{}",
             field(&self.scene),
             self.triangles,
             field(&self.camera),
@@ -236,7 +239,8 @@ impl Row {
             self.min_ms,
             self.mrays(),
             self.tracer,
-            field(&self.device)
+            field(&self.device),
+            self.intersect
         )
     }
 
@@ -340,6 +344,7 @@ fn ray_report_rows(text: &str, threads: Option<u32>) -> Result<Vec<Row>, String>
                 rays: counts,
                 tracer: tracer.to_owned(),
                 device: format!("{want} threads"),
+                intersect: String::new(),
             });
         }
     }
@@ -397,7 +402,7 @@ pub fn merge_repeats(rows: &[Row]) -> Vec<Repeated> {
 
 /// Reads rows written by [`Row::csv`] (or by earlier versions of `trace-vk bench`, whose files have
 /// no `tracer` and `device` columns: those rows are `vk` on an unnamed device; nor `ao` and
-/// `diffuse`: those rows traced none).
+/// `diffuse`: those rows traced none; nor `intersect`: left empty).
 pub fn read_csv(path: &Path) -> Result<Vec<Row>, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
@@ -420,7 +425,8 @@ pub fn read_csv(path: &Path) -> Result<Vec<Row>, String> {
         need("shadow")?,
         need("secondary")?,
     ];
-    let (tracer, device, ao, diffuse) = (col("tracer"), col("device"), col("ao"), col("diffuse"));
+    let (tracer, device, ao, diffuse, intersect) =
+        (col("tracer"), col("device"), col("ao"), col("diffuse"), col("intersect"));
     let mut rows = Vec::new();
     for (n, line) in lines {
         let f: Vec<&str> = line.split(',').map(str::trim).collect();
@@ -446,6 +452,7 @@ pub fn read_csv(path: &Path) -> Result<Vec<Row>, String> {
             rays: [int(10)?, int(11)?, int(12)?, optional(ao)?, optional(diffuse)?],
             tracer: tracer.map_or("vk", |i| f[i]).to_owned(),
             device: device.map_or("", |i| f[i]).to_owned(),
+            intersect: intersect.map_or("", |i| f[i]).to_owned(),
         });
     }
     Ok(rows)
@@ -591,6 +598,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
     if !bench.honours(&accuracy) {
         return Err(format!("this tracer has no {:?} triangle test", m.intersect));
     }
+    let intersect_name = m.intersect.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default();
     let mut rows = Vec::with_capacity(total);
     for path in &scenes {
         let name = path
@@ -634,6 +642,7 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
                             rays: m.rays,
                             tracer: bench.tracer().to_owned(),
                             device: device.clone(),
+                            intersect: intersect_name.clone(),
                         });
                         bar.inc(1);
                     }
@@ -644,10 +653,9 @@ pub fn run<B: Bench>(bench: &B, m: &MatrixArgs, methods: &[&str], defaults: Defa
     bar.finish();
     bench.finish()?;
     let preface = format!(
-        "Device: {device} (`{}`); {frames} frames per setting after at least {warmup} warm-up frames, 1 s of them and more until their times settled; {}; triangle test {}.",
+        "Device: {device} (`{}`); {frames} frames per setting after at least {warmup} warm-up frames, 1 s of them and more until their times settled; {}; triangle test {intersect_name}.",
         bench.tracer(),
         bench.timing(),
-        m.intersect.to_possible_value().map(|v| v.get_name().to_owned()).unwrap_or_default()
     );
     let md_path = write_tables(&m.csv, &preface, &rows)?;
     crate::say!("{}", markdown(&[preface], &rows));
@@ -700,6 +708,7 @@ mod tests {
             rays: [1000, 0, 0, 0, 0],
             tracer: "ours".into(),
             device: "16 threads".into(),
+            intersect: "watertight".into(),
         };
         let rows = [row("a", 2.0), row("b", 1.0), row("a", 4.0), row("a", 1.0), row("b", 3.0)];
         let merged = merge_repeats(&rows);
@@ -757,6 +766,7 @@ mod tests {
             rays: [307200, 400000, 100, 0, 0],
             tracer: "cpu".into(),
             device: "Some CPU, 16 threads".into(),
+            intersect: "mt".into(),
         };
         let dir = std::env::temp_dir().join(format!("bench-csv-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
@@ -776,6 +786,7 @@ mod tests {
         .unwrap();
         let old = read_csv(&old).unwrap();
         assert_eq!((old[0].tracer.as_str(), old[0].method.as_str(), old[0].rays), ("vk", "lst", [2764800, 0, 0, 0, 0]));
+        assert_eq!(old[0].intersect, "", "a file from before the intersect column does not say");
         assert!((old[0].mrays() - 6260.9).abs() < 0.1);
         std::fs::remove_dir_all(&dir).unwrap();
     }

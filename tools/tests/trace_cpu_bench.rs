@@ -49,7 +49,10 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
             ("room", method, camera, size, name, lights),
             "row {i}"
         );
-        assert_eq!((r.tracer.as_str(), r.triangles), ("cpu", scene.triangles.len() as u64));
+        assert_eq!(
+            (r.tracer.as_str(), r.triangles, r.intersect.as_str()),
+            ("cpu", scene.triangles.len() as u64, "watertight")
+        );
         assert!(r.device.ends_with("2 threads"), "{}", r.device);
         assert!(r.min_ms > 0.0 && r.min_ms <= r.median_ms, "row {i}: {} > {}", r.min_ms, r.median_ms);
 
