@@ -202,7 +202,8 @@ where
     for (panel, scene) in root.split_evenly((scenes.len(), 1)).iter().zip(scenes) {
         let repeated: Vec<&Repeated> = rows.iter().filter(|r| &r.row.scene == scene).collect();
         let mine: Vec<&Row> = repeated.iter().map(|r| &r.row).collect();
-        let runs = repeated.iter().map(|r| r.runs).max().unwrap_or(1);
+        let (fewest, runs) = repeated.iter().fold((usize::MAX, 1), |(lo, hi), r| (lo.min(r.runs), hi.max(r.runs)));
+        let runs_said = if fewest < runs { format!("{fewest} to {runs}") } else { runs.to_string() };
         let several = distinct(mine.iter().map(|r| format!("{} {}x{}", r.camera, r.width, r.height))).len() > 1;
         let settings = distinct(mine.iter().map(|r| setting(r, several)));
         let present: Vec<usize> = (0..series.len())
@@ -228,7 +229,7 @@ where
         let mut chart = ChartBuilder::on(panel)
             .caption(
                 if runs > 1 {
-                    format!("{scene} ({triangles} triangles): median of {runs} runs, whiskers slowest to fastest")
+                    format!("{scene} ({triangles} triangles): median of {runs_said} runs, whiskers slowest to fastest")
                 } else {
                     format!("{scene} ({triangles} triangles)")
                 },
