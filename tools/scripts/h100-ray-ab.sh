@@ -49,28 +49,37 @@ for r in $(seq 1 "$ROUNDS"); do
       { echo "$tag $r FAILED"; tail -5 "$OUT/$tag-$r.log"; }
   done
 done
-# The targets table per COLUMN: columns scene, kind, threads, then each variant's median ratio.
+# The targets table per COLUMN: columns scene, (size, where the runs had several,) kind, threads,
+# then each variant's median ratio.
 IFS=, read -ra COLUMNS <<<"$COLUMN"
 for COLUMN in "${COLUMNS[@]}"; do
 [ ${#COLUMNS[@]} -gt 1 ] && printf "\n### %s\n\n" "$COLUMN"
 {
-  printf "| scene | kind | threads |"
-  for v in $VARIANTS; do printf " %s |" "$v"; done
-  printf "\n|---|---|--:|"
-  for v in $VARIANTS; do printf -- "--:|"; done
-  printf "\n"
   for v in $VARIANTS; do
     tag=$(echo "$v" | tr ':=,/' '_-__')
     for f in "$OUT/$tag"-*.md; do
       awk -F'|' -v col="$COLUMN" -v tag="$v" '
         /^\| scene \| size \| kind \| threads \|/ && !done { for (i = 1; i <= NF; i++) if ($i ~ "^ *" col " *$") c = i; on = c > 0; next }
         on && /^\|---/ { next }
-        on && /^\|/ { gsub(/ /, "", $2); gsub(/ /, "", $4); gsub(/ /, "", $5); gsub(/[ %]/, "", $c); print tag "," $2 "," $4 "," $5 "," $c; next }
+        on && /^\|/ { gsub(/ /, "", $2); gsub(/ /, "", $3); gsub(/ /, "", $4); gsub(/ /, "", $5); gsub(/[ %]/, "", $c); print tag "," $2 "," $3 "," $4 "," $5 "," $c; next }
         on { on = 0; done = 1 }' "$f"
     done
   done | awk -F, -v vars="$VARIANTS" '
-    { k = $2 "|" $3 "|" $4; r[$1, k] = r[$1, k] " " $5; if (!(k in seen)) { seen[k] = 1; o[++n] = k } }
+    { k = $2 "|" $3 "|" $4 "|" $5; r[$1, k] = r[$1, k] " " $6; if (!(k in seen)) { seen[k] = 1; o[++n] = k }; if (!($3 in sz)) { sz[$3] = 1; sizes++ } }
     function med(s,   a, c, i, j, x) { c = split(s, a, " "); if (!c) return "-"; for (i = 1; i <= c; i++) for (j = i + 1; j <= c; j++) if (a[j] + 0 < a[i] + 0) { x = a[i]; a[i] = a[j]; a[j] = x }; return c % 2 ? a[(c + 1) / 2] "%" : (a[c / 2] + a[c / 2 + 1]) / 2 "%" }
-    END { m = split(vars, vs, " "); for (i = 1; i <= n; i++) { split(o[i], p, "|"); printf "| %s | %s | %s |", p[1], p[2], p[3]; for (j = 1; j <= m; j++) printf " %s (%s) |", med(r[vs[j], o[i]]), substr(r[vs[j], o[i]], 2); printf "\n" } }'
+    END {
+      m = split(vars, vs, " ")
+      printf "| scene |%s kind | threads |", (sizes > 1 ? " size |" : "")
+      for (j = 1; j <= m; j++) printf " %s |", vs[j]
+      printf "\n|---|%s---|--:|", (sizes > 1 ? "---|" : "")
+      for (j = 1; j <= m; j++) printf "--:|"
+      printf "\n"
+      for (i = 1; i <= n; i++) {
+        split(o[i], p, "|")
+        if (sizes > 1) printf "| %s | %s | %s | %s |", p[1], p[2], p[3], p[4]; else printf "| %s | %s | %s |", p[1], p[3], p[4]
+        for (j = 1; j <= m; j++) printf " %s (%s) |", med(r[vs[j], o[i]]), substr(r[vs[j], o[i]], 2)
+        printf "\n"
+      }
+    }'
 }
 done | tee "$OUT/summary.md"
