@@ -132,6 +132,8 @@ pub struct WideBvh<const W: usize> {
     pub(crate) root: u32,
     /// The instruction set the traversal runs with here ([`Simd::detect`]).
     simd: Simd,
+    /// The most wide nodes on a path from the root to a leaf block.
+    depth: usize,
 }
 
 /// The 8-wide BVH: one AVX2 sequence (256-bit) tests a ray against a node's 8 boxes or a leaf's
@@ -278,7 +280,8 @@ impl<const W: usize> WideBvh<W> {
         const { assert!(W >= 2 && W <= 32) };
         let lines = (nodes.len() / (W - 2).max(1) + 1) * size_of::<WideNode<W>>() / 64
             + (tris.len() / (W / 2) + 1) * size_of::<TriBlock<W>>() / 64;
-        let mut out = Self { lines: Vec::with_capacity(lines), counts: (0, 0), root: LEAF, simd: Simd::detect() };
+        let mut out =
+            Self { lines: Vec::with_capacity(lines), counts: (0, 0), root: LEAF, simd: Simd::detect(), depth: 0 };
         if nodes.is_empty() {
             out.root = out.leaf(tris, &[]);
             return out;
@@ -330,7 +333,29 @@ impl<const W: usize> WideBvh<W> {
                 None => out.root = r,
             }
         }
+        out.depth = out.measure_depth();
         out
+    }
+
+    /// The most wide nodes on a path from the root to a leaf block.
+    fn measure_depth(&self) -> usize {
+        let (mut most, mut todo) = (0, vec![(self.root, 0)]);
+        while let Some((r, depth)) = todo.pop() {
+            if r & LEAF != 0 {
+                most = most.max(depth);
+                continue;
+            }
+            let node = self.node(r);
+            todo.extend((0..W).filter(|&i| node.valid & (1 << i) != 0).map(|i| (node.child[i], depth + 1)));
+        }
+        most
+    }
+
+    /// The most entries a walk's stack holds: what is on it are children of the wide nodes on the
+    /// path from where the walk started to the node it is at, at most `W - 1` of each.
+    #[inline(always)]
+    pub(crate) fn stack_bound(&self) -> usize {
+        (W - 1) * self.depth.max(1)
     }
 
     fn leaf(&mut self, tris: &(impl TriangleSource + ?Sized), indices: &[u32]) -> u32 {
@@ -563,7 +588,7 @@ impl<const W: usize> WideBvh<W> {
         let mut best = Hit { t: t_max, tri, u: 0.0, v: 0.0 };
         let mut found = false;
         let inv_far = ray.inv_dir.to_array().map(geometry::inv_far);
-        stack.clear();
+        let mut stack = stack.bounded(self.stack_bound());
         let mut cur = start;
         loop {
             if cur & LEAF == 0 {
@@ -1184,7 +1209,9 @@ pub(crate) mod avx2 {
         let mut found = false;
         // Counted here and added to `cost` once per ray: a local stays in a register.
         let mut work = Cost::default();
-        stack.clear();
+        // No allocating call in the loop: a call, even one never made, clobbers every vector
+        // register, and the compiler then reloaded the ray from memory at every node.
+        let mut stack = stack.bounded(bvh.stack_bound());
         let mut cur = start;
         loop {
             if cur & LEAF == 0 {
@@ -1650,6 +1677,44 @@ mod tests {
                     assert_eq!(any, want_any, "{simd:?}, width {W}: any hit to {t_max} on {ray:?}");
                     assert_eq!(any_cost, want_any_cost, "{simd:?}, width {W}: any hit to {t_max} on {ray:?}");
                 }
+            }
+        }
+    }
+
+    /// The walks' stacks hold what the deepest walk leaves on them ([`WideBvh::stack_bound`]; a
+    /// push beyond it would panic): coincident triangles under a binary tree as deep as it can be,
+    /// so that every ray through them enters every box and leaves all but one child of each
+    /// node on the stack, deeper than the stack's inline array.
+    #[test]
+    fn the_walks_stack_holds_the_deepest_walk() {
+        deepest_walk::<8>();
+        deepest_walk::<4>();
+    }
+
+    fn deepest_walk<const W: usize>() {
+        let n = 400u32;
+        let tris = vec![Triangle::from_vertices([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]); n as usize];
+        // Node 2k: a leaf of triangle k (the last: two triangles); node 2k + 1: the rest.
+        let leaf = |k: u32, count: u32| Node { min: [0.0; 3], count, max: [1.0, 1.0, 0.0], index: k };
+        let mut nodes = vec![Node { min: [0.0; 3], count: 0, max: [1.0, 1.0, 0.0], index: 1 }];
+        for k in 0..n - 2 {
+            nodes.push(leaf(k, 1));
+            nodes.push(Node { min: [0.0; 3], count: 0, max: [1.0, 1.0, 0.0], index: nodes.len() as u32 + 1 });
+        }
+        nodes.push(leaf(n - 2, 1));
+        nodes.push(leaf(n - 1, 1));
+        let bvh = WideBvh::<W>::new(&nodes, &tris);
+        assert!(bvh.stack_bound() > 128, "width {W}: {} entries fit the inline array", bvh.stack_bound());
+        let mut stack = Stack::default();
+        for o in [Vec3::new(0.25, 0.25, 1.0), Vec3::new(0.25, 0.25, -1.0)] {
+            let ray = Ray::new(o, Vec3::new(0.0, 0.0, -o.z.signum()));
+            for simd in Simd::available() {
+                let mut cost = Cost::default();
+                let hit = bvh.trace_on::<false, Watertight>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut cost);
+                assert_eq!(hit.map(|h| (h.t, h.tri)), Some((1.0, 0)), "{simd:?}, width {W}");
+                assert_eq!(cost.tris, n, "{simd:?}, width {W}: every triangle tested");
+                let any = bvh.trace_on::<true, Watertight>(simd, &ray, 0.0, f32::INFINITY, &mut stack, &mut cost);
+                assert!(any.is_some(), "{simd:?}, width {W}");
             }
         }
     }

@@ -12,11 +12,13 @@ pub struct Stack {
     inline: [(u32, f32); 128],
     len: usize,
     spill: Vec<(u32, f32)>,
+    /// [`Stack::bounded`]'s entries where the inline array is too short.
+    long: Vec<(u32, f32)>,
 }
 
 impl Default for Stack {
     fn default() -> Self {
-        Self { inline: [(0, 0.0); 128], len: 0, spill: Vec::new() }
+        Self { inline: [(0, 0.0); 128], len: 0, spill: Vec::new(), long: Vec::new() }
     }
 }
 
@@ -35,6 +37,20 @@ impl Stack {
         }
         self.len += 1;
     }
+    /// The stack for a walk that knows it holds at most `n` entries (the wide BVH's walks):
+    /// room for them is made here, so that pushing never allocates.
+    #[inline]
+    pub fn bounded(&mut self, n: usize) -> Bounded<'_> {
+        let slots: &mut [(u32, f32)] = if n <= self.inline.len() {
+            &mut self.inline
+        } else {
+            if self.long.len() < n {
+                self.long.resize(n, (0, 0.0));
+            }
+            &mut self.long
+        };
+        Bounded { slots, len: 0 }
+    }
     #[inline(always)]
     pub fn pop(&mut self) -> Option<(u32, f32)> {
         if self.len == 0 {
@@ -42,6 +58,29 @@ impl Stack {
         }
         self.len -= 1;
         if self.len < self.inline.len() { Some(self.inline[self.len]) } else { self.spill.pop() }
+    }
+}
+
+/// A traversal stack of at most as many entries as it was made with ([`Stack::bounded`]). Its
+/// push makes no call but the panic of an overflow, which a correct bound never reaches (and
+/// which, never returning, leaves the caller's registers alone): a call that returns, even one
+/// never made, clobbers every vector register, and the wide walk, which pushed onto a growable
+/// stack, reloaded its ray from memory at every node for it (docs/cpu-benchmark-log.md, stop 42).
+pub struct Bounded<'a> {
+    slots: &'a mut [(u32, f32)],
+    len: usize,
+}
+
+impl Bounded<'_> {
+    #[inline(always)]
+    pub fn push(&mut self, e: (u32, f32)) {
+        self.slots[self.len] = e;
+        self.len += 1;
+    }
+    #[inline(always)]
+    pub fn pop(&mut self) -> Option<(u32, f32)> {
+        self.len = self.len.checked_sub(1)?;
+        Some(self.slots[self.len])
     }
 }
 
