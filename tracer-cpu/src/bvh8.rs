@@ -1168,12 +1168,14 @@ pub(crate) mod avx2 {
     walk_compiled_for!(
         /// [`trace`] compiled for AVX-512 (F, VL, DQ, BW): the same 256-bit (or 128-bit)
         /// operations in the same order, so the same hits bit for bit, but with 32 vector
-        /// registers instead of 16 and compares straight into mask registers. (LLVM still
-        /// reloads the ray's lanes and the planes' offsets from the stack at every node, as in
-        /// the AVX2 build: objdump, stop 37.) On the H100 host's Xeon 0-5 points more of Embree on
-        /// every row of the ray report, side by side in three runs (docs/cpu-benchmark-log.md,
-        /// "AVX-512's registers and the walk's entry"); a walk written for 16-lane registers
-        /// traced 3-20% fewer rays than this one there and was removed.
+        /// registers instead of 16 and compares straight into mask registers. (Both builds keep
+        /// the ray's lanes in registers across the node loop since its stack stopped calling the
+        /// allocator there, [`crate::traverse::Bounded`]; per node the AVX2 build reloads four of
+        /// the six planes' offsets, this one two: objdump, stop 42.) On the H100 host's Xeon 0-5
+        /// points more of Embree on every row of the ray report, side by side in three runs
+        /// (docs/cpu-benchmark-log.md, "AVX-512's registers and the walk's entry"); a walk
+        /// written for 16-lane registers traced 3-20% fewer rays than this one there and was
+        /// removed.
         trace_evex,
         "avx2,popcnt,fma,avx512f,avx512vl,avx512dq,avx512bw"
     );
