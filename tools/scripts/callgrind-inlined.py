@@ -9,11 +9,14 @@ that is the tracer's own and not a one-line helper (the vector wrappers `add`, `
 so the frustum test, the leaf test and the walk's bookkeeping each get their share.
 
 Usage: callgrind-inlined.py PROFILE BINARY [PER] [--lines FUNCTION]
-  PROFILE   a callgrind.out made with --dump-instr=yes (e.g. with --toggle-collect='*packet8*trace*')
+  PROFILE   a callgrind.out made with --dump-instr=yes (e.g. with --toggle-collect='*packet8*trace*'),
+            or the histogram tools/stepcount writes (the AVX-512 path valgrind cannot run; only the
+            main executable's addresses are read)
   BINARY    the binary it profiled, with its debug info (the release profile keeps line tables)
   PER       divide the counts by this (packets or rays traced), to print instructions per item
   --lines F instead, the source lines of function F (a suffix of its path, e.g. avx2::walk)
-Needs binutils' addr2line. Made for stop 43 (docs/measurements/vm-2026-11-27-stop43).
+Needs binutils' addr2line. Made for stop 43 (docs/measurements/vm-2026-11-27-stop43); stepcount's
+histograms since stop 44 (docs/measurements/vm-2026-11-28-stop44).
 """
 import collections
 import re
@@ -31,8 +34,17 @@ LINE = re.compile(r"^(\d+|[+-]\d+|\*)$")
 
 
 def counts_by_address(path):
-    """Instruction address -> Ir, from a profile whose positions are `instr line`."""
+    """Instruction address -> Ir, from a profile whose positions are `instr line`, or -> steps,
+    from a stepcount histogram (`address count` lines; other modules' addresses are left out)."""
     counts = collections.Counter()
+    with open(path) as f:
+        if f.readline().startswith("# stepcount"):
+            for text in f:
+                if not text.startswith("#"):
+                    addr, n = text.split()
+                    if int(addr, 16) < 1 << 32:
+                        counts[int(addr, 16)] += int(n)
+            return counts
     addr = line = 0
     after_call = False
 
