@@ -6,6 +6,7 @@
 //! file yields a typed [`FormatError`] and never panics.
 #![doc = include_str!("../FORMAT.md")]
 
+pub mod destination;
 mod error;
 pub mod layout;
 pub mod memory;

@@ -714,6 +714,31 @@ fn an_invalid_scene_is_not_written_and_the_message_blames_the_scene_not_a_file()
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `bvhc compile -o /dev/null` as root renamed its file over the device; through a link the
+/// rename replaced the link. A link is followed to its file and a device is written in place (a
+/// link to `/dev/null`, so that a regression replaces the test's link, not the device).
+#[cfg(unix)]
+#[test]
+fn a_scene_written_through_a_link_replaces_the_file_it_names_and_a_device_is_written_in_place() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = std::env::temp_dir().join(format!("bvh-write-links-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let s = scene(40, Layouts::default());
+    let (target, link, null) = (dir.join("target.bvh"), dir.join("link.bvh"), dir.join("null.bvh"));
+    std::fs::write(&target, b"old").unwrap();
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    bvh_format::write_file(&s, &link).unwrap();
+    assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(), "the link stays a link");
+    assert_eq!(bvh_format::read_file(&target).unwrap(), s, "the file it names holds the scene");
+    std::os::unix::fs::symlink("/dev/null", &null).unwrap();
+    bvh_format::write_file(&s, &null).unwrap();
+    assert!(std::fs::symlink_metadata(&null).unwrap().file_type().is_symlink());
+    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null is still the device");
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 3, "no temporary file left");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 fn wide_nodes(bytes: &[u8]) -> Vec<WideNode> {
     bytemuck::pod_collect_to_vec(&bytes[range(&entry(bytes, SectionKind::NodesWide))])
 }

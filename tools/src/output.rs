@@ -4,6 +4,7 @@
 //! temporary name in its own folder and renamed only when complete ([`write_atomically`]), so that
 //! a failure or an interrupt (Ctrl-C, SIGTERM, SIGHUP) leaves what was there before untouched.
 
+use bvh_format::destination::Destination;
 use render_spec::Aovs;
 use std::fs::File;
 use std::io::{BufWriter, Seek, Write};
@@ -182,11 +183,22 @@ pub fn temporary_name(path: &Path) -> PathBuf {
 
 /// Writes `path` through `write` into a temporary file in the same folder, flushed to disk and
 /// renamed over `path` only when complete. On any failure the temporary file is removed and
-/// `path` is left as it was.
+/// `path` is left as it was. A link is followed to its file; a device or a pipe (`/dev/null`)
+/// is written in place, never renamed over ([`bvh_format::destination`]).
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> Result<(), String>,
 ) -> Result<(), OutputError> {
+    let fail = |message: String| OutputError::Write { path: path.to_owned(), message };
+    let path = match bvh_format::destination::destination(path).map_err(|e| fail(e.to_string()))? {
+        Destination::Replace(file) => file,
+        Destination::InPlace(stream) => {
+            let mut w = BufWriter::new(File::create(&stream).map_err(|e| fail(e.to_string()))?);
+            write(&mut w).map_err(fail)?;
+            return w.into_inner().map(drop).map_err(|e| fail(e.error().to_string()));
+        }
+    };
+    let path = path.as_path();
     let tmp = temporary_name(path);
     pending().push(tmp.clone());
     let written = (|| {
@@ -498,6 +510,32 @@ mod tests {
         write_atomically(&p, |w| w.write_all(b"new").map_err(|e| e.to_string())).unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"new");
         assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1, "only the output remains");
+    }
+
+    /// Renamed over, `/dev/null` became an empty regular file for the whole machine (as root), and
+    /// a link became a file beside the one it named. Through a link to `/dev/null`, so that a
+    /// regression replaces the test's link, not the device.
+    #[cfg(unix)]
+    #[test]
+    fn a_link_is_written_through_and_a_device_in_place() {
+        use std::os::unix::fs::FileTypeExt;
+        let d = scratch("links");
+        let target = d.join("target.png");
+        std::fs::write(&target, b"old").unwrap();
+        let link = d.join("link.png");
+        let _ = std::fs::remove_file(&link);
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        write_atomically(&link, |w| w.write_all(b"new").map_err(|e| e.to_string())).unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(), "the link stays a link");
+        assert_eq!(std::fs::read(&target).unwrap(), b"new", "the file it names is replaced");
+        let null = d.join("null.png");
+        let _ = std::fs::remove_file(&null);
+        std::os::unix::fs::symlink("/dev/null", &null).unwrap();
+        write_atomically(&null, |w| w.write_all(b"discarded").map_err(|e| e.to_string())).unwrap();
+        assert!(std::fs::symlink_metadata(&null).unwrap().file_type().is_symlink());
+        assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device());
+        let names: Vec<_> = std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names.len(), 3, "no temporary file left: {names:?}");
     }
 
     #[test]
