@@ -6,10 +6,13 @@
 //! rename must not reach what is not a regular file: renamed over `/dev/null` (`--out /dev/null`,
 //! run as root) it replaced the device for the whole machine with an empty file, and over a
 //! symbolic link it replaced the link instead of the file it names. So a link is followed to its
-//! file, and a device, a pipe or a socket is written in place.
+//! file, and a device, a pipe or a socket is written in place. [`write_replacing`] is that rule as
+//! the one writer every output goes through; [`remove_temporaries`] is for an interrupt handler.
 
-use std::io;
+use std::fs::File;
+use std::io::{self, BufWriter};
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
 
 /// How to write a new version of a path ([`destination`]).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -40,6 +43,64 @@ pub fn destination(path: &Path) -> io::Result<Destination> {
         path.to_owned()
     };
     Ok(if meta.is_file() { Destination::Replace(resolved) } else { Destination::InPlace(resolved) })
+}
+
+/// Temporary files this process is writing, for [`remove_temporaries`].
+static PENDING: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn pending() -> MutexGuard<'static, Vec<PathBuf>> {
+    PENDING.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The temporary name of `file` while its new version is written: hidden, in the same folder (so
+/// that the rename cannot cross file systems), and distinct per process.
+pub fn temporary_name(file: &Path) -> PathBuf {
+    let name = file.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let folder = file.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    folder.join(format!(".{name}.{}.partial", std::process::id()))
+}
+
+/// Writes a new version of `path` through `write`, by [`destination`]'s rule: a file is written
+/// under [`temporary_name`], flushed to disk and renamed over the old one only when complete; on
+/// any failure the temporary file is removed and the old file is left as it was. A device or a
+/// pipe is written in place.
+pub fn write_replacing(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>) -> io::Result<()> {
+    let file = match destination(path)? {
+        Destination::Replace(file) => file,
+        Destination::InPlace(stream) => {
+            let mut w = BufWriter::new(File::create(stream)?);
+            write(&mut w)?;
+            return w.into_inner().map(drop).map_err(|e| e.into_error());
+        }
+    };
+    let tmp = temporary_name(&file);
+    pending().push(tmp.clone());
+    let written = (|| {
+        let mut w = BufWriter::new(File::create(&tmp)?);
+        write(&mut w)?;
+        w.into_inner().map_err(|e| e.into_error())?.sync_all()
+    })();
+    // The rename happens under the lock, so an interrupt either removes the temporary file before
+    // it or finds it already renamed.
+    let mut list = pending();
+    let result = written.and_then(|()| std::fs::rename(&tmp, &file));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    list.retain(|p| *p != tmp);
+    result
+}
+
+/// Removes every temporary file [`write_replacing`] is writing, and keeps others from being
+/// renamed into place until the process ends: for a handler of Ctrl-C and the like, which then
+/// exits. No old file is touched.
+pub fn remove_temporaries() {
+    let list = pending();
+    for p in list.iter() {
+        let _ = std::fs::remove_file(p);
+    }
+    // Held to the exit, so that no write in flight renames a file after this.
+    std::mem::forget(list);
 }
 
 #[cfg(all(test, unix))]
@@ -76,6 +137,25 @@ mod tests {
         let null_link = dir.join("null");
         std::os::unix::fs::symlink("/dev/null", &null_link).unwrap();
         assert_eq!(destination(&null_link).unwrap(), Destination::InPlace("/dev/null".into()));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_failed_write_leaves_the_old_file_and_no_temporary_one() {
+        use std::io::Write;
+        let dir = scratch("replace");
+        let file = dir.join("out.txt");
+        std::fs::write(&file, b"old").unwrap();
+        let failed = write_replacing(&file, |w| {
+            w.write_all(b"half")?;
+            Err(io::Error::other("the encoder failed"))
+        });
+        assert_eq!(failed.unwrap_err().to_string(), "the encoder failed");
+        assert_eq!(std::fs::read(&file).unwrap(), b"old");
+        assert!(!temporary_name(&file).exists());
+        write_replacing(&file, |w| w.write_all(b"new")).unwrap();
+        assert_eq!(std::fs::read(&file).unwrap(), b"new");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "only the file itself is left");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -196,26 +196,5 @@ pub fn write_file(scene: &SceneFile, path: &std::path::Path) -> Result<(), FileE
     // Validated before the temporary file exists, so an invalid scene leaves nothing behind.
     let plan = plan(scene).map_err(|source| FileError::InvalidScene { path: path.display().to_string(), source })?;
     let werr = |source| FileError::Write { path: path.display().to_string(), source };
-    let file = match crate::destination::destination(path).map_err(werr)? {
-        crate::destination::Destination::Replace(file) => file,
-        crate::destination::Destination::InPlace(stream) => {
-            let mut w = std::io::BufWriter::new(std::fs::File::create(stream).map_err(werr)?);
-            emit(&plan, &mut w).map_err(werr)?;
-            return w.into_inner().map(drop).map_err(|e| werr(e.into_error()));
-        }
-    };
-    let mut tmp = file.as_os_str().to_owned();
-    tmp.push(".partial");
-    let tmp = std::path::PathBuf::from(tmp);
-    let written = (|| {
-        let mut w = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
-        emit(&plan, &mut w)?;
-        w.into_inner().map_err(|e| e.into_error())?;
-        std::fs::rename(&tmp, &file)
-    })();
-    // A failed write (a full disk) or rename removes the temporary file as well.
-    written.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        werr(e)
-    })
+    crate::destination::write_replacing(path, |w| emit(&plan, w)).map_err(werr)
 }

@@ -4,12 +4,10 @@
 //! temporary name in its own folder and renamed only when complete ([`write_atomically`]), so that
 //! a failure or an interrupt (Ctrl-C, SIGTERM, SIGHUP) leaves what was there before untouched.
 
-use bvh_format::destination::Destination;
 use render_spec::Aovs;
 use std::fs::File;
 use std::io::{BufWriter, Seek, Write};
 use std::path::{Path, PathBuf};
-use std::sync::{Mutex, MutexGuard};
 use thiserror::Error;
 
 /// A file format, known from the file name's extension (any case).
@@ -167,56 +165,16 @@ pub fn check(outputs: &[(&'static str, &Path, Kind)], inputs: &[&Path]) -> Resul
     Ok(checked)
 }
 
-/// Temporary files being written, removed by the interrupt handler.
-static PENDING: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
-
-fn pending() -> MutexGuard<'static, Vec<PathBuf>> {
-    PENDING.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-/// The temporary name of `path` while it is written: hidden, in the same folder (so that the
-/// rename cannot cross file systems), and distinct per process.
-pub fn temporary_name(path: &Path) -> PathBuf {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    folder_of(path).join(format!(".{name}.{}.partial", std::process::id()))
-}
-
-/// Writes `path` through `write` into a temporary file in the same folder, flushed to disk and
-/// renamed over `path` only when complete. On any failure the temporary file is removed and
-/// `path` is left as it was. A link is followed to its file; a device or a pipe (`/dev/null`)
-/// is written in place, never renamed over ([`bvh_format::destination`]).
+/// Writes `path` through `write` by the workspace's one rule for outputs
+/// ([`bvh_format::destination::write_replacing`]): a file is replaced only when its new version is
+/// complete and on disk, and left as it was on any failure or interrupt; a link is followed to its
+/// file; a device or a pipe (`/dev/null`) is written in place, never renamed over.
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> Result<(), String>,
 ) -> Result<(), OutputError> {
-    let fail = |message: String| OutputError::Write { path: path.to_owned(), message };
-    let path = match bvh_format::destination::destination(path).map_err(|e| fail(e.to_string()))? {
-        Destination::Replace(file) => file,
-        Destination::InPlace(stream) => {
-            let mut w = BufWriter::new(File::create(&stream).map_err(|e| fail(e.to_string()))?);
-            write(&mut w).map_err(fail)?;
-            return w.into_inner().map(drop).map_err(|e| fail(e.error().to_string()));
-        }
-    };
-    let path = path.as_path();
-    let tmp = temporary_name(path);
-    pending().push(tmp.clone());
-    let written = (|| {
-        let mut w = BufWriter::new(File::create(&tmp).map_err(|e| e.to_string())?);
-        write(&mut w)?;
-        let file = w.into_inner().map_err(|e| e.error().to_string())?;
-        file.sync_all().map_err(|e| e.to_string())
-    })();
-    // The rename happens under the lock, so an interrupt either removes the temporary file
-    // before it or finds it already renamed.
-    let mut list = pending();
-    let result = written.and_then(|()| std::fs::rename(&tmp, path).map_err(|e| e.to_string()));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    list.retain(|p| *p != tmp);
-    drop(list);
-    result.map_err(|message| OutputError::Write { path: path.to_owned(), message })
+    bvh_format::destination::write_replacing(path, |w| write(w).map_err(std::io::Error::other))
+        .map_err(|e| OutputError::Write { path: path.to_owned(), message: e.to_string() })
 }
 
 /// On Ctrl-C, SIGTERM or SIGHUP: removes every temporary file being written and exits with
@@ -230,10 +188,7 @@ pub fn remove_partial_outputs_on_interrupt() {
             let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) else { return };
             std::thread::spawn(move || {
                 if let Some(signal) = signals.forever().next() {
-                    let list = pending();
-                    for p in list.iter() {
-                        let _ = std::fs::remove_file(p);
-                    }
+                    bvh_format::destination::remove_temporaries();
                     let _ = writeln!(std::io::stderr(), "\ninterrupted; no output was left half-written");
                     std::process::exit(128 + signal);
                 }
@@ -506,7 +461,7 @@ mod tests {
         });
         assert!(e.unwrap_err().to_string().contains("the encoder failed"));
         assert_eq!(std::fs::read(&p).unwrap(), b"old");
-        assert!(!temporary_name(&p).exists());
+        assert!(!bvh_format::destination::temporary_name(&p).exists());
         write_atomically(&p, |w| w.write_all(b"new").map_err(|e| e.to_string())).unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"new");
         assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1, "only the output remains");

@@ -426,18 +426,6 @@ pub fn cpu_model() -> String {
 pub fn write_report(path: &Path, text: &str) -> Result<(), String> {
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(|e| format!("cannot create the folder {}: {e}", dir.display()))?;
-    let cannot = |e: std::io::Error| format!("cannot write {}: {e}", path.display());
-    let path = match bvh_format::destination::destination(path).map_err(cannot)? {
-        bvh_format::destination::Destination::Replace(file) => file,
-        bvh_format::destination::Destination::InPlace(stream) => return std::fs::write(stream, text).map_err(cannot),
-    };
-    let path = path.as_path();
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().ok_or_else(|| format!("{} names no file", path.display()))?;
-    let tmp = dir.join(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
-    let written = std::fs::write(&tmp, text).and_then(|()| std::fs::rename(&tmp, path));
-    written.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        format!("cannot write {}: {e}", path.display())
-    })
+    bvh_format::destination::write_replacing(path, |w| std::io::Write::write_all(w, text.as_bytes()))
+        .map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
