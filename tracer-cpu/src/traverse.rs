@@ -11,14 +11,14 @@ use bvh_format::Node;
 pub struct Stack {
     inline: [(u32, f32); 128],
     len: usize,
-    spill: Vec<(u32, f32)>,
-    /// [`Stack::bounded`]'s entries where the inline array is too short.
-    long: Vec<(u32, f32)>,
+    /// The entries past the inline array's, or [`Stack::bounded`]'s slots where the array is too
+    /// short (one walk at a time borrows the stack, and each starts by clearing or sizing it).
+    heap: Vec<(u32, f32)>,
 }
 
 impl Default for Stack {
     fn default() -> Self {
-        Self { inline: [(0, 0.0); 128], len: 0, spill: Vec::new(), long: Vec::new() }
+        Self { inline: [(0, 0.0); 128], len: 0, heap: Vec::new() }
     }
 }
 
@@ -26,14 +26,14 @@ impl Stack {
     #[inline(always)]
     pub fn clear(&mut self) {
         self.len = 0;
-        self.spill.clear();
+        self.heap.clear();
     }
     #[inline(always)]
     pub fn push(&mut self, e: (u32, f32)) {
         if self.len < self.inline.len() {
             self.inline[self.len] = e;
         } else {
-            self.spill.push(e);
+            self.heap.push(e);
         }
         self.len += 1;
     }
@@ -44,10 +44,10 @@ impl Stack {
         let slots: &mut [(u32, f32)] = if n <= self.inline.len() {
             &mut self.inline
         } else {
-            if self.long.len() < n {
-                self.long.resize(n, (0, 0.0));
+            if self.heap.len() < n {
+                self.heap.resize(n, (0, 0.0));
             }
-            &mut self.long
+            &mut self.heap
         };
         Bounded { slots, len: 0 }
     }
@@ -57,7 +57,7 @@ impl Stack {
             return None;
         }
         self.len -= 1;
-        if self.len < self.inline.len() { Some(self.inline[self.len]) } else { self.spill.pop() }
+        if self.len < self.inline.len() { Some(self.inline[self.len]) } else { self.heap.pop() }
     }
 }
 
@@ -196,4 +196,69 @@ pub fn escape<const ANY: bool, T: TriangleTest>(
         }
     }
     (best.tri != u32::MAX).then_some(best)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Watertight;
+    use bvh_format::Triangle;
+    use glam::Vec3;
+
+    /// `n` triangles facing +x at x = 0..n, in a tree that is a chain: every inner node holds one
+    /// triangle's leaf (left) and the rest of the row (right), so a ray down the row from +x
+    /// enters the rest first and pushes every leaf it passes: `n - 1` entries, past the inline
+    /// array's 128. Each triangle is half of the unit square of its box; a ray through the upper
+    /// half (y + z > 1) misses all but triangle 0, the last entry popped.
+    fn chain(n: u32) -> (Vec<Node>, Vec<Triangle>) {
+        let tris: Vec<Triangle> = (0..n)
+            .map(|i| {
+                let x = i as f32;
+                match i {
+                    0 => Triangle::from_vertices([x, 1.0, 1.0], [x, 1.0, 0.0], [x, 0.0, 1.0]),
+                    _ => Triangle::from_vertices([x, 0.0, 0.0], [x, 1.0, 0.0], [x, 0.0, 1.0]),
+                }
+            })
+            .collect();
+        let boxed = |lo: u32, hi: u32| ([lo as f32, 0.0, 0.0], [(hi - 1) as f32, 1.0, 1.0]);
+        let mut nodes = Vec::new();
+        for i in 0..n {
+            let (min, max) = boxed(i, n);
+            if i + 1 == n {
+                nodes.push(Node { min, max, count: 1, index: i });
+            } else {
+                nodes.push(Node { min, max, count: 0, index: nodes.len() as u32 + 1 });
+                let (min, max) = boxed(i, i + 1);
+                nodes.push(Node { min, max, count: 1, index: i });
+            }
+        }
+        (nodes, tris)
+    }
+
+    #[test]
+    fn a_stack_deeper_than_its_inline_array_spills_and_serves_a_bounded_walk_after() {
+        let n = 300;
+        let (nodes, tris) = chain(n);
+        let ray = Ray::new(Vec3::new(n as f32 + 4.0, 0.75, 0.75), Vec3::NEG_X);
+        let mut stack = Stack::default();
+        for round in 0..2 {
+            let mut cost = Cost::default();
+            let hit = child_pair::<false, Watertight>(&nodes, &tris, &ray, 0.0, f32::INFINITY, &mut stack, &mut cost)
+                .expect("the ray runs down the row to triangle 0");
+            assert_eq!((hit.tri, hit.t), (0, n as f32 + 4.0), "round {round}");
+            // Down the whole chain, then every leaf popped back and tested once.
+            assert_eq!((cost.nodes, cost.tris), (1 + 2 * (n - 1), n), "round {round}");
+            let any = child_pair::<true, Watertight>(&nodes, &tris, &ray, 0.0, f32::INFINITY, &mut stack, &mut cost);
+            assert!(any.is_some());
+            // The same stack as a bounded one longer than its array, between the two rounds.
+            let mut bounded = stack.bounded(n as usize);
+            for i in 0..n {
+                bounded.push((i, i as f32));
+            }
+            for i in (0..n).rev() {
+                assert_eq!(bounded.pop(), Some((i, i as f32)));
+            }
+            assert_eq!(bounded.pop(), None);
+        }
+    }
 }
