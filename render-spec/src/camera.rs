@@ -1,7 +1,7 @@
 //! Primary rays from a camera: the convention of docs/shading.md ("Camera"), shared by every tracer
 //! and tool so that all of them shoot exactly the same primary rays.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 /// A pinhole camera: eye, look-at point, up vector, vertical field of view in degrees.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -42,8 +42,8 @@ impl CameraSpec {
         if !(self.fov_deg > 0.0 && self.fov_deg < 180.0) {
             return Err(CameraError::FieldOfView);
         }
-        let f = (self.at - self.eye).normalize_or_zero();
-        let r = f.cross(self.up).normalize_or_zero();
+        let f = unit(self.at - self.eye, self.at.as_dvec3() - self.eye.as_dvec3());
+        let r = unit(f.cross(self.up), f.as_dvec3().cross(self.up.as_dvec3()));
         if f == Vec3::ZERO || r == Vec3::ZERO || !f.is_finite() || !r.is_finite() {
             return Err(CameraError::Degenerate);
         }
@@ -57,6 +57,19 @@ impl CameraSpec {
             v_step: -2.0 * t * u / height as f32,
         })
     }
+}
+
+/// `v` (computed in f32) as a unit vector; zero where it is zero or its inputs are not finite.
+/// Where `v` or its squared length over- or underflows f32 (an eye 1e20 from the look-at point or
+/// 1e-20, eye and look-at point on either side of 2e38, an up vector of length 1e30), `v64`, the
+/// same vector computed in f64, where none of these does. Elsewhere f32's own normalisation, so
+/// that every ordinary camera keeps the bits of its rays.
+fn unit(v: Vec3, v64: DVec3) -> Vec3 {
+    let n = v.normalize_or_zero();
+    if n != Vec3::ZERO || !v64.is_finite() {
+        return n;
+    }
+    v64.normalize_or_zero().as_vec3()
 }
 
 impl Frame {
@@ -97,10 +110,37 @@ mod tests {
     }
 
     #[test]
+    fn cameras_far_near_or_with_a_long_up_vector_are_not_degenerate() {
+        let plain = CameraSpec { eye: Vec3::new(0.0, 0.0, 5.0), at: Vec3::ZERO, up: Vec3::Y, fov_deg: 60.0 };
+        let want = plain.frame(4, 3).unwrap();
+        // The view direction's and the right vector's squared lengths overflow or underflow f32.
+        for cam in [
+            CameraSpec { eye: Vec3::new(0.0, 0.0, 1e30), ..plain },
+            CameraSpec { eye: Vec3::new(0.0, 0.0, 3e38), at: Vec3::new(0.0, 0.0, -3e38), ..plain },
+            CameraSpec { eye: Vec3::new(0.0, 0.0, 1e-30), ..plain },
+            CameraSpec { up: Vec3::new(0.0, 1e30, 0.0), ..plain },
+            CameraSpec { up: Vec3::new(0.0, 1e-30, 0.0), ..plain },
+        ] {
+            let f = cam.frame(4, 3).unwrap_or_else(|e| panic!("{cam:?}: {e:?}"));
+            for (x, y) in [(0, 0), (3, 0), (1, 2)] {
+                let (a, b) = (f.direction(x, y), want.direction(x, y));
+                assert!((a - b).length() < 1e-6, "{cam:?} pixel ({x}, {y}): {a} against {b}");
+            }
+        }
+        // Where f32 normalises, the rays keep their bits: a power-of-two longer up vector.
+        let f = CameraSpec { up: Vec3::new(0.0, 4.0, 0.0), ..plain }.frame(4, 3).unwrap();
+        assert_eq!(f.direction(3, 2), want.direction(3, 2));
+    }
+
+    #[test]
     fn degenerate_cameras_are_rejected() {
         let bad = CameraSpec { eye: Vec3::ZERO, at: Vec3::ZERO, up: Vec3::Y, fov_deg: 45.0 };
         assert_eq!(bad.frame(4, 4).unwrap_err(), CameraError::Degenerate);
         let bad = CameraSpec { eye: Vec3::ZERO, at: Vec3::Y, up: Vec3::Y, fov_deg: 45.0 };
+        assert_eq!(bad.frame(4, 4).unwrap_err(), CameraError::Degenerate);
+        let bad = CameraSpec { eye: Vec3::ZERO, at: Vec3::Z, up: Vec3::ZERO, fov_deg: 45.0 };
+        assert_eq!(bad.frame(4, 4).unwrap_err(), CameraError::Degenerate);
+        let bad = CameraSpec { eye: Vec3::ZERO, at: Vec3::new(0.0, 0.0, f32::INFINITY), up: Vec3::Y, fov_deg: 45.0 };
         assert_eq!(bad.frame(4, 4).unwrap_err(), CameraError::Degenerate);
         let bad = CameraSpec { eye: Vec3::ZERO, at: Vec3::Z, up: Vec3::Y, fov_deg: 180.0 };
         assert_eq!(bad.frame(4, 4).unwrap_err(), CameraError::FieldOfView);
