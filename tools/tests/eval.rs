@@ -11,12 +11,11 @@
 //! - rt-pipeline has rows where the device supports it, else eval.md names it with the reason.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("tools/ sits in the workspace").to_path_buf()
-}
+mod common;
+use common::repo;
 
 /// The rows of eval.csv as maps from column name to value.
 fn read(csv: &Path) -> Vec<HashMap<String, String>> {
@@ -60,9 +59,7 @@ fn run(out: &Path) -> Vec<HashMap<String, String>> {
 
 #[test]
 fn the_bunny_evaluation_shows_the_orderings_the_measurements_must_show() {
-    let out = std::env::temp_dir().join(format!("trace-vk-eval-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out);
-    std::fs::create_dir_all(&out).unwrap();
+    let out = common::scratch("eval");
     let rows = run(&out);
     let md = std::fs::read_to_string(out.join("eval.md")).unwrap();
     for tracer in ["cpu", "vk"] {
@@ -115,5 +112,4 @@ fn the_bunny_evaluation_shows_the_orderings_the_measurements_must_show() {
     for (a, b) in rows.iter().zip(&again) {
         assert_eq!((&a["setting"], &a["flip_mean"], &a["leaks"]), (&b["setting"], &b["flip_mean"], &b["leaks"]));
     }
-    std::fs::remove_dir_all(&out).unwrap();
 }

@@ -2,19 +2,16 @@
 //! columns, and every row's ray counts are those of the image the tracer renders for it.
 
 use render_spec::{Mode, Settings};
-use std::path::{Path, PathBuf};
 use std::process::Command;
 use tools::bench::{CSV_HEADER, read_csv};
 use tracer_cpu::{Method, Tracer};
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("tools/ sits in the workspace").to_path_buf()
-}
+mod common;
+use common::repo;
 
 #[test]
 fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
-    let dir = std::env::temp_dir().join(format!("trace-cpu-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("cpu-bench");
     let csv = dir.join("cpu.csv");
     let room = repo().join("scenes/room.toml");
     let o = Command::new(env!("CARGO_BIN_EXE_trace-cpu"))
@@ -87,7 +84,6 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
     }
     let md = std::fs::read_to_string(csv.with_extension("md")).unwrap();
     assert_eq!(md.lines().filter(|l| l.starts_with("| room |")).count(), rows.len());
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// `--vertices expanded,indexed` times each method in both forms side by side (rows METHOD and
@@ -95,8 +91,7 @@ fn a_small_matrix_writes_one_row_per_setting_with_the_rays_of_its_image() {
 /// 48 bytes per triangle fewer.
 #[test]
 fn both_vertex_forms_are_timed_side_by_side() {
-    let dir = std::env::temp_dir().join(format!("trace-cpu-bench-forms-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("cpu-bench-forms");
     let csv = dir.join("cpu.csv");
     let room = repo().join("scenes/room.toml");
     let o = Command::new(env!("CARGO_BIN_EXE_trace-cpu"))
@@ -123,5 +118,4 @@ fn both_vertex_forms_are_timed_side_by_side() {
     assert!(held("bvh8", "indexed") > held("ordered", "indexed"), "bvh8 holds its wide BVH besides");
     assert_eq!(held("bvh4", "expanded") - held("bvh4", "indexed"), copy);
     assert!(held("bvh4", "indexed") > held("ordered", "indexed"), "bvh4 holds its 4-wide BVH besides");
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -23,12 +23,35 @@ pub fn scene(name: &str) -> PathBuf {
     repo().join("scenes").join(name)
 }
 
-/// A fresh, empty folder for one test.
-pub fn scratch(name: &str) -> PathBuf {
+/// A fresh, empty folder for one test, removed with its contents when the guard is dropped (a
+/// run of the suite left some thirty folders in the temporary directory before).
+pub fn scratch(name: &str) -> Scratch {
     let dir = std::env::temp_dir().join(format!("tools-test-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("temp dir is writable");
-    dir
+    Scratch(dir)
+}
+
+/// [`scratch`]'s folder: a path while it lives, gone when dropped.
+pub struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// Runs a program in `dir` with a time limit: a hang is a failure, not a stuck test.
