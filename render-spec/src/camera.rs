@@ -42,12 +42,7 @@ impl CameraSpec {
         if !(self.fov_deg > 0.0 && self.fov_deg < 180.0) {
             return Err(CameraError::FieldOfView);
         }
-        let f = unit(self.at - self.eye, self.at.as_dvec3() - self.eye.as_dvec3());
-        let r = unit(f.cross(self.up), f.as_dvec3().cross(self.up.as_dvec3()));
-        if f == Vec3::ZERO || r == Vec3::ZERO || !f.is_finite() || !r.is_finite() {
-            return Err(CameraError::Degenerate);
-        }
-        let u = r.cross(f);
+        let [f, r, u] = self.basis()?;
         let t = (self.fov_deg.to_radians() * 0.5).tan();
         let a = width as f32 / height as f32;
         Ok(Frame {
@@ -56,6 +51,17 @@ impl CameraSpec {
             h_step: 2.0 * t * a * r / width as f32,
             v_step: -2.0 * t * u / height as f32,
         })
+    }
+
+    /// The camera's unit vectors `[forward, right, up]` (right-handed: `up = right x forward`),
+    /// from which [`Self::frame`] spans the image.
+    pub fn basis(&self) -> Result<[Vec3; 3], CameraError> {
+        let f = unit(self.at - self.eye, self.at.as_dvec3() - self.eye.as_dvec3());
+        let r = unit(f.cross(self.up), f.as_dvec3().cross(self.up.as_dvec3()));
+        if f == Vec3::ZERO || r == Vec3::ZERO || !f.is_finite() || !r.is_finite() {
+            return Err(CameraError::Degenerate);
+        }
+        Ok([f, r, r.cross(f)])
     }
 }
 

@@ -48,9 +48,7 @@ pub fn camera_grid(n: u32, distance: f32, aim: Aim) -> Result<(SceneFile, Camera
     let fov = 2.0 * (0.4 / distance).atan().to_degrees();
     let cam = CameraSpec { eye, at: Vec3::ZERO, up: Vec3::Y, fov_deg: fov };
     let frame = cam.frame(n, n).map_err(|e| format!("{e:?}"))?;
-    let f = (cam.at - eye).normalize();
-    let r = f.cross(cam.up).normalize();
-    let u = r.cross(f);
+    let [f, _, u] = cam.basis().map_err(|e| format!("{e:?}"))?;
     let tilt = 35f32.to_radians();
     let plane = -f * tilt.cos() + u * tilt.sin();
     let ray = |x: f32, y: f32| frame.top_left + x * frame.h_step + y * frame.v_step;
