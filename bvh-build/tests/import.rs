@@ -5,40 +5,12 @@ use bvh_build::Scene;
 use bvh_build::import::{ImportError, ImportOptions, defaults, load};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use tests::Scratch;
 
-/// A fresh directory under the system temp dir, unique per test run and call, removed when the
-/// test ends (pass or fail: a panic unwinds through the drop).
+/// A fresh directory for one test, removed when the test ends (pass or fail: a panic unwinds
+/// through the drop).
 fn temp_dir(tag: &str) -> Scratch {
-    static N: AtomicUsize = AtomicUsize::new(0);
-    let dir = std::env::temp_dir().join(format!(
-        "bvh-import-{tag}-{}-{}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
-    ));
-    std::fs::create_dir_all(&dir).unwrap();
-    Scratch(dir)
-}
-
-struct Scratch(PathBuf);
-
-impl std::ops::Deref for Scratch {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl AsRef<Path> for Scratch {
-    fn as_ref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
+    Scratch::new(&format!("import-{tag}"))
 }
 
 fn write(dir: &Path, name: &str, text: impl AsRef<[u8]>) -> PathBuf {

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
+pub use tests::Scratch;
 
 pub fn bin(name: &str) -> &'static str {
     match name {
@@ -26,32 +27,7 @@ pub fn scene(name: &str) -> PathBuf {
 /// A fresh, empty folder for one test, removed with its contents when the guard is dropped (a
 /// run of the suite left some thirty folders in the temporary directory before).
 pub fn scratch(name: &str) -> Scratch {
-    let dir = std::env::temp_dir().join(format!("tools-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir is writable");
-    Scratch(dir)
-}
-
-/// [`scratch`]'s folder: a path while it lives, gone when dropped.
-pub struct Scratch(PathBuf);
-
-impl std::ops::Deref for Scratch {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl AsRef<Path> for Scratch {
-    fn as_ref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
+    Scratch::new(&format!("tools-{name}"))
 }
 
 /// Runs a program in `dir` with a time limit: a hang is a failure, not a stuck test.
