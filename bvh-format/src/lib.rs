@@ -19,7 +19,7 @@ mod write;
 
 pub use error::{FileError, FormatError, LayoutKind};
 pub use layout::SectionKind;
-pub use read::{SectionInfo, read, read_file, read_with_sections};
+pub use read::{SectionInfo, read, read_file, read_input, read_with_sections};
 pub use tree::{Tree, TreeStats};
 pub use types::{
     BuildParams, CAMERA_NAME_LEN, Camera, FLAT, IndexedTriangle, Light, Material, Node, SceneSettings, Strategy,

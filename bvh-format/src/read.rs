@@ -205,8 +205,24 @@ fn wide_layout(header: &Header, data: Option<&[u8]>) -> Result<Option<Vec<crate:
 /// Reads and validates a scene file from disk.
 pub fn read_file(path: &std::path::Path) -> Result<SceneFile, FileError> {
     let p = || path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| FileError::Read { path: p(), source })?;
+    let bytes = read_input(path).map_err(|source| FileError::Read { path: p(), source })?;
     read(&bytes).map_err(|source| FileError::Invalid { path: p(), source })
+}
+
+/// The bytes of an input file (a scene file, a mesh, a description, a file a scene refers to), as
+/// `std::fs::read`, but a character or block device is refused: `/dev/zero` or a disk is no
+/// scene and need not end, so reading it whole would take memory until the program is killed
+/// instead of ending in an error. A pipe is read to its end, as a file is.
+pub fn read_input(path: &std::path::Path) -> std::io::Result<Vec<u8>> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let kind = std::fs::metadata(path)?.file_type();
+        if kind.is_char_device() || kind.is_block_device() {
+            return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "it is a device, not a file"));
+        }
+    }
+    std::fs::read(path)
 }
 
 /// The index of the first value that is not finite, if any.
@@ -412,4 +428,15 @@ fn is_permutation(index: &[u32]) -> bool {
     use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
     let seen: Vec<AtomicBool> = (0..index.len()).map(|_| AtomicBool::new(false)).collect();
     crate::par::all(index, |_, &i| seen.get(i as usize).is_some_and(|f| !f.swap(true, Relaxed)))
+}
+
+#[cfg(all(test, unix))]
+mod tests {
+    #[test]
+    fn a_device_is_refused_before_it_is_read() {
+        let e = super::read_input(std::path::Path::new("/dev/zero")).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput);
+        let e = super::read_file(std::path::Path::new("/dev/zero")).unwrap_err();
+        assert_eq!(e.to_string(), "cannot read /dev/zero: it is a device, not a file");
+    }
 }

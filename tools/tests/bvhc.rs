@@ -120,6 +120,35 @@ fn bad_input_gives_one_sentence_and_no_output() {
     assert!(!out.exists());
 }
 
+/// A device given where a scene belongs (`/dev/zero` behind a scene's name, or as a file a
+/// scene refers to) was read until memory ran out; it is refused at once, in one sentence.
+#[cfg(unix)]
+#[test]
+fn a_device_given_as_a_scene_is_refused_not_read_until_memory_runs_out() {
+    let dir = scratch("device");
+    for name in ["zero.bvh", "zero.obj", "zero.glb", "zero.toml", "zero.mtl"] {
+        std::os::unix::fs::symlink("/dev/zero", dir.join(name)).unwrap();
+    }
+    std::fs::write(dir.join("lib.obj"), "mtllib zero.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    std::fs::write(dir.join("refers.toml"), "[[object]]\ntype = \"mesh\"\nfile = \"zero.obj\"\n").unwrap();
+    let limit = Duration::from_secs(30);
+    for args in [
+        &["info", "zero.bvh"][..],
+        &["info", "/dev/zero"],
+        &["compile", "zero.obj", "-o", "out.bvh"],
+        &["compile", "zero.glb", "-o", "out.bvh"],
+        &["compile", "zero.toml", "-o", "out.bvh"],
+        &["compile", "lib.obj", "-o", "out.bvh"],
+        &["compile", "refers.toml", "-o", "out.bvh"],
+    ] {
+        let o = common::run_in(&dir, "bvhc", args, limit);
+        assert_one_sentence_error(&o, "is a device, not a file");
+        assert!(!dir.join("out.bvh").exists(), "{args:?}");
+    }
+    let o = common::run_in(&dir, "trace-cpu", &["render", "zero.bvh", "--res", "8x8", "-o", "out.png"], limit);
+    assert_one_sentence_error(&o, "is a device, not a file");
+}
+
 #[test]
 fn damaged_files_fail_verification_with_one_sentence() {
     let dir = scratch("damaged");

@@ -209,7 +209,7 @@ pub const MAX_SHAPE_TRIANGLES: u64 = 1 << 22;
 
 /// Reads a scene description and everything it references.
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
-    load_bytes(path, &super::read_file(path)?, opts, &|file| std::fs::read(file))
+    load_bytes(path, &super::read_file(path)?, opts, &bvh_format::read_input)
 }
 
 /// [`load`] of `bytes` read from `path`; `read` reads the mesh files it places.

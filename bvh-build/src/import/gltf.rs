@@ -23,7 +23,7 @@ use rayon::prelude::*;
 use std::path::Path;
 
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<(Scene, Vec<Camera>), ImportError> {
-    load_bytes(path, &read_file(path)?, opts, &|file| std::fs::read(file))
+    load_bytes(path, &read_file(path)?, opts, &bvh_format::read_input)
 }
 
 /// [`load`] of `bytes` read from `path` (a `.gltf` or `.glb`); `read` reads the external

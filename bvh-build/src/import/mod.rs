@@ -73,7 +73,7 @@ pub enum ImportError {
 /// otherwise. A description sets all of these itself (see `docs/scene-description.md`).
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
     Kind::of(path)?;
-    load_bytes(path, &read_file(path)?, opts, &|file| std::fs::read(file))
+    load_bytes(path, &read_file(path)?, opts, &bvh_format::read_input)
 }
 
 /// Reads a file that a scene refers to: an OBJ's material library, a glTF buffer, a mesh of a
@@ -154,7 +154,7 @@ pub(crate) fn load_mesh_file(
 }
 
 pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, ImportError> {
-    std::fs::read(path).map_err(|source| ImportError::Read { path: path.to_owned(), source })
+    bvh_format::read_input(path).map_err(|source| ImportError::Read { path: path.to_owned(), source })
 }
 
 /// The material of triangles that have none.

@@ -14,7 +14,7 @@ use std::io::Cursor;
 use std::path::Path;
 
 pub fn load(path: &Path, opts: &ImportOptions) -> Result<Scene, ImportError> {
-    load_bytes(path, &read_file(path)?, opts, &|file| std::fs::read(file))
+    load_bytes(path, &read_file(path)?, opts, &bvh_format::read_input)
 }
 
 /// [`load`] of `bytes` read from `path`; `read` reads the material libraries it names.

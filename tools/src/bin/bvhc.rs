@@ -203,7 +203,7 @@ fn compile(args: &CompileArgs) -> Result<(), String> {
 }
 
 fn load(file: &Path) -> Result<(SceneFile, Vec<bvh_format::SectionInfo>), String> {
-    let bytes = std::fs::read(file).map_err(|e| format!("cannot read {}: {e}", file.display()))?;
+    let bytes = bvh_format::read_input(file).map_err(|e| format!("cannot read {}: {e}", file.display()))?;
     bvh_format::read_with_sections(&bytes).map_err(|e| format!("{} is not a valid scene file: {e}", file.display()))
 }
 
