@@ -281,8 +281,15 @@ pub fn significant(x: f64) -> String {
 /// rest as the method, the thread count as the device; only the rows of `threads` (by default the
 /// largest thread count in the file).
 pub fn read_ray_report(path: &Path, threads: Option<u32>) -> Result<Vec<Row>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let text = read_text(path)?;
     ray_report_rows(&text, threads).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// A text file the charts read (a CSV, a ray report), refused if it is a device as every input is
+/// ([`bvh_format::read_input`]).
+fn read_text(path: &Path) -> Result<String, String> {
+    let bytes = bvh_format::read_input(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    String::from_utf8(bytes).map_err(|_| format!("{} is not UTF-8 text", path.display()))
 }
 
 /// [`read_ray_report`] on the report's text.
@@ -404,7 +411,7 @@ pub fn merge_repeats(rows: &[Row]) -> Vec<Repeated> {
 /// no `tracer` and `device` columns: those rows are `vk` on an unnamed device; nor `ao` and
 /// `diffuse`: those rows traced none; nor `intersect`: left empty).
 pub fn read_csv(path: &Path) -> Result<Vec<Row>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let text = read_text(path)?;
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
     let (_, header) = lines.next().ok_or_else(|| format!("{} is empty", path.display()))?;
     let names: Vec<&str> = header.split(',').map(str::trim).collect();
