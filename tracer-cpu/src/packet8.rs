@@ -3,10 +3,12 @@
 //! Embree's `rtcIntersect8` walks a coherent packet. The lanes are split by the signs
 //! of their directions (one walk per octant; a lane with an axis-parallel direction goes alone).
 //! Per walk a frustum bounds the lanes' origins and reciprocal directions; at a node one 8-wide
-//! sequence tests all 8 children against the frustum (no child a lane enters fails it), one more
-//! tests them exactly against the first live lane; an inner child that lane enters takes all the
-//! node's lanes along, the other children only the lanes their exact per-lane test lets in, and a
-//! leaf block always only those. Children are visited nearest first by the frustum's entry distance
+//! sequence tests all 8 children against the frustum (no child a lane enters fails it). Where the
+//! lanes share an origin (primary rays), whose frustum is tight, every inner child it lets through
+//! takes all the node's lanes along; otherwise one more sequence tests the children exactly against
+//! the first live lane, and an inner child that lane enters takes all the node's lanes along. The
+//! other children get only the lanes their exact per-lane test lets in, and a leaf block always
+//! only those. Children are visited nearest first by the frustum's entry distance
 //! (closest hit; any hit: last to first, as Embree), deferred ones on a stack of (node, lane bits,
 //! distance). A leaf block is tested one triangle at a time against the lanes, or, where the lanes
 //! do not share an origin and that takes fewer vector tests (by 1.25 times), one lane at a time
@@ -553,16 +555,13 @@ macro_rules! packet_walk_compiled_for {
         }
 
         impl LaneSplat {
-            /// Lane `lane` of `pk`; the origin from `shared` where the lanes share one.
+            /// Lane `lane` of `pk` (only packets whose lanes do not share an origin take it).
             #[target_feature(enable = $features)]
             #[inline]
-            fn new(pk: &Packet, shared: Option<[f32; 3]>, lane: u32) -> Self {
+            fn new(pk: &Packet, lane: u32) -> Self {
                 let i = _mm256_set1_epi32(lane as i32);
-                let o = match shared {
-                    Some(o) => o.map(splat),
-                    None => [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.o[a], i)),
-                };
-                LaneSplat { lane, o, inv: [0, 1, 2].map(|a| _mm256_permutevar8x32_ps(pk.inv[a], i)) }
+                let at = |v: __m256| _mm256_permutevar8x32_ps(v, i);
+                LaneSplat { lane, o: pk.o.map(at), inv: pk.inv.map(at) }
             }
         }
 
@@ -970,11 +969,12 @@ macro_rules! packet_walk_compiled_for {
 
         /// The walk of the lanes in `group` (finite inverse directions with one sign per axis):
         /// Embree's coherent packet traversal. At a node all 8 children are tested at once against
-        /// the group's frustum and against its first live lane; a child the first lane enters takes
-        /// all the node's lanes along (a superset of those that enter it: every lane is still tested
-        /// exactly against the leaf blocks' boxes, and a lane that enters a box enters every box
-        /// around it, so no triangle is tested by a lane the ordered traversal would not test it
-        /// with), the others the lanes that enter them by the per-lane test.
+        /// the group's frustum and, unless the lanes share an origin, against its first live lane; an
+        /// inner child the frustum lets through (shared origin) or the first lane enters takes all the
+        /// node's lanes along (a superset of those that enter it: every lane is still tested exactly
+        /// against the leaf blocks' boxes, and a lane that enters a box enters every box around it,
+        /// so no triangle is tested by a lane the ordered traversal would not test it with), the
+        /// others the lanes that enter them by the per-lane test.
         #[target_feature(enable = $features)]
         #[allow(clippy::too_many_arguments)]
         fn walk<const ANY: bool, T: TriangleTest>(
@@ -1016,12 +1016,22 @@ macro_rules! packet_walk_compiled_for {
                         let (hit, near) = f.test(b, t_far);
                         let mut hit = hit & node.valid;
                         if hit != 0 {
-                            let l = cur_mask.trailing_zeros();
-                            if l != lane.lane {
-                                lane = LaneSplat::new(pk, shared, l);
-                            }
-                            let i = _mm256_set1_epi32(l as i32);
-                            let first = one_lane(b, &lane, &f, _mm256_permutevar8x32_ps(st.best.t, i));
+                            // Inner children that take all the node's lanes along. A shared
+                            // origin's frustum is tight enough to decide alone (the first lane's
+                            // test cost primary packets 2-5% on the Xeon, stop 46); lanes from
+                            // different points (shadow rays) need it: without it a loose frustum
+                            // took them into every subtree it let through (dragon shadow packets
+                            // ran at a tenth of their speed).
+                            let first = if shared.is_some() {
+                                u32::MAX
+                            } else {
+                                let l = cur_mask.trailing_zeros();
+                                if l != lane.lane {
+                                    lane = LaneSplat::new(pk, l);
+                                }
+                                let i = _mm256_set1_epi32(l as i32);
+                                one_lane(b, &lane, &f, _mm256_permutevar8x32_ps(st.best.t, i))
+                            };
                             let mut masks = [0u32; WIDTH];
                             let mut m = hit;
                             while m != 0 {
