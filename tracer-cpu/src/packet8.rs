@@ -994,8 +994,8 @@ macro_rules! packet_walk_compiled_for {
             let mut t_far = largest(st.best.t, _mm256_and_ps(group_v, st.alive));
             let mut cur = bvh.root;
             let mut cur_mask = group & _mm256_movemask_ps(st.alive) as u32;
-            // Made at the first node whose children the frustum lets through (none for a third of
-            // the bunny's primary packets).
+            // Made at the first node whose children the frustum lets through, and only for lanes
+            // without a shared origin (shadow rays).
             let zero = _mm256_setzero_ps();
             let mut lane = LaneSplat { lane: u32::MAX, o: [zero; 3], inv: [zero; 3] };
             'walk: loop {
