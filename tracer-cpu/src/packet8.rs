@@ -157,7 +157,7 @@ macro_rules! packet_walk_compiled_for {
         use super::SPARSE;
 
         use crate::bvh8::avx2::{Lanes, cross, dot as dot3, edge_function, moller_trumbore, prefetch, watertight};
-        use crate::bvh8::{Bvh8, LEAF, Simd, TriBlock, WIDTH};
+        use crate::bvh8::{Bvh8, LEAF, Simd, TriBlock, WIDTH, each3};
         use crate::geometry;
         use crate::geometry::Hit;
         use crate::geometry::{Cost, TriangleTest};
@@ -232,8 +232,8 @@ macro_rules! packet_walk_compiled_for {
                 // SAFETY: `r` holds 8 floats.
                 unsafe { _mm256_loadu_ps(r.as_ptr()) }
             };
-            let e1 = [0, 1, 2].map(|a| sub(ld(&p[1][a]), ld(&p[0][a])));
-            let e2 = [0, 1, 2].map(|a| sub(ld(&p[2][a]), ld(&p[0][a])));
+            let e1 = each3(|a| sub(ld(&p[1][a]), ld(&p[0][a])));
+            let e2 = each3(|a| sub(ld(&p[2][a]), ld(&p[0][a])));
             [
                 sub(mul(e1[1], e2[2]), mul(e1[2], e2[1])),
                 sub(mul(e1[2], e2[0]), mul(e1[0], e2[2])),
@@ -249,7 +249,7 @@ macro_rules! packet_walk_compiled_for {
                 // SAFETY: `r` holds 8 floats.
                 unsafe { _mm256_loadu_ps(r.as_ptr()) }
             };
-            let rel = |k: usize| [0, 1, 2].map(|a| sub(ld(&p[k][a]), splat(o[a])));
+            let rel = |k: usize| each3(|a| sub(ld(&p[k][a]), splat(o[a])));
             let (a0, a1, a2) = (rel(0), rel(1), rel(2));
             let cross = |a: [__m256; 3], b: [__m256; 3]| {
                 let e = [sub(a[0], b[0]), sub(a[1], b[1]), sub(a[2], b[2])];
@@ -263,8 +263,11 @@ macro_rules! packet_walk_compiled_for {
             let n = normals(block);
             let dist = add(add(mul(n[0], a0[0]), mul(n[1], a0[1])), mul(n[2], a0[2]));
             SharedOrigin {
-                cross: [cross(a1, a2), cross(a2, a0), cross(a0, a1)].map(|c| c.map(store)),
-                n: n.map(store),
+                cross: {
+                    let c = [cross(a1, a2), cross(a2, a0), cross(a0, a1)];
+                    each3(|k| each3(|a| store(c[k][a])))
+                },
+                n: each3(|a| store(n[a])),
                 dist: store(dist),
             }
         }
@@ -477,14 +480,14 @@ macro_rules! packet_walk_compiled_for {
                 let (olo, ohi, a, b) = match shared {
                     Some(o) => {
                         let a = smallest4([lo(inv[0]), hi(inv[0]), lo(inv[0]), lo(inv[0])]);
-                        (o.map(splat), o.map(splat), lane(a, SMALLEST4[0]), neg_lane(a, SMALLEST4[1]))
+                        (each3(|k| splat(o[k])), each3(|k| splat(o[k])), lane(a, SMALLEST4[0]), neg_lane(a, SMALLEST4[1]))
                     }
                     None => {
                         let a = smallest4([lo(o[0]), lo(o[1]), lo(o[2]), lo(inv[0])]);
                         let b = smallest4([hi(o[0]), hi(o[1]), hi(o[2]), hi(inv[0])]);
                         (
-                            [0, 1, 2].map(|k| lane(a, SMALLEST4[k])),
-                            [0, 1, 2].map(|k| neg_lane(b, SMALLEST4[k])),
+                            each3(|k| lane(a, SMALLEST4[k])),
+                            each3(|k| neg_lane(b, SMALLEST4[k])),
                             lane(a, SMALLEST4[3]),
                             neg_lane(b, SMALLEST4[3]),
                         )
@@ -492,12 +495,12 @@ macro_rules! packet_walk_compiled_for {
                 };
                 let inv_lo = [a, lane(c, SMALLEST4[0]), lane(c, SMALLEST4[1])];
                 let inv_hi = [b, neg_lane(c, SMALLEST4[2]), neg_lane(c, SMALLEST4[3])];
-                let up: [bool; 3] = std::array::from_fn(|a| negative[a] & group == 0);
+                let up = each3(|a| negative[a] & group == 0);
                 Frustum {
-                    near_plane: std::array::from_fn(|a| if up[a] { a } else { 3 + a }),
-                    far_plane: std::array::from_fn(|a| if up[a] { 3 + a } else { a }),
-                    o_near: std::array::from_fn(|a| if up[a] { ohi[a] } else { olo[a] }),
-                    o_far: std::array::from_fn(|a| if up[a] { olo[a] } else { ohi[a] }),
+                    near_plane: each3(|a| if up[a] { a } else { 3 + a }),
+                    far_plane: each3(|a| if up[a] { 3 + a } else { a }),
+                    o_near: each3(|a| if up[a] { ohi[a] } else { olo[a] }),
+                    o_far: each3(|a| if up[a] { olo[a] } else { ohi[a] }),
                     inv_lo,
                     inv_hi,
                 }
@@ -561,7 +564,7 @@ macro_rules! packet_walk_compiled_for {
             fn new(pk: &Packet, lane: u32) -> Self {
                 let i = _mm256_set1_epi32(lane as i32);
                 let at = |v: __m256| _mm256_permutevar8x32_ps(v, i);
-                LaneSplat { lane, o: pk.o.map(at), inv: pk.inv.map(at) }
+                LaneSplat { lane, o: each3(|a| at(pk.o[a])), inv: each3(|a| at(pk.inv[a])) }
             }
         }
 
@@ -682,7 +685,7 @@ macro_rules! packet_walk_compiled_for {
             // What every lane's test of a triangle shares, for the whole block at once.
             let (pre, n) = match (T::KIND, shared) {
                 (Intersect::Watertight, Some(o)) => (Some(shared_origin(block, o)), [[0.0; WIDTH]; 3]),
-                (Intersect::Watertight, None) => (None, normals(block).map(store)),
+                (Intersect::Watertight, None) => (None, { let n = normals(block); each3(|a| store(n[a])) }),
                 _ => (None, [[0.0; WIDTH]; 3]),
             };
             if !ANY {
@@ -750,7 +753,7 @@ macro_rules! packet_walk_compiled_for {
                 m &= m - 1;
                 let i = _mm256_set1_epi32(lane as i32);
                 let at = |v: __m256| _mm256_permutevar8x32_ps(v, i);
-                let r = Lanes { o: pk.o.map(at), d: pk.d.map(at), inv: pk.inv.map(at) };
+                let r = Lanes { o: each3(|a| at(pk.o[a])), d: each3(|a| at(pk.d[a])), inv: each3(|a| at(pk.inv[a])) };
                 let l = lane as usize;
                 let [hit, t, w1, w2, sum] = match T::KIND {
                     Intersect::Watertight => watertight(block, &r, _mm256_setzero_ps(), splat(t_best[l])),
@@ -1167,14 +1170,14 @@ macro_rules! packet_walk_compiled_for {
                 m & _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(o, o0))) as u32
             });
             let shared =
-                (same == valid).then(|| [0, 1, 2].map(|a| _mm256_cvtss_f32(_mm256_permutevar8x32_ps(pk.o[a], first))));
+                (same == valid).then(|| each3(|a| _mm256_cvtss_f32(_mm256_permutevar8x32_ps(pk.o[a], first))));
             // Lanes with an infinite reciprocal (a direction along a coordinate plane) go alone; the
             // others walk in groups of one octant, as Embree splits its packets.
             let abs = |v: __m256| _mm256_andnot_ps(splat(-0.0), v);
             let infinite = (0..3).fold(0, |m, a| {
                 m | _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(abs(pk.inv[a]), splat(f32::INFINITY))) as u32
             }) & valid;
-            let negative: [u32; 3] = std::array::from_fn(|a| _mm256_movemask_ps(pk.inv[a]) as u32);
+            let negative = each3(|a| _mm256_movemask_ps(pk.inv[a]) as u32);
             // Left uninitialised: only what `push` writes is read.
             let mut inline = std::mem::MaybeUninit::<[std::mem::MaybeUninit<Item>; INLINE]>::uninit();
             // SAFETY: an array of `MaybeUninit` needs no initialisation.
