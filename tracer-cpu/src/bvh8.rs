@@ -1208,8 +1208,7 @@ pub(crate) mod avx2 {
         let near_plane = super::each3(|a| if ray.inv_dir[a].is_sign_negative() { 3 + a } else { a });
         let far_plane = super::each3(|a| if ray.inv_dir[a].is_sign_negative() { a } else { 3 + a });
         let zero = V::zero();
-        // Splatted one by one: a closure (`map`) would run out of line, without the target's
-        // instructions.
+        // Splatted one by one, not by `map`, for the reason of `each3`.
         let inv_far = [
             V::splat(geometry::inv_far(ray.inv_dir[0])),
             V::splat(geometry::inv_far(ray.inv_dir[1])),

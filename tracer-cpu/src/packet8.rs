@@ -1199,7 +1199,8 @@ macro_rules! packet_walk_compiled_for {
             let (u, v) = (_mm256_mul_ps(st.best.w1, inv), _mm256_mul_ps(st.best.w2, inv));
             let hit = crate::wide::bools_of(st.hit_any);
             let mut out = Results { hit, t: store(st.best.t), u: store(u), v: store(v), ..Results::default() };
-            // A loop, not `array::from_fn`: its closure would not be compiled for AVX2 nor inlined.
+            // A loop, not `array::from_fn`: core's helper behind it may be put into another
+            // codegen unit, out of the walk's inlining (see `bvh8::each3`).
             for i in 0..LANES {
                 out.tri[i] = tri[i] as u32;
                 out.cost[i] = Cost { nodes: nn[i] as u32, tris: nt[i] as u32 };
