@@ -255,7 +255,10 @@ fn main() {
                         pool.install(|| plan(&tracer, &settings, method)).unwrap_or_else(|e| fail(&e.to_string()));
                     let engine = match plan.method() {
                         Method::Packet => rayset::Engine::Packet(&tracer),
-                        Method::Auto if plan.packet_stages()[Stage::Primary.index()] => rayset::Engine::Packet(&tracer),
+                        Method::Bvh8Packet => rayset::Engine::WidePacket(&tracer),
+                        Method::Auto if plan.packet_stages()[Stage::Primary.index()] => {
+                            rayset::Engine::WidePacket(&tracer)
+                        }
                         m => rayset::Engine::Scalar(tracer.walk(m).expect("planned"), Intersect::Watertight),
                     };
                     let mut out = vec![rayset::NO_RAY; (w * h) as usize];

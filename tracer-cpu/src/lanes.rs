@@ -5,6 +5,7 @@
 
 use crate::geometry::{MollerTrumbore, Ray, TriangleTest, Watertight};
 use crate::packet::{self, Entry, LANES, Rays, Results};
+use crate::packet8;
 use crate::render::Walk;
 use crate::traverse::Stack;
 use crate::vertices::Triangles;
@@ -156,26 +157,28 @@ impl TraceLanes for Packets<'_> {
 }
 
 /// `--method auto`: every ray on the wide BVH one at a time ([`crate::bvh8`]), except in the
-/// stages where auto's measurement ([`crate::render::plan`]) found AVX2 packets over the
-/// child-pair tree faster. A packet stage's calls with few live lanes still go one by one on the
-/// wide BVH, which then costs less than a mostly empty packet.
+/// stages where auto's measurement ([`crate::render::plan`]) found packets on the same wide BVH
+/// ([`crate::packet8`], `--method bvh8-packet`) faster. A packet stage's calls with few live lanes
+/// still go one by one, which then costs less than a mostly empty packet.
 pub struct Mixed<'a> {
     single: OneByOne<'a>,
-    packets: Option<Packets<'a>>,
+    packets: Option<packet8::Lanes<'a>>,
     /// Per stage ([`Stage::index`]): whether its rays go as packets.
     packet_stages: [bool; Stage::ALL.len()],
 }
 
 impl<'a> Mixed<'a> {
-    /// Singles on `wide` (a bvh8 walk); packets on `pairs` (a child-pair walk) for the stages
-    /// marked in `packet_stages`, none without `pairs`.
-    pub fn new(wide: Walk<'a>, pairs: Option<Walk<'a>>, packet_stages: [bool; Stage::ALL.len()]) -> Self {
-        Self { single: OneByOne::new(wide), packets: pairs.map(Packets::new), packet_stages }
+    /// Singles on `wide` (a bvh8 walk); wide packets on its BVH for the stages marked in
+    /// `packet_stages`, none where `wide` walks no wide BVH or this CPU runs no wide packets
+    /// ([`packet8::available`]).
+    pub fn new(wide: Walk<'a>, packet_stages: [bool; Stage::ALL.len()]) -> Self {
+        let packets = wide.bvh8().filter(|_| packet8::available()).map(packet8::Lanes::new);
+        Self { single: OneByOne::new(wide), packets, packet_stages }
     }
 
     /// The packets for `stage`'s `rays`, where this stage takes them and enough lanes are live.
     #[inline]
-    fn packets_for(&mut self, stage: Stage, rays: &Rays) -> Option<&mut Packets<'a>> {
+    fn packets_for(&mut self, stage: Stage, rays: &Rays) -> Option<&mut packet8::Lanes<'a>> {
         match &mut self.packets {
             Some(p) if self.packet_stages[stage.index()] && rays.count() > SPARSE => Some(p),
             _ => None,

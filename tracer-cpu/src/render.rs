@@ -177,6 +177,14 @@ impl<'t> Walk<'t> {
         }
     }
 
+    /// The wide BVH, where this walk reads it (what wide packets trace).
+    pub(crate) fn bvh8(&self) -> Option<&'t Bvh8> {
+        match self.layout {
+            Layout::Wide(bvh) => Some(bvh),
+            Layout::ChildPair(_) | Layout::Escape(_) | Layout::Wide4(_) => None,
+        }
+    }
+
     /// The child-pair nodes, where this walk reads them (what packets trace).
     pub(crate) fn child_pair(&self) -> Option<&'t [Node]> {
         match self.layout {
@@ -390,8 +398,6 @@ impl Canvas {
 pub struct Plan<'t> {
     method: Method,
     walk: Walk<'t>,
-    /// Auto's child-pair walk for its packet stages, where packets run at all.
-    pairs: Option<Walk<'t>>,
     packet_stages: [bool; Stage::ALL.len()],
     measured: Option<Measurement>,
 }
@@ -416,7 +422,11 @@ impl<'t> Plan<'t> {
     pub fn lanes(&self) -> FrameLanes<'t> {
         match self.method {
             Method::Packet => FrameLanes::Packets(Packets::new(self.walk)),
-            Method::Auto => FrameLanes::Mixed(Mixed::new(self.walk, self.pairs, self.packet_stages)),
+            Method::Bvh8Packet => match self.walk.bvh8() {
+                Some(bvh) => FrameLanes::WidePackets(crate::packet8::Lanes::new(bvh)),
+                None => FrameLanes::Single(OneByOne::new(self.walk)),
+            },
+            Method::Auto => FrameLanes::Mixed(Mixed::new(self.walk, self.packet_stages)),
             _ => FrameLanes::Single(OneByOne::new(self.walk)),
         }
     }
@@ -440,6 +450,7 @@ impl<'t> Plan<'t> {
 #[allow(clippy::large_enum_variant)]
 pub enum FrameLanes<'t> {
     Packets(Packets<'t>),
+    WidePackets(crate::packet8::Lanes<'t>),
     Single(OneByOne<'t>),
     Mixed(Mixed<'t>),
 }
@@ -448,6 +459,7 @@ impl TraceLanes for FrameLanes<'_> {
     fn closest(&mut self, rays: &Rays, test: Intersect) -> Results {
         match self {
             FrameLanes::Packets(l) => l.closest(rays, test),
+            FrameLanes::WidePackets(l) => l.closest(rays, test),
             FrameLanes::Single(l) => l.closest(rays, test),
             FrameLanes::Mixed(l) => l.closest(rays, test),
         }
@@ -455,6 +467,7 @@ impl TraceLanes for FrameLanes<'_> {
     fn occluded(&mut self, rays: &Rays, test: Intersect) -> Results {
         match self {
             FrameLanes::Packets(l) => l.occluded(rays, test),
+            FrameLanes::WidePackets(l) => l.occluded(rays, test),
             FrameLanes::Single(l) => l.occluded(rays, test),
             FrameLanes::Mixed(l) => l.occluded(rays, test),
         }
@@ -462,6 +475,7 @@ impl TraceLanes for FrameLanes<'_> {
     fn closest_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
         match self {
             FrameLanes::Packets(l) => l.closest_in(stage, rays, test),
+            FrameLanes::WidePackets(l) => l.closest_in(stage, rays, test),
             FrameLanes::Single(l) => l.closest_in(stage, rays, test),
             FrameLanes::Mixed(l) => l.closest_in(stage, rays, test),
         }
@@ -469,6 +483,7 @@ impl TraceLanes for FrameLanes<'_> {
     fn occluded_in(&mut self, stage: Stage, rays: &Rays, test: Intersect) -> Results {
         match self {
             FrameLanes::Packets(l) => l.occluded_in(stage, rays, test),
+            FrameLanes::WidePackets(l) => l.occluded_in(stage, rays, test),
             FrameLanes::Single(l) => l.occluded_in(stage, rays, test),
             FrameLanes::Mixed(l) => l.occluded_in(stage, rays, test),
         }
@@ -534,8 +549,9 @@ pub fn plan<'t>(tracer: &'t Tracer<'t>, settings: &Settings, method: Method) -> 
 /// 4 x 2 pixel blocks spread evenly over the image are shaded once as the renderer shades them,
 /// every call of each stage (primary, shadow, secondary, AO or diffuse rays) recorded; then the
 /// workers (16 chunks, each every 16th block) time each stage's calls one by one on the wide BVH
-/// and as packets over the child-pair tree: packets 3 rounds (the first warms them up; the
-/// recording pass has warmed the single rays), single rays up to 3 until one way has taken more
+/// and as packets on it ([`crate::packet8`]; the binary tree's packets, `--method packet`, are
+/// slower on every kind of ray, docs/cpu-benchmark.md): packets 3 rounds (the first warms them
+/// up; the recording pass has warmed the single rays), single rays up to 3 until one way has taken more
 /// than 1.3 times the other's time, but only one where it took twice the packets' first two,
 /// stopped there and counted as 1.1 times them (about half a millisecond of work on one
 /// thread, spread over the pool). Each way's time is the fastest of its rounds, and each stage
@@ -549,11 +565,9 @@ pub fn plan_with<'t>(
 ) -> Result<Plan<'t>, RenderError> {
     let resolved = method.resolve(tracer.scene);
     let walk = tracer.walk(resolved)?;
-    let mut plan = Plan { method: resolved, walk, pairs: None, packet_stages: [false; 5], measured: None };
-    if resolved == Method::Auto && crate::packet::available() && tracer.child_pair.is_some() {
-        let pairs = tracer.walk(Method::Ordered)?;
-        let m = measure(tracer, settings, walk, pairs, timer)?;
-        plan.pairs = Some(pairs);
+    let mut plan = Plan { method: resolved, walk, packet_stages: [false; 5], measured: None };
+    if resolved == Method::Auto && crate::packet8::available() && walk.bvh8().is_some() {
+        let m = measure(tracer, settings, walk, timer)?;
         plan.packet_stages = m.packet_stages();
         plan.measured = Some(m);
     }
@@ -565,7 +579,6 @@ fn measure(
     tracer: &Tracer<'_>,
     settings: &Settings,
     wide: Walk<'_>,
-    pairs: Walk<'_>,
     timer: &dyn StageTimer,
 ) -> Result<Measurement, RenderError> {
     let frame = settings.frame()?;
@@ -593,8 +606,8 @@ fn measure(
                 let (rays, seeds, ..) = primary_block::<F8>(&frame, w, h, x0, y0, sample, sh.seeded());
                 sh.block::<F8, _>(&rays, &seeds, &mut record);
             }
-            let mut single = Mixed::new(wide, None, [false; 5]);
-            let mut packets = Mixed::new(wide, Some(pairs), [true; 5]);
+            let mut single = Mixed::new(wide, [false; 5]);
+            let mut packets = Mixed::new(wide, [true; 5]);
             let mut m = Measurement::default();
             for stage in Stage::ALL {
                 let calls: Vec<&Call> = record.calls.iter().filter(|c| c.stage == stage).collect();
@@ -720,12 +733,12 @@ pub fn render_into(
     match method {
         Method::Packet => render_in(tracer, settings, method, || Packets::new(walk), tiles, progress, avx, canvas),
         Method::Bvh8Packet => {
-            let bvh = tracer.bvh8().expect("the walk is on the wide BVH");
+            let bvh = walk.bvh8().expect("bvh8-packet's walk is on the wide BVH");
             render_in(tracer, settings, method, || crate::packet8::Lanes::new(bvh), tiles, progress, avx, canvas)
         }
         Method::Auto => {
-            let (pairs, stages) = (plan.pairs, plan.packet_stages);
-            render_in(tracer, settings, method, || Mixed::new(walk, pairs, stages), tiles, progress, avx, canvas)
+            let stages = plan.packet_stages;
+            render_in(tracer, settings, method, || Mixed::new(walk, stages), tiles, progress, avx, canvas)
         }
         _ => render_in(tracer, settings, method, || OneByOne::new(walk), tiles, progress, avx, canvas),
     }

@@ -303,7 +303,7 @@ fn auto_picks_each_kind_of_ray_by_its_measurement() {
             let timer = Table::new(table);
             let plan = plan_with(&tracer, &s, Method::Auto, &timer).unwrap();
             let want: Vec<usize> = stages.iter().map(|s| s.index()).collect();
-            if !tracer_cpu::packet::available() {
+            if !tracer_cpu::packet8::available() {
                 assert!(plan.measured().is_none() && plan.packet_stages() == [false; 5], "no AVX2: no packets");
                 continue;
             }
@@ -319,6 +319,33 @@ fn auto_picks_each_kind_of_ray_by_its_measurement() {
             }
             let image = render_into(&tracer, &s, &plan, Canvas::new(&s), &|_| {}).unwrap();
             same_image(&base, &image, &format!("{mode:?} auto {}", plan.describe()));
+        }
+    }
+}
+
+/// Auto's two ways are the wide BVH's: where its measurement sends every stage as packets, each
+/// pixel's work (the node and triangle AOVs) is `--method bvh8-packet`'s, and where it sends none,
+/// `--method bvh8`'s; the binary tree's packets (`--method packet`) would test other nodes.
+#[test]
+fn auto_traces_the_wide_bvh_both_ways() {
+    let bunny = common::compile(&common::scenes_dir().join("bunny.toml"));
+    let tracer = Tracer::new(&bunny);
+    for mode in [Mode::Cast, Mode::Whitted, Mode::Ao(Default::default()), Mode::Diffuse] {
+        let (s, _) = settings(&bunny, "medium", mode, Method::Auto, 64, 48);
+        let work = |image: &Image| {
+            let aov = image.aov.as_ref().expect("AOVs asked for");
+            (aov.nodes.clone(), aov.tris.clone())
+        };
+        let binary = work(&tracer_cpu::render(&tracer, &s, Method::Packet).unwrap());
+        for (per_ray, fixed) in [((2e-9, 1e-9), Method::Bvh8Packet), ((1e-9, 2e-9), Method::Bvh8)] {
+            let plan = plan_with(&tracer, &s, Method::Auto, &Table::new([per_ray; 5])).unwrap();
+            let image = render_into(&tracer, &s, &plan, Canvas::new(&s), &|_| {}).unwrap();
+            let want = tracer_cpu::render(&tracer, &s, fixed.resolve(&bunny)).unwrap();
+            same_image(&want, &image, &format!("{mode:?} auto {}", plan.describe()));
+            assert!(work(&image) == work(&want), "{mode:?}: auto's work is not {fixed:?}'s");
+            if fixed == Method::Bvh8Packet && tracer_cpu::packet8::available() {
+                assert!(work(&image) != binary, "{mode:?}: the binary tree's packets do the same work");
+            }
         }
     }
 }
@@ -340,7 +367,7 @@ fn auto_stops_timing_the_way_clearly_behind() {
     {
         let timer = Table::new([(single, packets); 5]);
         let plan = plan_with(&tracer, &s, Method::Auto, &timer).unwrap();
-        if !tracer_cpu::packet::available() {
+        if !tracer_cpu::packet8::available() {
             assert!(
                 plan.measured().is_none() && timer.timed.into_inner().unwrap() == [[0; 2]; 5],
                 "no AVX2: no timing"
@@ -391,7 +418,7 @@ fn auto_by_the_clock_follows_its_measurement() {
                 assert!(plan.describe().contains(stage.name()), "{}", plan.describe());
             }
         }
-        None => assert!(!tracer_cpu::packet::available()),
+        None => assert!(!tracer_cpu::packet8::available()),
     }
 }
 

@@ -24,12 +24,13 @@ enum Command {
         #[command(flatten)]
         args: Box<RenderArgs>,
         /// Traversal: auto picks per kind of ray (primary, shadow, secondary, AO, diffuse) between
-        /// packets and the wide BVH one ray at a time, whichever a short measurement of the
-        /// frame's own rays at the start finds faster (the stackless walk for a file compiled
-        /// with only the escape-pointer layout); packet: SIMD packets where the CPU has AVX2 (else ordered);
-        /// ordered child-pair traversal; the stackless escape-pointer walk; bvh8: the wide BVH
-        /// (8 children per node) collapsed at load from the child-pair layout, one ray at a time;
-        /// bvh4: the same with 4 children per node; bvh8-packet: 8-ray packets on the wide BVH.
+        /// the wide BVH's 8-ray packets and its rays one at a time (bvh8-packet and bvh8),
+        /// whichever a short measurement of the frame's own rays at the start finds faster (the
+        /// stackless walk for a file compiled with only the escape-pointer layout); packet: SIMD
+        /// packets on the binary tree where the CPU has AVX2 (else ordered); ordered child-pair
+        /// traversal; the stackless escape-pointer walk; bvh8: the wide BVH (8 children per node)
+        /// collapsed at load from the child-pair layout, one ray at a time; bvh4: the same with 4
+        /// children per node; bvh8-packet: 8-ray packets on the wide BVH.
         #[arg(long, value_enum, default_value = "auto")]
         method: MethodArg,
         /// Render the exact reference instead: f64 arithmetic throughout, every bounce up to the
