@@ -1,7 +1,7 @@
 //! The CI slice of the stability sweep (issue 9, `stress --quick`): a cheap point or two of every
-//! axis, every method (CPU ordered, stackless, packet; Vulkan LST, stackless, SST, SST-subgroup
-//! on lavapipe, and rt-pipeline, which lavapipe lacks: refused at every point with the reason),
-//! asserting that no pixel fails in silence: no wrong closest hit against the f64
+//! axis, every method (CPU ordered, stackless, packet, bvh8, bvh8-packet; Vulkan LST, stackless,
+//! SST, SST-subgroup on lavapipe, and rt-pipeline, which lavapipe lacks: refused at every point
+//! with the reason), asserting that no pixel fails in silence: no wrong closest hit against the f64
 //! reference, no leak, no NaN or infinite value, no wrong pixel where an image is compared, no
 //! crash and no hang. A refusal (a typed error naming the limit) is allowed and printed. The scale
 //! axis's end points (10^-8 and 10^8, which failed before the compiler stored scenes in a unit of

@@ -20,7 +20,7 @@ use tools::stress::{METHODS, Method, report};
     name = "stress",
     version,
     about = "Sweep every method over the conditions where ray tracers fail and write the failure rates.",
-    long_about = "Sweep every method (CPU ordered, stackless, packet; GPU LST, stackless, SST, SST-subgroup, rt-pipeline \
+    long_about = "Sweep every method (CPU ordered, stackless, packet, bvh8, bvh8-packet; GPU LST, stackless, SST, SST-subgroup, rt-pipeline \
 where the device has it, else refused with the reason) over \
 generated scenes along each axis of trouble: distance from the origin 10^0..10^7 scene sizes (with and without \
 the compiler's rebasing), scale 10^-8..10^8, axis-parallel rays through faces, edges and vertices (+0 and -0 \

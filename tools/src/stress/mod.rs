@@ -32,13 +32,16 @@ impl Method {
     }
 }
 
-/// Every method the sweep runs: CPU ordered, stackless, packet; GPU LST, stackless, SST,
-/// SST-subgroup and rt-pipeline (refused, with the reason, on a device without it: see
-/// [`unsupported`]).
-pub const METHODS: [Method; 8] = [
+/// Every method the sweep runs: CPU ordered, stackless, packet, and the wide BVH one ray at a
+/// time and as packets (bvh8, bvh8-packet: the two ways `--method auto`, the default, picks
+/// from); GPU LST, stackless, SST, SST-subgroup and rt-pipeline (refused, with the reason, on a
+/// device without it: see [`unsupported`]).
+pub const METHODS: [Method; 10] = [
     Method::Cpu(tracer_cpu::Method::Ordered),
     Method::Cpu(tracer_cpu::Method::Stackless),
     Method::Cpu(tracer_cpu::Method::Packet),
+    Method::Cpu(tracer_cpu::Method::Bvh8),
+    Method::Cpu(tracer_cpu::Method::Bvh8Packet),
     Method::Gpu(tracer_vk::kernels::Method::Lst),
     Method::Gpu(tracer_vk::kernels::Method::Stackless),
     Method::Gpu(tracer_vk::kernels::Method::Sst),
