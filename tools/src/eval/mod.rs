@@ -45,7 +45,7 @@ pub struct EvalArgs {
     /// Modes: cast, or whitted with a light count (whitted1, whitted2, ...).
     #[arg(long, value_delimiter = ',', value_parser = parse_reference_mode, default_value = "whitted1", allow_hyphen_values = true)]
     pub modes: Vec<BenchMode>,
-    /// CPU traversals (auto, packet, ordered, stackless), or none.
+    /// CPU traversals (auto, packet, ordered, stackless, bvh8, bvh4, bvh8-packet), or none.
     #[arg(long, value_delimiter = ',', default_value = "auto")]
     pub cpu_methods: Vec<String>,
     /// GPU traversals (lst, stackless, sst, sst-subgroup, rt-pipeline), or none; one the device
