@@ -170,9 +170,9 @@ pub struct Mixed<'a> {
 impl<'a> Mixed<'a> {
     /// Singles on `wide` (a bvh8 walk); wide packets on its BVH for the stages marked in
     /// `packet_stages`, none where `wide` walks no wide BVH or this CPU runs no wide packets
-    /// ([`packet8::available`]).
+    /// ([`Walk::packet_bvh8`]).
     pub fn new(wide: Walk<'a>, packet_stages: [bool; Stage::ALL.len()]) -> Self {
-        let packets = wide.bvh8().filter(|_| packet8::available()).map(packet8::Lanes::new);
+        let packets = wide.packet_bvh8().map(packet8::Lanes::new);
         Self { single: OneByOne::new(wide), packets, packet_stages }
     }
 

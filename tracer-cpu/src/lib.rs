@@ -57,8 +57,8 @@ pub enum Method {
     Bvh8Packet,
     /// Picked per kind of ray (`lanes::Mixed`): the rays of each stage (primary, shadow,
     /// secondary, AO, diffuse) one at a time on the wide BVH ([`Method::Bvh8`]) or as packets on
-    /// it ([`Method::Bvh8Packet`]), whichever a short measurement of the frame's own rays at its start
-    /// ([`render::plan`]) finds faster. [`Method::Stackless`] for a file that holds only the
+    /// it ([`Method::Bvh8Packet`]), whichever a short measurement of the frame's own rays at its
+    /// start ([`render::plan`]) finds faster. [`Method::Stackless`] for a file that holds only the
     /// escape-pointer layout.
     Auto,
 }

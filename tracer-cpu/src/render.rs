@@ -177,11 +177,12 @@ impl<'t> Walk<'t> {
         }
     }
 
-    /// The wide BVH, where this walk reads it (what wide packets trace).
-    pub(crate) fn bvh8(&self) -> Option<&'t Bvh8> {
+    /// The wide BVH, where this walk reads it and this CPU runs packets on it
+    /// ([`crate::packet8::available`]): what `--method bvh8-packet` and auto's packets trace.
+    pub(crate) fn packet_bvh8(&self) -> Option<&'t Bvh8> {
         match self.layout {
-            Layout::Wide(bvh) => Some(bvh),
-            Layout::ChildPair(_) | Layout::Escape(_) | Layout::Wide4(_) => None,
+            Layout::Wide(bvh) if crate::packet8::available() => Some(bvh),
+            Layout::Wide(_) | Layout::ChildPair(_) | Layout::Escape(_) | Layout::Wide4(_) => None,
         }
     }
 
@@ -422,7 +423,7 @@ impl<'t> Plan<'t> {
     pub fn lanes(&self) -> FrameLanes<'t> {
         match self.method {
             Method::Packet => FrameLanes::Packets(Packets::new(self.walk)),
-            Method::Bvh8Packet => match self.walk.bvh8() {
+            Method::Bvh8Packet => match self.walk.packet_bvh8() {
                 Some(bvh) => FrameLanes::WidePackets(crate::packet8::Lanes::new(bvh)),
                 None => FrameLanes::Single(OneByOne::new(self.walk)),
             },
@@ -550,10 +551,10 @@ pub fn plan<'t>(tracer: &'t Tracer<'t>, settings: &Settings, method: Method) -> 
 /// every call of each stage (primary, shadow, secondary, AO or diffuse rays) recorded; then the
 /// workers (16 chunks, each every 16th block) time each stage's calls one by one on the wide BVH
 /// and as packets on it ([`crate::packet8`]; the binary tree's packets, `--method packet`, are
-/// slower on every kind of ray, docs/cpu-benchmark.md): packets 3 rounds (the first warms them
-/// up; the recording pass has warmed the single rays), single rays up to 3 until one way has taken more
-/// than 1.3 times the other's time, but only one where it took twice the packets' first two,
-/// stopped there and counted as 1.1 times them (about half a millisecond of work on one
+/// slower on nearly every kind of ray, docs/cpu-benchmark.md): packets 3 rounds (the first warms
+/// them up; the recording pass has warmed the single rays), single rays up to 3 until one way has
+/// taken more than 1.3 times the other's time, but only one where it took twice the packets' first
+/// two, stopped there and counted as 1.1 times them (about half a millisecond of work on one
 /// thread, spread over the pool). Each way's time is the fastest of its rounds, and each stage
 /// goes the way that took less time summed over the workers. Images do not depend on it: every
 /// way finds the same hits.
@@ -566,7 +567,7 @@ pub fn plan_with<'t>(
     let resolved = method.resolve(tracer.scene);
     let walk = tracer.walk(resolved)?;
     let mut plan = Plan { method: resolved, walk, packet_stages: [false; 5], measured: None };
-    if resolved == Method::Auto && crate::packet8::available() && walk.bvh8().is_some() {
+    if resolved == Method::Auto && walk.packet_bvh8().is_some() {
         let m = measure(tracer, settings, walk, timer)?;
         plan.packet_stages = m.packet_stages();
         plan.measured = Some(m);
@@ -732,10 +733,12 @@ pub fn render_into(
     // Each way of tracing compiled into the loop of its own (what [`Plan::lanes`] makes).
     match method {
         Method::Packet => render_in(tracer, settings, method, || Packets::new(walk), tiles, progress, avx, canvas),
-        Method::Bvh8Packet => {
-            let bvh = walk.bvh8().expect("bvh8-packet's walk is on the wide BVH");
-            render_in(tracer, settings, method, || crate::packet8::Lanes::new(bvh), tiles, progress, avx, canvas)
-        }
+        Method::Bvh8Packet => match walk.packet_bvh8() {
+            Some(bvh) => {
+                render_in(tracer, settings, method, || crate::packet8::Lanes::new(bvh), tiles, progress, avx, canvas)
+            }
+            None => render_in(tracer, settings, method, || OneByOne::new(walk), tiles, progress, avx, canvas),
+        },
         Method::Auto => {
             let stages = plan.packet_stages;
             render_in(tracer, settings, method, || Mixed::new(walk, stages), tiles, progress, avx, canvas)
