@@ -27,15 +27,21 @@
 //! one, lane by lane, in the same operations: both find exactly the same hits (closest hit: the nearest, ties to the lower
 //! triangle index, whatever the order of the tests; `tests/hits.rs` holds every path to that).
 //!
-//! Derived at load from the child-pair layout ([`WideBvh::new`], on one thread: 8 ms for the
-//! bunny, 0.2-0.25 s for the dragon and the million-triangle scene on the loaded 2-core VM;
-//! `examples/ray_report.rs` prints it per scene and width), not stored in the file. Arrays of
-//! 32 MiB or more ask for transparent huge pages, as Embree's allocator does (see `HUGE_TREE`).
+//! Derived at load from the child-pair layout ([`WideBvh::new`], in parallel on rayon's pool:
+//! `collapse`; on the H100 machine's 16-core host 2.8 ms for the bunny, 16 ms for the dragon and
+//! 18 ms for the million-triangle scene on 16 threads, 9, 129 and 145 ms on one;
+//! `examples/load_profile.rs` and `examples/ray_report.rs` print it), not stored in the file.
+//! Arrays of 32 MiB or more ask for transparent huge pages, as Embree's allocator does (see
+//! `HUGE_TREE`).
+
+mod collapse;
 
 use crate::geometry::{self, Cost, Hit, Ray, TriangleTest, may_hold};
 use crate::traverse::Stack;
 use crate::vertices::TriangleSource;
 use bvh_format::{Node, Triangle};
+#[cfg(test)]
+use collapse::{BLOCK_COST, NODE_COST, half_area};
 
 /// Children of a node of the 8-wide BVH, and triangles of its leaf blocks.
 pub const WIDTH: usize = 8;
@@ -125,7 +131,13 @@ impl<const W: usize> TriBlock<W> {
 /// One cache line of a [`WideBvh`]'s arena.
 #[repr(C, align(64))]
 #[derive(Clone, Copy)]
-pub(crate) struct Line([u8; 64]);
+pub(crate) struct Line(std::mem::MaybeUninit<[u8; 64]>);
+
+impl Line {
+    /// A line not written yet: the collapse writes every line of the arena once, and its nodes'
+    /// padding never, so the bytes of a line need not be initialised.
+    pub(crate) const UNWRITTEN: Line = Line(std::mem::MaybeUninit::uninit());
+}
 
 /// A wide BVH of a scene, `W` children per node and up to `W` triangles per leaf block, nodes and
 /// blocks in one arena of cache lines: each node followed by its children's leaf blocks, then its
@@ -256,13 +268,6 @@ impl Found {
     }
 }
 
-/// What the collapse still has to make: the wide subtree of a binary node, or of a range of
-/// triangles of one binary leaf larger than a block (boxes then computed from the triangles).
-enum Work {
-    Binary(u32),
-    Range(u32, u32),
-}
-
 /// Wide BVHs of at least this many bytes ask for transparent huge pages
 /// ([`bvh_format::memory::advise_huge_pages`]) where the kernel grants them on request (`madvise`):
 /// an incoherent walk of a tree of tens of MB takes a TLB miss on most nodes and blocks with
@@ -270,12 +275,6 @@ enum Work {
 /// the TLB covers gains nothing (the bunny's 5 MB traced AO and diffuse rays about 10 points
 /// slower with them on the VM, docs/cpu-benchmark-log.md, branch sr11).
 const HUGE_TREE: usize = 32 << 20;
-
-/// Half the surface area of a box, the SAH's measure of how likely a ray enters it.
-fn half_area(n: &Node) -> f32 {
-    let d = [n.max[0] - n.min[0], n.max[1] - n.min[1], n.max[2] - n.min[2]];
-    d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
-}
 
 impl<const W: usize> WideBvh<W> {
     /// Collapses the child-pair tree `nodes` over the triangles `tris` (leaf order, as
@@ -287,79 +286,7 @@ impl<const W: usize> WideBvh<W> {
     /// [`Self::new`] over the triangles of either vertex form: the leaf blocks are this BVH's
     /// own copy of the vertices, in the layout its SIMD test loads, whatever form they came from.
     pub fn from_source(nodes: &[Node], tris: &(impl TriangleSource + ?Sized)) -> Self {
-        // `valid` holds a bit per slot; a binary node opens into at least 2.
-        const { assert!(W >= 2 && W <= 32) };
-        let lines = (nodes.len() / (W - 2).max(1) + 1) * size_of::<WideNode<W>>() / 64
-            + (tris.len() / (W / 2) + 1) * size_of::<TriBlock<W>>() / 64;
-        let mut out =
-            Self { lines: Vec::with_capacity(lines), counts: (0, 0), root: LEAF, simd: Simd::detect(), depth: 0 };
-        if nodes.is_empty() {
-            out.root = out.leaf(tris, &[]);
-            return out;
-        }
-        bvh_format::memory::advise_huge_pages(out.lines.spare_capacity_mut(), HUGE_TREE);
-        let plan = Plan::<W>::new(nodes);
-        let mut work: Vec<(Work, Option<(u32, usize)>)> = vec![(Work::Binary(0), None)];
-        let (mut indices, mut scratch) = (Vec::with_capacity(W), Vec::new());
-        let mut kids = Vec::with_capacity(W);
-        while let Some((w, parent)) = work.pop() {
-            let r = match w {
-                Work::Binary(b) if plan.leaf[b as usize] => {
-                    indices.clear();
-                    leaf_indices(nodes, b, &mut indices, &mut scratch);
-                    indices.sort_unstable();
-                    out.leaf(tris, &indices)
-                }
-                Work::Binary(b) if nodes[b as usize].is_leaf() => {
-                    let n = &nodes[b as usize];
-                    out.range_node(tris, n.index, n.count, &mut work)
-                }
-                Work::Binary(b) => {
-                    plan.children(nodes, b, &mut kids);
-                    let mut node = WideNode::empty();
-                    for (slot, &k) in kids.iter().enumerate() {
-                        let c = &nodes[k as usize];
-                        node.set(slot, c.min, c.max);
-                    }
-                    let id = out.push_node(node);
-                    // Leaf children popped first, so that their blocks follow the node.
-                    for leaves in [false, true] {
-                        for (slot, &k) in kids.iter().enumerate().rev() {
-                            if plan.leaf[k as usize] == leaves {
-                                work.push((Work::Binary(k), Some((id, slot))));
-                            }
-                        }
-                    }
-                    id
-                }
-                Work::Range(start, count) if count as usize <= W => {
-                    indices.clear();
-                    indices.extend(start..start + count);
-                    out.leaf(tris, &indices)
-                }
-                Work::Range(start, count) => out.range_node(tris, start, count, &mut work),
-            };
-            match parent {
-                Some((p, slot)) => out.node_mut(p).child[slot] = r,
-                None => out.root = r,
-            }
-        }
-        out.depth = out.measure_depth();
-        out
-    }
-
-    /// The most wide nodes on a path from the root to a leaf block.
-    fn measure_depth(&self) -> usize {
-        let (mut most, mut todo) = (0, vec![(self.root, 0)]);
-        while let Some((r, depth)) = todo.pop() {
-            if r & LEAF != 0 {
-                most = most.max(depth);
-                continue;
-            }
-            let node = self.node(r);
-            todo.extend((0..W).filter(|&i| node.valid & (1 << i) != 0).map(|i| (node.child[i], depth + 1)));
-        }
-        most
+        collapse::collapse(nodes, tris, collapse::Parallel::auto::<W>(nodes.len()))
     }
 
     /// The most entries a walk's stack holds: what is on it are children of the wide nodes on the
@@ -367,27 +294,6 @@ impl<const W: usize> WideBvh<W> {
     #[inline(always)]
     pub(crate) fn stack_bound(&self) -> usize {
         (W - 1) * self.depth.max(1)
-    }
-
-    fn leaf(&mut self, tris: &(impl TriangleSource + ?Sized), indices: &[u32]) -> u32 {
-        self.counts.1 += 1;
-        LEAF | self.push(TriBlock::<W>::new(tris, indices))
-    }
-
-    fn push_node(&mut self, node: WideNode<W>) -> u32 {
-        self.counts.0 += 1;
-        self.push(node)
-    }
-
-    /// Appends `v` (a node or a block) to the arena; returns its first line.
-    fn push<T: Copy>(&mut self, v: T) -> u32 {
-        const { assert!(size_of::<T>().is_multiple_of(64) && align_of::<T>() <= 64) };
-        let at = self.lines.len();
-        self.lines.resize(at + size_of::<T>() / 64, Line([0; 64]));
-        // SAFETY: the lines just added hold `size_of::<T>()` bytes (a multiple of 64, asserted
-        // above), aligned to 64 (at least `T`'s alignment).
-        unsafe { self.lines.as_mut_ptr().add(at).cast::<T>().write(v) };
-        u32::try_from(at).expect("a wide BVH of fewer than 2^31 lines")
     }
 
     /// The node `r` refers to.
@@ -398,12 +304,6 @@ impl<const W: usize> WideBvh<W> {
         // floats and integers only, so any bytes are a valid one (a wrong `r` reads garbage,
         // never undefined behaviour).
         unsafe { &*lines.as_ptr().cast::<WideNode<W>>() }
-    }
-
-    fn node_mut(&mut self, r: u32) -> &mut WideNode<W> {
-        let lines = &mut self.lines[r as usize..r as usize + size_of::<WideNode<W>>() / 64];
-        // SAFETY: as in `node`.
-        unsafe { &mut *lines.as_mut_ptr().cast::<WideNode<W>>() }
     }
 
     /// The node `r` refers to, unchecked.
@@ -441,43 +341,6 @@ impl<const W: usize> WideBvh<W> {
     #[inline(always)]
     pub(crate) fn lines_ptr(&self) -> *const i8 {
         self.lines.as_ptr().cast()
-    }
-
-    /// A wide node over `count` (more than `W`) triangles from `start`: up to `W` equal runs, each
-    /// boxed by its triangles' vertices.
-    fn range_node(
-        &mut self,
-        tris: &(impl TriangleSource + ?Sized),
-        start: u32,
-        count: u32,
-        work: &mut Vec<(Work, Option<(u32, usize)>)>,
-    ) -> u32 {
-        let per = count.div_ceil(W as u32).max(W as u32);
-        let mut node = WideNode::empty();
-        let runs: Vec<(u32, u32)> =
-            (start..start + count).step_by(per as usize).map(|s| (s, per.min(start + count - s))).collect();
-        for (slot, &(s, n)) in runs.iter().enumerate() {
-            let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-            for t in (s..s + n).map(|i| tris.triangle(i)) {
-                for v in t.vertices() {
-                    for a in 0..3 {
-                        lo[a] = lo[a].min(v[a]);
-                        hi[a] = hi[a].max(v[a]);
-                    }
-                }
-            }
-            node.set(slot, lo, hi);
-        }
-        let id = self.push_node(node);
-        // Leaf children popped first, as in `from_source`.
-        for leaves in [false, true] {
-            for (slot, &(s, n)) in runs.iter().enumerate().rev() {
-                if (n as usize <= W) == leaves {
-                    work.push((Work::Range(s, n), Some((id, slot))));
-                }
-            }
-        }
-        id
     }
 
     /// Wide nodes and leaf blocks.
@@ -676,129 +539,6 @@ impl<const W: usize> WideBvh<W> {
             }
         }
         Some(Found { t: best.t, tri: best.tri, w1: best.u, w2: best.v, sum: 1.0 })
-    }
-}
-
-/// The SAH costs the collapse weighs, per unit of a box's area (the probability that a ray
-/// enters it): testing a wide node's boxes ([`NODE_COST`]) and a leaf block's triangles
-/// ([`BLOCK_COST`]), each one SIMD sequence whatever the number of lanes in use. A block loads 5
-/// cache lines to a node's 4 and runs about three times the operations; 2 and 3 traced alike on
-/// the 2-core VM, 1 was slower (docs/cpu-benchmark-log.md, "Issue 11: the SAH collapse").
-const NODE_COST: f32 = 1.0;
-const BLOCK_COST: f32 = 2.0;
-
-/// The collapse's choices, made bottom-up by dynamic programming over the binary tree (Ylitie,
-/// Karras and Laine, "Efficient Incoherent Ray Traversal on GPUs Through Compressed Wide BVHs",
-/// 2017): for each binary node and each budget of 1 to `W` slots, the least SAH cost of its
-/// subtree spread over at most that many slots of a wide node, each slot a leaf block (a subtree
-/// of at most `W` triangles) or a wide node of its own.
-struct Plan<const W: usize> {
-    /// Whether binary node `n`, given one slot, becomes a leaf block (else a wide node).
-    leaf: Vec<bool>,
-    /// At `n * W + k - 1`: how many of `k` slots the left subtree of `n` takes when `n` is
-    /// spread over at most `k` (the rest go to the right one); 0 where `n` takes one slot itself.
-    split: Vec<u8>,
-    /// The slots of `n`'s left subtree when `n` becomes a wide node (its `W` slots spread over
-    /// both subtrees).
-    open: Vec<u8>,
-}
-
-impl<const W: usize> Plan<W> {
-    fn new(nodes: &[Node]) -> Self {
-        let mut order = Vec::with_capacity(nodes.len());
-        let mut stack = vec![0u32];
-        while let Some(n) = stack.pop() {
-            order.push(n);
-            let node = &nodes[n as usize];
-            if !node.is_leaf() {
-                stack.extend([node.index, node.index + 1]);
-            }
-        }
-        let len = nodes.len();
-        let mut plan = Plan { leaf: vec![false; len], split: vec![0; len * W], open: vec![0; len] };
-        // The reverse of that order visits each node after both its subtrees, the left one
-        // first: per subtree, its triangles and its least cost in at most 1 to `W` slots stay on
-        // this stack until its parent takes them (as deep as the tree, not as long).
-        let mut done: Vec<(u64, [f32; W])> = Vec::new();
-        for &n in order.iter().rev() {
-            let n = n as usize;
-            let node = &nodes[n];
-            let area = half_area(node);
-            if node.is_leaf() {
-                let c = node.count as usize;
-                plan.leaf[n] = c <= W;
-                // A leaf of more than a block becomes a wide node over blocks (`range_node`).
-                let one = if c <= W { BLOCK_COST } else { NODE_COST + c.div_ceil(W) as f32 * BLOCK_COST };
-                done.push((c as u64, [area * one; W]));
-                continue;
-            }
-            let (Some((nr, right)), Some((nl, left))) = (done.pop(), done.pop()) else {
-                unreachable!("both subtrees come before their node")
-            };
-            let count = nl + nr;
-            // The cheapest spread of both subtrees over at most `j` slots, and the left's share
-            // (at least 1, also where every cost is infinite: boxes of areas beyond f32).
-            let spread = |j: usize| {
-                (1..j)
-                    .map(|k| (left[k - 1] + right[j - k - 1], k as u8))
-                    .fold((f32::INFINITY, 1), |a, b| if b.0 < a.0 { b } else { a })
-            };
-            let (inner, k) = spread(W);
-            plan.open[n] = k;
-            let inner = area * NODE_COST + inner;
-            let leaf = if count <= W as u64 { area * BLOCK_COST } else { f32::INFINITY };
-            plan.leaf[n] = count <= W as u64 && leaf <= inner;
-            let mut cost = [leaf.min(inner); W];
-            for j in 2..=W {
-                let (c, k) = spread(j);
-                let i = n * W + j - 1;
-                // More slots never cost more: keep the spread over fewer where it is as cheap.
-                (cost[j - 1], plan.split[i]) = if c < cost[j - 2] { (c, k) } else { (cost[j - 2], plan.split[i - 1]) };
-            }
-            done.push((count, cost));
-        }
-        plan
-    }
-
-    /// The binary nodes that become the children of internal binary node `b`'s wide node, left
-    /// to right: its `W` slots spread over its subtrees as planned.
-    fn children(&self, nodes: &[Node], b: u32, kids: &mut Vec<u32>) {
-        kids.clear();
-        // (binary node, slots): at most `W` pending, since each takes one slot or more of `W`.
-        let mut todo = [(0u32, 0usize); W];
-        let n = &nodes[b as usize];
-        let k = self.open[b as usize] as usize;
-        assert!((1..W).contains(&k), "the plan gives both subtrees of a wide node a slot");
-        todo[0] = (n.index + 1, W - k);
-        todo[1] = (n.index, k);
-        let mut len = 2;
-        while len > 0 {
-            len -= 1;
-            let (x, slots) = todo[len];
-            let k = self.split[x as usize * W + slots - 1] as usize;
-            if k == 0 {
-                kids.push(x);
-            } else {
-                let c = nodes[x as usize].index;
-                todo[len] = (c + 1, slots - k);
-                todo[len + 1] = (c, k);
-                len += 2;
-            }
-        }
-    }
-}
-
-/// The triangles under binary node `b`, with `stack` as scratch.
-fn leaf_indices(nodes: &[Node], b: u32, out: &mut Vec<u32>, stack: &mut Vec<u32>) {
-    stack.clear();
-    stack.push(b);
-    while let Some(n) = stack.pop() {
-        let node = &nodes[n as usize];
-        if node.is_leaf() {
-            out.extend(node.index..node.index + node.count);
-        } else {
-            stack.extend([node.index, node.index + 1]);
-        }
     }
 }
 
@@ -1501,6 +1241,59 @@ mod tests {
             cheaper += usize::from(sah < greedy * 0.99);
         }
         assert!(cheaper >= 3, "width {W}: cheaper on {cheaper} of 6 trees");
+    }
+
+    /// The collapse split into tasks (the plan's subtrees, the arena's slices) writes the arena
+    /// the one-thread collapse writes, line for line, on a pool of several threads: with tasks
+    /// from the root's children down to the leaves, and with large leaves (wide nodes over runs
+    /// of triangles) inside and at the foot of the parallel levels.
+    #[test]
+    fn a_parallel_collapse_writes_the_serial_arena() {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().expect("a pool of 4 threads");
+        pool.install(|| {
+            parallel_matches_serial::<8>();
+            parallel_matches_serial::<4>();
+        });
+    }
+
+    fn parallel_matches_serial<const W: usize>() {
+        use collapse::{Parallel, collapse};
+        for (n, leaf) in [(1, 1), (9, 1), (100, 2), (1000, 1), (3000, 3), (2000, 20), (700, 700)] {
+            let tris = scattered(n, 11 * n as u64 + leaf as u64);
+            let nodes = halving_tree(&tris, leaf);
+            let serial = collapse::<W>(&nodes, &tris[..], Parallel::SERIAL);
+            check_structure(&serial, &tris);
+            for (plan_depth, write_levels) in [(1, 1), (3, 2), (10, 3), (40, 40)] {
+                let par = collapse::<W>(&nodes, &tris[..], Parallel { plan_depth, write_levels });
+                let what = format!("{n} triangles, leaves of {leaf}, width {W}, {plan_depth}/{write_levels}");
+                assert_eq!((par.root, par.counts, par.depth), (serial.root, serial.counts, serial.depth), "{what}");
+                assert_eq!(par.lines.len(), serial.lines.len(), "{what}");
+                // Node by node and block by block (a node's padding bytes are not written).
+                let refs = serial.refs();
+                assert_eq!(par.refs(), refs, "{what}: the same layout");
+                for r in refs {
+                    let same = match r & LEAF {
+                        0 => {
+                            let (a, b) = (par.node(r), serial.node(r));
+                            a.bounds
+                                .as_flattened()
+                                .iter()
+                                .zip(b.bounds.as_flattened())
+                                .all(|(x, y)| x.to_bits() == y.to_bits())
+                                && (a.child, a.valid) == (b.child, b.valid)
+                        }
+                        _ => {
+                            let (a, b) = (par.block(r), serial.block(r));
+                            let bits = |t: &TriBlock<W>| {
+                                t.p.as_flattened().as_flattened().iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+                            };
+                            bits(a) == bits(b) && a.index == b.index
+                        }
+                    };
+                    assert!(same, "{what}: the same contents at line {r:#x}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -39,7 +39,9 @@ enum Command {
         /// Takes --spp; refuses --method, --intersect, --offset, --cutoff and --vertices.
         #[arg(long, conflicts_with_all = ["method", "intersect", "offset", "cutoff", "vertices"])]
         reference: bool,
-        /// Worker threads, 1 to 1024 [default: all cores].
+        /// Worker threads of the render, 1 to 1024 [default: all cores]. Loading the scene
+        /// (reading and checking the file, or compiling it, and collapsing the wide BVH) uses
+        /// every core whatever this says.
         #[arg(long, value_parser = parse_threads, allow_hyphen_values = true)]
         threads: Option<usize>,
     },
@@ -107,7 +109,8 @@ fn render(args: &RenderArgs, method: MethodArg, reference: bool, threads: Option
     let method = method.0;
     let pool = thread_pool(threads)?;
     // The scene prepared for tracing before the clock starts, as the file's reading is: the wide
-    // BVH of bvh8, bvh4 and auto is collapsed at load, and its time printed apart.
+    // BVH of bvh8, bvh4 and auto is collapsed at load, on every core as the loading is (outside
+    // `pool`), and its time printed apart.
     let form = args.vertices.map_or(Default::default(), VerticesArg::vertices);
     let mut tracer = Tracer::with_vertices(scene, form);
     tracer.count_self_hits(args.self_hits);
