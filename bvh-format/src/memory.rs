@@ -8,8 +8,9 @@
 /// Embree advises its large allocations the same way. Only a hint: where huge pages are off
 /// (`/sys/kernel/mm/transparent_hugepage/enabled` set to `never`) or the call fails, nothing
 /// changes but the speed. The contents are not touched, so the buffer's state does not change.
-/// Buffers under `smallest` bytes are left alone. Here, below both of its users (bvh-build's
-/// buffers, tracer-cpu's wide BVHs), so that the one `unsafe` call to the C library is written once.
+/// Buffers under `smallest` bytes are left alone. Here, below all of its users (bvh-build's
+/// buffers, the reader's file buffer, tracer-cpu's wide BVHs), so that the one `unsafe` call to the
+/// C library is written once.
 pub fn advise_huge_pages<T>(buf: &mut [std::mem::MaybeUninit<T>], smallest: usize) {
     #[cfg(target_os = "linux")]
     {
