@@ -192,7 +192,13 @@ impl<const W: usize, S: TriangleSource + ?Sized> Collapse<'_, W, S> {
     fn write_par(&self, w: Work, sized: &Sizes, out: &mut [Line], base: u32) -> u32 {
         let b = match self.kind(w) {
             Kind::Node(b) if !sized.inner.is_empty() => b,
-            _ => return self.write(w, &mut Cursor { out, base, at: 0 }),
+            _ => {
+                let mut cursor = Cursor { out, base, at: 0 };
+                let r = self.write(w, &mut cursor);
+                // Every line written once: none is left for a walk to read unwritten.
+                assert_eq!(cursor.at, cursor.out.len(), "the subtree fills the lines sized for it");
+                return r;
+            }
         };
         let mut kids = Vec::with_capacity(W);
         self.plan.children(self.nodes, b, &mut kids);
