@@ -14,7 +14,7 @@
 //! `W` triangles costs one sequence, like testing one) or a wide node of its own, and a wide node's
 //! `W` slots are spread over its binary subtree. Which, is decided bottom-up by dynamic programming
 //! for the least SAH cost (a slot's box area times the cost of testing a node's boxes or a block's
-//! triangles, [`NODE_COST`] and [`BLOCK_COST`]), not greedily as Embree's BVH8 collapse does
+//! triangles, `collapse`'s `NODE_COST` and `BLOCK_COST`), not greedily as Embree's BVH8 collapse does
 //! (open the child of the largest area until the node is full; every subtree of at most `W`
 //! triangles a block), which this replaced: the greedy collapse leaves many nodes of 2 children
 //! (30% of the dragon's) and boxes a block's far-apart triangles together. Per ray the SAH
