@@ -233,7 +233,8 @@ pub fn read_input(path: &std::path::Path) -> std::io::Result<Vec<u8>> {
         }
     }
     // As `std::fs::read`, with a large file's buffer on transparent huge pages: the dragon's
-    // 84 MB took 50-58 ms to read into fresh 4 KiB pages on the 2-core VM, 27-30 ms into huge ones.
+    // 84 MB took 45-60 ms to read into fresh 4 KiB pages on the 2-core VM, 26-30 ms into huge
+    // ones (tracer-cpu's `examples/load_profile.rs`).
     use std::io::Read;
     let mut file = std::fs::File::open(path)?;
     let len = file.metadata().map_or(0, |m| m.len() as usize);

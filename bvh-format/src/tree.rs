@@ -42,11 +42,15 @@ impl<'a> Tree<'a> {
 
     /// Visits every node depth-first, left child first, with its depth (the root has depth 0).
     /// Uses an explicit stack, so a deep tree cannot overflow the thread's stack.
-    pub fn for_each_depth_first(&self, mut f: impl FnMut(usize, u32)) {
-        if self.nodes.is_empty() {
-            return;
+    pub fn for_each_depth_first(&self, f: impl FnMut(usize, u32)) {
+        if !self.nodes.is_empty() {
+            self.for_each_depth_first_from(0, 0, f);
         }
-        let mut stack = vec![(0usize, 0u32)];
+    }
+
+    /// [`Self::for_each_depth_first`] over the subtree of node `root`, which lies at `depth`.
+    pub fn for_each_depth_first_from(&self, root: usize, depth: u32, mut f: impl FnMut(usize, u32)) {
+        let mut stack = vec![(root, depth)];
         while let Some((i, depth)) = stack.pop() {
             f(i, depth);
             if !self.nodes[i].is_leaf() {
@@ -86,8 +90,8 @@ pub fn half_area(min: [f32; 3], max: [f32; 3]) -> f64 {
 
 /// Depth, leaf statistics and SAH cost of a tree that has passed [`check_shape`]. The subtrees
 /// below the top [`STATS_SPLIT`] levels are measured as tasks of their own on rayon's pool (the
-/// reader runs this once per layout: for the dragon 14-15 ms each on one thread of the H100
-/// machine's host, 1.4 ms on its 16). The sums are the same whatever the threads: each task adds
+/// reader runs this once per layout: for the dragon 12-16 ms each on one thread of the H100
+/// machine's host, 1.4 ms on its 16, tracer-cpu's `examples/load_profile.rs`). The sums are the same whatever the threads: each task adds
 /// up its subtree depth first, and a split node adds its own term, then its left subtree's sum,
 /// then its right one's.
 pub fn stats(tree: Tree<'_>, traversal_cost: f32, intersection_cost: f32) -> TreeStats {
@@ -161,33 +165,20 @@ impl Sums {
     }
 }
 
-/// The sums of the subtree at node `i` (at `depth`): depth first on an explicit stack (a valid
-/// tree may be a chain as long as the scene), its root's two subtrees as tasks of their own while
-/// it lies in the top [`STATS_SPLIT`] levels.
+/// The sums of the subtree at node `i` (at `depth`): its root's two subtrees as tasks of their
+/// own while it lies in the top [`STATS_SPLIT`] levels, else depth first on one thread.
 fn sums(tree: Tree<'_>, c: &Costs, i: usize, depth: u32) -> Sums {
     let mut s = Sums::default();
     let n = &tree.nodes[i];
+    if n.is_leaf() || depth >= STATS_SPLIT {
+        tree.for_each_depth_first_from(i, depth, |j, d| s.add(&tree.nodes[j], d, c));
+        return s;
+    }
     s.add(n, depth, c);
-    if n.is_leaf() {
-        return s;
-    }
     let (l, r) = tree.children(i);
-    if depth < STATS_SPLIT {
-        let (a, b) = rayon::join(|| sums(tree, c, l, depth + 1), || sums(tree, c, r, depth + 1));
-        s.merge(a);
-        s.merge(b);
-        return s;
-    }
-    let mut stack = vec![(r, depth + 1), (l, depth + 1)];
-    while let Some((i, depth)) = stack.pop() {
-        let n = &tree.nodes[i];
-        s.add(n, depth, c);
-        if !n.is_leaf() {
-            let (l, r) = tree.children(i);
-            stack.push((r, depth + 1));
-            stack.push((l, depth + 1));
-        }
-    }
+    let (a, b) = rayon::join(|| sums(tree, c, l, depth + 1), || sums(tree, c, r, depth + 1));
+    s.merge(a);
+    s.merge(b);
     s
 }
 
