@@ -39,37 +39,156 @@ pub fn read_with_sections(bytes: &[u8]) -> Result<(SceneFile, Vec<SectionInfo>),
 
 /// Reads and validates a scene file held in memory.
 pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
-    let len = bytes.len() as u64;
+    read_from(&Memory(bytes)).map_err(|e| match e {
+        Failure::Format(e) => e,
+        Failure::Source(never) => match never {},
+    })
+}
+
+/// Where the reader takes a file's bytes from: memory ([`Memory`]), or an open file read piece by
+/// piece straight into each section's array ([`OpenFile`]). The checks, their order and their
+/// errors are the same for both: they are written once, in [`read_from`].
+trait Source {
+    /// What reading can fail with besides the file's contents (nothing, for memory).
+    type Error;
+    /// The file's length in bytes.
+    fn len(&self) -> u64;
+    /// `n` bytes from `offset` (a range the caller has checked lies within [`Source::len`]).
+    fn bytes(&self, offset: u64, n: usize) -> Result<std::borrow::Cow<'_, [u8]>, Self::Error>;
+    /// The `T`s of `n` bytes from `offset` (within the file, a multiple of `T`'s size), in a new
+    /// array.
+    fn items<T: Pod + Send>(&self, offset: u64, n: usize) -> Result<Vec<T>, Self::Error>;
+}
+
+/// Why [`read_from`] returned no scene.
+enum Failure<E> {
+    Format(FormatError),
+    Source(E),
+}
+
+impl<E> From<FormatError> for Failure<E> {
+    fn from(e: FormatError) -> Self {
+        Failure::Format(e)
+    }
+}
+
+/// Pieces of a section copied or read by one task: large enough that a task's overhead does not
+/// count, small enough that a large section spreads over every thread.
+const PIECE: usize = 1 << 20;
+
+/// A file held in memory.
+struct Memory<'a>(&'a [u8]);
+
+impl Source for Memory<'_> {
+    type Error = std::convert::Infallible;
+
+    fn len(&self) -> u64 {
+        self.0.len() as u64
+    }
+
+    fn bytes(&self, offset: u64, n: usize) -> Result<std::borrow::Cow<'_, [u8]>, Self::Error> {
+        Ok(std::borrow::Cow::Borrowed(&self.0[offset as usize..offset as usize + n]))
+    }
+
+    /// Copied out of the buffer (whose alignment is the buffer's) by rayon's pool in pieces, into
+    /// memory the allocator hands out zeroed (fresh pages for large sections), so that the copy's
+    /// page faults spread over the threads as the copy does.
+    fn items<T: Pod + Send>(&self, offset: u64, n: usize) -> Result<Vec<T>, Self::Error> {
+        use rayon::prelude::*;
+        let data = &self.0[offset as usize..offset as usize + n];
+        let mut items: Vec<T> = bytemuck::zeroed_vec(n / size_of::<T>());
+        let out: &mut [u8] = bytemuck::cast_slice_mut(&mut items);
+        out.par_chunks_mut(PIECE).zip(data.par_chunks(PIECE)).for_each(|(to, from)| to.copy_from_slice(from));
+        Ok(items)
+    }
+}
+
+/// A regular file, open, and its length when it was opened.
+#[cfg(unix)]
+struct OpenFile {
+    file: std::fs::File,
+    len: u64,
+}
+
+#[cfg(unix)]
+impl OpenFile {
+    /// Fills `buf` from `offset`; a file that ends before (it got shorter since it was opened) is
+    /// an error, not a section cut short.
+    fn read_at(&self, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+        use std::os::unix::fs::FileExt;
+        self.file.read_exact_at(buf, offset).map_err(|e| match e.kind() {
+            std::io::ErrorKind::UnexpectedEof => {
+                std::io::Error::new(e.kind(), "the file got shorter while it was being read")
+            }
+            _ => e,
+        })
+    }
+}
+
+#[cfg(unix)]
+impl Source for OpenFile {
+    type Error = std::io::Error;
+
+    fn len(&self) -> u64 {
+        self.len
+    }
+
+    fn bytes(&self, offset: u64, n: usize) -> Result<std::borrow::Cow<'_, [u8]>, Self::Error> {
+        let mut buf = vec![0; n];
+        self.read_at(&mut buf, offset)?;
+        Ok(std::borrow::Cow::Owned(buf))
+    }
+
+    /// Read by rayon's pool in pieces (`pread`, which takes no shared file position) straight into
+    /// memory the allocator hands out zeroed, as [`Memory`] copies: reading the whole file into one
+    /// buffer first took the dragon's 84 MB 23-35 ms more on the 2-core VM (`read bytes` against
+    /// `read_file` of tracer-cpu's `examples/load_profile.rs`). Advising these arrays onto huge
+    /// pages, as that buffer was, changed nothing measurable there.
+    fn items<T: Pod + Send>(&self, offset: u64, n: usize) -> Result<Vec<T>, Self::Error> {
+        use rayon::prelude::*;
+        let mut items: Vec<T> = bytemuck::zeroed_vec(n / size_of::<T>());
+        let out: &mut [u8] = bytemuck::cast_slice_mut(&mut items);
+        out.par_chunks_mut(PIECE)
+            .enumerate()
+            .try_for_each(|(i, piece)| self.read_at(piece, offset + (i * PIECE) as u64))?;
+        Ok(items)
+    }
+}
+
+/// Reads and validates a scene file from `src`.
+fn read_from<S: Source>(src: &S) -> Result<SceneFile, Failure<S::Error>> {
+    let len = src.len();
+    let head = src.bytes(0, len.min(HEADER_SIZE as u64) as usize).map_err(Failure::Source)?;
     // The magic first, so that a short file of another kind (a text file) is named as such
     // rather than as a truncated scene file.
     let magic = bytemuck::bytes_of(&MAGIC);
-    if bytes[..bytes.len().min(magic.len())] != magic[..bytes.len().min(magic.len())] {
-        return Err(FormatError::BadMagic);
+    if head[..head.len().min(magic.len())] != magic[..head.len().min(magic.len())] {
+        return Err(FormatError::BadMagic.into());
     }
-    if bytes.len() < HEADER_SIZE {
-        return Err(FormatError::Truncated { what: "the header", needed: HEADER_SIZE as u64, len });
+    if head.len() < HEADER_SIZE {
+        return Err(FormatError::Truncated { what: "the header", needed: HEADER_SIZE as u64, len }.into());
     }
-    let header: Header = bytemuck::pod_read_unaligned(&bytes[..HEADER_SIZE]);
+    let header: Header = bytemuck::pod_read_unaligned(&head[..HEADER_SIZE]);
     if header.magic != MAGIC {
-        return Err(FormatError::BadMagic);
+        return Err(FormatError::BadMagic.into());
     }
     if header.version < VERSION {
-        return Err(FormatError::OldVersion { found: header.version, supported: VERSION });
+        return Err(FormatError::OldVersion { found: header.version, supported: VERSION }.into());
     }
     if header.version != VERSION {
-        return Err(FormatError::UnsupportedVersion { found: header.version, supported: VERSION });
+        return Err(FormatError::UnsupportedVersion { found: header.version, supported: VERSION }.into());
     }
     if header.header_size as usize != HEADER_SIZE {
-        return Err(FormatError::BadHeader("its size field is wrong"));
+        return Err(FormatError::BadHeader("its size field is wrong").into());
     }
     let table_len = header.section_count as u64 * SECTION_ENTRY_SIZE as u64;
     let table_end = HEADER_SIZE as u64 + table_len;
     if table_end > len {
-        return Err(FormatError::Truncated { what: "the section table", needed: table_end, len });
+        return Err(FormatError::Truncated { what: "the section table", needed: table_end, len }.into());
     }
-    let table_bytes = &bytes[HEADER_SIZE..table_end as usize];
-    if crate::write::header_crc(&header, table_bytes) != header.header_crc {
-        return Err(FormatError::HeaderChecksum);
+    let table_bytes = src.bytes(HEADER_SIZE as u64, table_len as usize).map_err(Failure::Source)?;
+    if crate::write::header_crc(&header, &table_bytes) != header.header_crc {
+        return Err(FormatError::HeaderChecksum.into());
     }
 
     let mut found: Vec<(SectionKind, SectionEntry)> = Vec::new();
@@ -77,17 +196,18 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
         let e: SectionEntry = bytemuck::pod_read_unaligned(chunk);
         let kind = SectionKind::from_u32(e.kind).ok_or(FormatError::UnknownSection(e.kind))?;
         if found.iter().any(|(k, _)| *k == kind) {
-            return Err(FormatError::DuplicateSection(kind));
+            return Err(FormatError::DuplicateSection(kind).into());
         }
         if e.element_size != kind.element_size() {
             return Err(FormatError::ElementSize {
                 section: kind,
                 expected: kind.element_size(),
                 found: e.element_size,
-            });
+            }
+            .into());
         }
         if !e.offset.is_multiple_of(ALIGN) {
-            return Err(FormatError::SectionMisaligned { section: kind, offset: e.offset });
+            return Err(FormatError::SectionMisaligned { section: kind, offset: e.offset }.into());
         }
         let size = e.count.checked_mul(e.element_size as u64);
         let end = size.and_then(|s| e.offset.checked_add(s));
@@ -99,10 +219,11 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
                     offset: e.offset,
                     size: s,
                     file_len: len,
-                });
+                }
+                .into());
             }
             (Some(_), Some(_)) => {
-                return Err(FormatError::BadHeader("a section overlaps the section table"));
+                return Err(FormatError::BadHeader("a section overlaps the section table").into());
             }
             _ => {
                 return Err(FormatError::SectionOutOfBounds {
@@ -110,7 +231,8 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
                     offset: e.offset,
                     size: u64::MAX,
                     file_len: len,
-                });
+                }
+                .into());
             }
         }
         found.push((kind, e));
@@ -120,39 +242,21 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
         for (kb, b) in &found[i + 1..] {
             let (ra, rb) = (range(a), range(b));
             if !ra.is_empty() && !rb.is_empty() && ra.start < rb.end && rb.start < ra.end {
-                return Err(FormatError::SectionOverlap { a: *ka, b: *kb });
+                return Err(FormatError::SectionOverlap { a: *ka, b: *kb }.into());
             }
         }
     }
 
-    let section = |kind: SectionKind| -> Result<Option<&[u8]>, FormatError> {
-        let Some((_, e)) = found.iter().find(|(k, _)| *k == kind) else {
-            return Ok(None);
-        };
-        let r = range(e);
-        let data = &bytes[r.start as usize..r.end as usize];
-        if crate::write::section_crc(data) != e.crc {
-            return Err(FormatError::Checksum { section: kind });
-        }
-        Ok(Some(data))
-    };
-    let required = |kind| section(kind)?.ok_or(FormatError::MissingSection(kind));
+    let sections = Sections { src, found: &found };
 
     if header.flags & !(FLAG_CHILD_PAIR | FLAG_ESCAPE | FLAG_WIDE) != 0 || header.flags == 0 {
-        return Err(FormatError::NoLayout(header.flags));
+        return Err(FormatError::NoLayout(header.flags).into());
     }
     if header.flags & (FLAG_CHILD_PAIR | FLAG_ESCAPE) == 0 {
-        return Err(FormatError::WideAlone);
+        return Err(FormatError::WideAlone.into());
     }
-    let layout = |flag, kind| -> Result<Option<Vec<crate::Node>>, FormatError> {
-        match (header.flags & flag != 0, section(kind)?) {
-            (true, Some(d)) => Ok(Some(pod(d))),
-            (true, None) => Err(FormatError::MissingSection(kind)),
-            (false, Some(_)) => Err(FormatError::BadHeader("a node section is present that the flags do not announce")),
-            (false, None) => Ok(None),
-        }
-    };
-    let names = std::str::from_utf8(required(SectionKind::MaterialNames)?).map_err(|_| FormatError::BadNames)?;
+    let names: Vec<u8> = sections.required(SectionKind::MaterialNames)?;
+    let names = std::str::from_utf8(&names).map_err(|_| FormatError::BadNames)?;
     let strategy =
         Strategy::from_u32(header.strategy).ok_or(FormatError::BadHeader("its builder strategy is unknown"))?;
 
@@ -171,51 +275,83 @@ pub fn read(bytes: &[u8]) -> Result<SceneFile, FormatError> {
         },
         origin: header.origin,
         scale_log2: header.scale_log2,
-        vertices: pod(required(SectionKind::Vertices)?),
-        triangles: pod(required(SectionKind::Triangles)?),
-        normals: pod(required(SectionKind::Normals)?),
-        normal_indices: pod(required(SectionKind::NormalIndices)?),
-        materials: pod(required(SectionKind::Materials)?),
+        vertices: sections.required(SectionKind::Vertices)?,
+        triangles: sections.required(SectionKind::Triangles)?,
+        normals: sections.required(SectionKind::Normals)?,
+        normal_indices: sections.required(SectionKind::NormalIndices)?,
+        materials: sections.required(SectionKind::Materials)?,
         material_names: names.split('\0').map(str::to_owned).collect(),
-        input_index: pod(required(SectionKind::InputIndex)?),
-        child_pair: layout(FLAG_CHILD_PAIR, SectionKind::NodesChildPair)?,
-        escape: layout(FLAG_ESCAPE, SectionKind::NodesEscape)?,
-        wide: wide_layout(&header, section(SectionKind::NodesWide)?)?,
-        cameras: pod(required(SectionKind::Cameras)?),
-        lights: pod(required(SectionKind::Lights)?),
+        input_index: sections.required(SectionKind::InputIndex)?,
+        child_pair: sections.layout(&header, FLAG_CHILD_PAIR, SectionKind::NodesChildPair)?,
+        escape: sections.layout(&header, FLAG_ESCAPE, SectionKind::NodesEscape)?,
+        wide: sections.layout(&header, FLAG_WIDE, SectionKind::NodesWide)?,
+        cameras: sections.required(SectionKind::Cameras)?,
+        lights: sections.required(SectionKind::Lights)?,
     };
     validate_scene(&scene, Some(&header))?;
     Ok(scene)
 }
 
-/// The items of a section, copied out of the file's bytes (whose alignment is the buffer's) by
-/// rayon's pool in pieces, into memory the allocator hands out zeroed (fresh pages for large
-/// sections), so that the copy's page faults spread over the threads as the copy does.
-fn pod<T: Pod + Send>(data: &[u8]) -> Vec<T> {
-    use rayon::prelude::*;
-    const PIECE: usize = 1 << 20;
-    let mut items: Vec<T> = bytemuck::zeroed_vec(data.len() / size_of::<T>());
-    let out: &mut [u8] = bytemuck::cast_slice_mut(&mut items);
-    let len = out.len();
-    out.par_chunks_mut(PIECE).zip(data[..len].par_chunks(PIECE)).for_each(|(to, from)| to.copy_from_slice(from));
-    items
+/// The sections a file's table lists, read from its source.
+struct Sections<'a, S> {
+    src: &'a S,
+    found: &'a [(SectionKind, SectionEntry)],
 }
 
-/// The wide nodes when the flags announce them (their own function, like their validation in
-/// `wide.rs`: the binary layouts' reading above is shared by two layouts of one node type).
-fn wide_layout(header: &Header, data: Option<&[u8]>) -> Result<Option<Vec<crate::WideNode>>, FormatError> {
-    match (header.flags & FLAG_WIDE != 0, data) {
-        (true, Some(d)) => Ok(Some(pod(d))),
-        (true, None) => Err(FormatError::MissingSection(SectionKind::NodesWide)),
-        (false, Some(_)) => Err(FormatError::BadHeader("a node section is present that the flags do not announce")),
-        (false, None) => Ok(None),
+impl<S: Source> Sections<'_, S> {
+    /// A section's items, once their bytes match the section's checksum.
+    fn get<T: Pod + Send>(&self, kind: SectionKind) -> Result<Option<Vec<T>>, Failure<S::Error>> {
+        let Some((_, e)) = self.found.iter().find(|(k, _)| *k == kind) else {
+            return Ok(None);
+        };
+        // The element sizes the table was checked against are the sizes of the types read here.
+        debug_assert_eq!(e.element_size as usize, size_of::<T>(), "{kind:?}");
+        let n = (e.count * e.element_size as u64) as usize;
+        let items: Vec<T> = self.src.items(e.offset, n).map_err(Failure::Source)?;
+        if crate::write::section_crc(bytemuck::cast_slice(&items)) != e.crc {
+            return Err(FormatError::Checksum { section: kind }.into());
+        }
+        Ok(Some(items))
+    }
+
+    fn required<T: Pod + Send>(&self, kind: SectionKind) -> Result<Vec<T>, Failure<S::Error>> {
+        self.get(kind)?.ok_or(Failure::Format(FormatError::MissingSection(kind)))
+    }
+
+    /// A layout's nodes where the header's flags announce them, which must then be present, and
+    /// nothing where they do not.
+    fn layout<T: Pod + Send>(
+        &self,
+        header: &Header,
+        flag: u32,
+        kind: SectionKind,
+    ) -> Result<Option<Vec<T>>, Failure<S::Error>> {
+        match (header.flags & flag != 0, self.get(kind)?) {
+            (true, Some(n)) => Ok(Some(n)),
+            (true, None) => Err(FormatError::MissingSection(kind).into()),
+            (false, Some(_)) => {
+                Err(FormatError::BadHeader("a node section is present that the flags do not announce").into())
+            }
+            (false, None) => Ok(None),
+        }
     }
 }
 
-/// Reads and validates a scene file from disk.
+/// Reads and validates a scene file from disk. A regular file is read section by section into the
+/// scene's arrays; anything else that is not a device (a pipe) is read whole first.
 pub fn read_file(path: &std::path::Path) -> Result<SceneFile, FileError> {
     let p = || path.display().to_string();
-    let bytes = read_input(path).map_err(|source| FileError::Read { path: p(), source })?;
+    let unreadable = |source| FileError::Read { path: p(), source };
+    #[cfg(unix)]
+    if std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
+        let file = std::fs::File::open(path).map_err(unreadable)?;
+        let len = file.metadata().map_err(unreadable)?.len();
+        return read_from(&OpenFile { file, len }).map_err(|e| match e {
+            Failure::Format(source) => FileError::Invalid { path: p(), source },
+            Failure::Source(source) => unreadable(source),
+        });
+    }
+    let bytes = read_input(path).map_err(unreadable)?;
     read(&bytes).map_err(|source| FileError::Invalid { path: p(), source })
 }
 
@@ -462,5 +598,22 @@ mod tests {
         assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput);
         let e = super::read_file(std::path::Path::new("/dev/zero")).unwrap_err();
         assert_eq!(e.to_string(), "cannot read /dev/zero: it is a device, not a file");
+    }
+
+    /// A file that ends before the length it had when it was opened (another program cut it
+    /// meanwhile) is an error of reading, not a damaged scene and not a panic.
+    #[test]
+    fn a_file_that_got_shorter_is_an_error_of_reading() {
+        let path = std::env::temp_dir().join(format!("bvh-format-shorter-{}", std::process::id()));
+        std::fs::write(&path, crate::layout::MAGIC).unwrap();
+        let file = std::fs::File::open(&path).unwrap();
+        let e = super::read_from(&super::OpenFile { file, len: 4096 }).err().unwrap();
+        let _ = std::fs::remove_file(&path);
+        match e {
+            super::Failure::Source(e) => {
+                assert_eq!(e.to_string(), "the file got shorter while it was being read");
+            }
+            super::Failure::Format(e) => panic!("reported as a damaged file: {e}"),
+        }
     }
 }

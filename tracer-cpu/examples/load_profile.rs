@@ -1,7 +1,8 @@
 //! Where loading a scene file for the CPU tracer goes, step by step, each the median of 5 runs
 //! on rayon's global pool (`RAYON_NUM_THREADS` sets its threads): reading the file's bytes,
 //! reading and checking the scene from them (of which one tree's statistics pass, which the checks
-//! run once per layout), the triangles' expanded copy, the wide BVH's collapse, and freeing it.
+//! run once per layout), both at once as the tracers load a file (`bvh_format::read_file`: each
+//! section read from the file straight into its array), the triangles' expanded copy, the wide BVH's collapse, and freeing it.
 //!
 //! Usage: `load_profile FILE.bvh...` (one Markdown table row per file).
 
@@ -31,9 +32,9 @@ fn main() -> Result<(), String> {
     println!("rayon threads: {}", rayon::current_num_threads());
     println!();
     println!(
-        "| file | MB | read bytes | read and check | one stats pass | expanded triangles | collapse | free the wide BVH |"
+        "| file | MB | read bytes | read and check | read_file | one stats pass | expanded triangles | collapse | free the wide BVH |"
     );
-    println!("|---|--:|--:|--:|--:|--:|--:|--:|");
+    println!("|---|--:|--:|--:|--:|--:|--:|--:|--:|");
     for f in files {
         let path = Path::new(&f);
         let bytes = bvh_format::read_input(path).map_err(|e| format!("{f}: {e}"))?;
@@ -42,6 +43,7 @@ fn main() -> Result<(), String> {
         let tris = scene.leaf_triangles();
         let read = median(|| timed(|| bvh_format::read_input(path)));
         let check = median(|| timed(|| bvh_format::read(&bytes)));
+        let file = median(|| timed(|| bvh_format::read_file(path)));
         let stats = median(|| timed(|| bvh_format::tree::stats(scene.tree(), 1.0, 1.0)));
         let expand = median(|| timed(|| scene.leaf_triangles()));
         let collapse = median(|| timed(|| Bvh8::new(nodes, &tris)));
@@ -50,7 +52,7 @@ fn main() -> Result<(), String> {
             timed(|| drop(bvh))
         });
         println!(
-            "| {f} | {:.1} | {read:.1} | {check:.1} | {stats:.1} | {expand:.1} | {collapse:.1} | {free:.1} |",
+            "| {f} | {:.1} | {read:.1} | {check:.1} | {file:.1} | {stats:.1} | {expand:.1} | {collapse:.1} | {free:.1} |",
             bytes.len() as f64 / 1e6
         );
     }
