@@ -98,6 +98,7 @@ impl Source for Memory<'_> {
         let data = &self.0[offset as usize..offset as usize + n];
         let mut items: Vec<T> = bytemuck::zeroed_vec(n / size_of::<T>());
         let out: &mut [u8] = bytemuck::cast_slice_mut(&mut items);
+        let data = &data[..out.len()];
         out.par_chunks_mut(PIECE).zip(data.par_chunks(PIECE)).for_each(|(to, from)| to.copy_from_slice(from));
         Ok(items)
     }
