@@ -193,8 +193,8 @@ fn check_cut(bytes: &[u8], len: usize) {
 fn a_large_file_reads_the_same_from_disk() {
     let file = scene(150_000, Layouts::ALL);
     let bytes = bytes_of(&file);
-    let sizes = table(&bytes).iter().map(|e| range(e).len()).max().unwrap();
-    assert!(sizes > 2 << 20, "the largest section ({sizes} bytes) should span several 1 MiB pieces");
+    let largest = table(&bytes).iter().map(|e| range(e).len()).max().unwrap();
+    assert!(largest > 2 << 20, "the largest section ({largest} bytes) should span several 1 MiB pieces");
     assert_eq!(from_disk(&bytes).as_ref(), Ok(&file));
 }
 

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # What a `trace-cpu render` (or, with TRACER=trace-vk, a `trace-vk render`) spends before and after
 # its frame, side by side for several builds on the 16-core host: each VARIANT's binary
-# (.bin/TRACER_NAME or its .xz) renders each scene once
-# per round and thread count, the variants in turn, ROUNDS rounds. Per run: the process's wall
-# time from outside, the collapse time and the frame time it prints (trace-vk: no collapse, its GPU time as the frame).
+# (.bin/TRACER_NAME or its .xz) renders each scene once per round and thread count, the variants
+# in turn, ROUNDS rounds. Per run: the process's wall time from outside, the collapse time and the
+# frame time it prints (trace-vk: no collapse, its GPU time as the frame).
 # Env: VARIANTS (space-separated names, e.g. "main new"), SCENES (default bunny dragon million:
 # scenes/NAME.toml compiled here by .bin/bvhc), THREADS (default "1 16"), MODE (default cast), RES
 # (default 1920x1440), ROUNDS (default 5), TRACER (default trace-cpu; trace-vk takes no --threads,

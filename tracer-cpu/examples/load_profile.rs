@@ -2,7 +2,8 @@
 //! on rayon's global pool (`RAYON_NUM_THREADS` sets its threads): reading the file's bytes,
 //! reading and checking the scene from them (of which one tree's statistics pass, which the checks
 //! run once per layout), both at once as the tracers load a file (`bvh_format::read_file`: each
-//! section read from the file straight into its array), the triangles' expanded copy, the wide BVH's collapse, and freeing it.
+//! section read from the file straight into its array), the triangles' expanded copy, the wide
+//! BVH's collapse, and freeing it.
 //!
 //! Usage: `load_profile FILE.bvh...` (one Markdown table row per file).
 
