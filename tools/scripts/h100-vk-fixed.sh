@@ -10,7 +10,7 @@ set -uo pipefail
 R=$1; for f in .gl/*.deb; do dpkg -x $f /; done; ldconfig; export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
 xz -d .bin/*.xz; chmod +x .bin/*; mkdir -p /tmp/sc
 for s in bunny dragon; do .bin/bvhc compile scenes/$s.toml -o /tmp/sc/$s.bvh > /dev/null; done
-t() { local name=$1; shift; for i in 1 2 3 4 5; do s=$(date +%s%N); "$@" > /tmp/last.txt 2>&1; echo "$name,$i,$(( ($(date +%s%N)-s)/1000000 ))"; done; tail -1 /tmp/last.txt | cut -c1-200 >> $R/lines.txt; }
+t() { local name=$1 s; shift; for i in 1 2 3 4 5; do s=$(date +%s%N); "$@" > /tmp/last.txt 2>&1; echo "$name,$i,$(( ($(date +%s%N)-s)/1000000 ))"; done; tail -1 /tmp/last.txt | cut -c1-200 >> $R/lines.txt; }
 {
 t devices .bin/trace-vk devices
 t bunny-lst-16x16 .bin/trace-vk render /tmp/sc/bunny.bvh --method lst --mode cast --res 16x16 -o /tmp/x.png
