@@ -76,8 +76,13 @@ pub fn write_replacing(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> 
     let tmp = temporary_name(&file);
     pending().push(tmp.clone());
     let written = (|| {
-        let mut w = BufWriter::new(File::create(&tmp)?);
-        write(&mut w)?;
+        let file = File::create(&tmp)?;
+        let flusher = Flusher::start(&file);
+        let mut w = BufWriter::new(file);
+        let wrote = write(&mut w);
+        let synced = flusher.stop();
+        wrote?;
+        synced?;
         w.into_inner().map_err(|e| e.into_error())?.sync_all()
     })();
     // The rename happens under the lock, so an interrupt either removes the temporary file before
@@ -89,6 +94,51 @@ pub fn write_replacing(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> 
     }
     list.retain(|p| *p != tmp);
     result
+}
+
+/// Sends what a long write has put into the page cache so far to the disk while the write goes
+/// on, so that the `sync_all` at its end, which must finish before the rename, waits only for the
+/// rest: a second handle of the file synced every [`Flusher::PERIOD`] on a thread of its own. For
+/// a file written in less than one period it never syncs. Its errors are the write's: the handle
+/// shares the file's open description, and Linux reports a failed write-back to one sync of it
+/// only, so the final `sync_all` would not see what this thread was told.
+struct Flusher {
+    stop: std::sync::mpsc::Sender<()>,
+    thread: Option<std::thread::JoinHandle<io::Result<usize>>>,
+}
+
+impl Flusher {
+    const PERIOD: std::time::Duration = std::time::Duration::from_millis(8);
+
+    fn start(file: &File) -> Self {
+        let (stop, stopped) = std::sync::mpsc::channel::<()>();
+        // Without a second handle (or a thread) the write still ends in its full sync.
+        let thread = file.try_clone().ok().and_then(|f| {
+            std::thread::Builder::new()
+                .name("flush".into())
+                .spawn(move || {
+                    let mut syncs = 0;
+                    while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) = stopped.recv_timeout(Self::PERIOD) {
+                        f.sync_data()?;
+                        syncs += 1;
+                    }
+                    Ok(syncs)
+                })
+                .ok()
+        });
+        Flusher { stop, thread }
+    }
+
+    /// Ends the thread (after the sync it may be in): how many syncs it made, or the error of the
+    /// one that failed.
+    fn stop(mut self) -> io::Result<usize> {
+        let _ = self.stop.send(());
+        match self.thread.take().map(std::thread::JoinHandle::join) {
+            Some(Ok(synced)) => synced,
+            Some(Err(_)) => Err(io::Error::other("the thread that syncs the file to disk stopped")),
+            None => Ok(0),
+        }
+    }
 }
 
 /// Removes every temporary file [`write_replacing`] is writing, and keeps others from being
@@ -156,6 +206,43 @@ mod tests {
         write_replacing(&file, |w| w.write_all(b"new")).unwrap();
         assert_eq!(std::fs::read(&file).unwrap(), b"new");
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "only the file itself is left");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_long_write_is_synced_while_it_goes_on_and_still_replaces_the_file_whole() {
+        use std::io::Write;
+        let dir = scratch("flush");
+        let file = dir.join("out.bin");
+        let piece = vec![7u8; 1 << 20];
+        // The flusher on its own: a write of several periods is synced on the way.
+        let f = File::create(dir.join("direct.bin")).unwrap();
+        let flusher = Flusher::start(&f);
+        for _ in 0..4 {
+            (&f).write_all(&piece).unwrap();
+            std::thread::sleep(Flusher::PERIOD * 2);
+        }
+        assert!(flusher.stop().unwrap() >= 1, "no sync while the write went on");
+        // Through write_replacing: the whole file arrives, and a failure after syncs leaves the
+        // old file and no temporary one.
+        std::fs::write(&file, b"old").unwrap();
+        let slow = |fail: bool| {
+            write_replacing(&file, |w| {
+                for _ in 0..4 {
+                    w.write_all(&piece)?;
+                    w.flush()?;
+                    std::thread::sleep(Flusher::PERIOD * 2);
+                }
+                if fail { Err(io::Error::other("the encoder failed")) } else { Ok(()) }
+            })
+        };
+        assert!(slow(true).is_err());
+        assert_eq!(std::fs::read(&file).unwrap(), b"old");
+        assert!(!temporary_name(&file).exists());
+        slow(false).unwrap();
+        let got = std::fs::read(&file).unwrap();
+        assert_eq!(got.len(), 4 << 20);
+        assert!(got.iter().all(|&b| b == 7));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
