@@ -218,9 +218,10 @@ mod tests {
         // The flusher on its own: a write of several periods is synced on the way.
         let f = File::create(dir.join("direct.bin")).unwrap();
         let flusher = Flusher::start(&f);
+        // Long pauses, so that even a loaded machine runs the thread's first sync among them.
         for _ in 0..4 {
             (&f).write_all(&piece).unwrap();
-            std::thread::sleep(Flusher::PERIOD * 2);
+            std::thread::sleep(Flusher::PERIOD * 8);
         }
         assert!(flusher.stop().unwrap() >= 1, "no sync while the write went on");
         // Through write_replacing: the whole file arrives, and a failure after syncs leaves the
