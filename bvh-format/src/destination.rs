@@ -131,9 +131,9 @@ impl Flusher {
 
     /// Ends the thread (after the sync it may be in): how many syncs it made, or the error of the
     /// one that failed.
-    fn stop(mut self) -> io::Result<usize> {
+    fn stop(self) -> io::Result<usize> {
         let _ = self.stop.send(());
-        match self.thread.take().map(std::thread::JoinHandle::join) {
+        match self.thread.map(std::thread::JoinHandle::join) {
             Some(Ok(synced)) => synced,
             Some(Err(_)) => Err(io::Error::other("the thread that syncs the file to disk stopped")),
             None => Ok(0),
@@ -224,8 +224,8 @@ mod tests {
             std::thread::sleep(Flusher::PERIOD * 8);
         }
         assert!(flusher.stop().unwrap() >= 1, "no sync while the write went on");
-        // Through write_replacing: the whole file arrives, and a failure after syncs leaves the
-        // old file and no temporary one.
+        // Through write_replacing: the whole file arrives, and a failure late in a long write
+        // leaves the old file and no temporary one.
         std::fs::write(&file, b"old").unwrap();
         let slow = |fail: bool| {
             write_replacing(&file, |w| {
