@@ -121,7 +121,9 @@ pub const EXIT_SCALE: f32 = 1.0 + 2.0 * T_SLACK;
 /// multiplies, a multiply's latency less on the walk's critical path: on the H100 host's Xeon 1-4
 /// points more shadow and AO rays per second. Closest-hit rays keep `may_hold_wide`: there it
 /// gained nothing on the Xeon and cost 3-11 points on the 2-core VM's Zen 4, in three pairs of
-/// builds (docs/cpu-benchmark-log.md, "the exit scale folded into the inverse").
+/// builds (docs/cpu-benchmark-log.md, "the exit scale folded into the inverse"); on two Xeons
+/// again in stop 55, within a point or two, as much as the untouched any-hit rays moved ("the
+/// folded exit for closest-hit rays too").
 ///
 /// It accepts whatever [`may_hold_wide`]`(near, exit)` accepts for the exit distance
 /// `exit = (plane - origin) * inv`, so that the walk still finds every hit the binary traversals
