@@ -40,7 +40,9 @@ impl Hit {
 }
 
 /// Work done for one ray, the traversal-cost AOV: node boxes tested and triangles tested.
+/// `repr(C)`: the wide packets store lanes of them as pairs of `u32` (`packet8`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(C)]
 pub struct Cost {
     pub nodes: u32,
     pub tris: u32,

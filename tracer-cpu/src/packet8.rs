@@ -682,11 +682,13 @@ macro_rules! packet_walk_compiled_for {
             }
             let mut mv = mask_of(lanes);
             let mut won = _mm256_setzero_ps();
-            // What every lane's test of a triangle shares, for the whole block at once.
+            // What every lane's test of a triangle shares, for the whole block at once. The normals
+            // only where they are read: filled with zeros for nothing, in every leaf of a primary
+            // packet, they were stored by 512-bit moves (see `avx512` below).
             let (pre, n) = match (T::KIND, shared) {
-                (Intersect::Watertight, Some(o)) => (Some(shared_origin(block, o)), [[0.0; WIDTH]; 3]),
-                (Intersect::Watertight, None) => (None, { let n = normals(block); each3(|a| store(n[a])) }),
-                _ => (None, [[0.0; WIDTH]; 3]),
+                (Intersect::Watertight, Some(o)) => (Some(shared_origin(block, o)), None),
+                (Intersect::Watertight, None) => (None, Some({ let n = normals(block); each3(|a| store(n[a])) })),
+                _ => (None, None),
             };
             if !ANY {
                 // Every lane of `lanes` tests every triangle of the block.
@@ -703,12 +705,12 @@ macro_rules! packet_walk_compiled_for {
                 if ANY {
                     st.n_tris = count(st.n_tris, mv);
                 }
-                let win = match &pre {
-                    Some(s) => match intersect_shared_origin(s, l, &pk.d, mv, st.best.t) {
+                let win = match (&pre, &n) {
+                    (Some(s), _) => match intersect_shared_origin(s, l, &pk.d, mv, st.best.t) {
                         Some(found) => keep(found, i, mv, &mut st.best),
                         None => continue,
                     },
-                    None if T::KIND == Intersect::Watertight => {
+                    (None, Some(n)) => {
                         let v = |k: usize| [splat(block.p[k][0][l]), splat(block.p[k][1][l]), splat(block.p[k][2][l])];
                         let n = [splat(n[0][l]), splat(n[1][l]), splat(n[2][l])];
                         match watertight_in(&[v(0), v(1), v(2)], &n, &pk.o, &pk.d, _mm256_movemask_ps(mv) as u32, st.best.t)
@@ -717,7 +719,7 @@ macro_rules! packet_walk_compiled_for {
                             None => continue,
                         }
                     }
-                    None => test::<T>(&block.triangle(l), i, pk, mv, &mut st.best),
+                    (None, None) => test::<T>(&block.triangle(l), i, pk, mv, &mut st.best),
                 };
                 won = _mm256_or_ps(won, win);
                 if ANY {
@@ -1148,18 +1150,15 @@ macro_rules! packet_walk_compiled_for {
                 unsafe { _mm256_loadu_ps(a.as_ptr()) }
             };
             let (pk, alive) = packet_of(rays);
+            // Zero as a value LLVM cannot see: as a constant, the stores of two neighbouring zero
+            // fields were merged into one 512-bit store (see `avx512` below).
+            let zero = std::hint::black_box(_mm256_setzero_ps());
             let mut st = State {
-                best: Best {
-                    t: load(&rays.t_max),
-                    tri: _mm256_set1_epi32(-1),
-                    w1: _mm256_setzero_ps(),
-                    w2: _mm256_setzero_ps(),
-                    sum: splat(1.0),
-                },
-                hit_any: _mm256_setzero_ps(),
+                best: Best { t: load(&rays.t_max), tri: _mm256_set1_epi32(-1), w1: zero, w2: zero, sum: splat(1.0) },
+                hit_any: zero,
                 alive,
-                n_nodes: _mm256_setzero_si256(),
-                n_tris: _mm256_setzero_si256(),
+                n_nodes: _mm256_castps_si256(zero),
+                n_tris: _mm256_castps_si256(zero),
             };
             let valid = _mm256_movemask_ps(alive) as u32;
             // The origin, where every valid lane starts at the same point (primary rays).
@@ -1194,7 +1193,6 @@ macro_rules! packet_walk_compiled_for {
             }
 
             let tri = store_i(st.best.tri);
-            let (nn, nt) = (store_i(st.n_nodes), store_i(st.n_tris));
             let inv = _mm256_div_ps(splat(1.0), st.best.sum);
             let (u, v) = (_mm256_mul_ps(st.best.w1, inv), _mm256_mul_ps(st.best.w2, inv));
             let hit = crate::wide::bools_of(st.hit_any);
@@ -1203,7 +1201,16 @@ macro_rules! packet_walk_compiled_for {
             // codegen unit, out of the walk's inlining (see `bvh8::each3`).
             for i in 0..LANES {
                 out.tri[i] = tri[i] as u32;
-                out.cost[i] = Cost { nodes: nn[i] as u32, tris: nt[i] as u32 };
+            }
+            // The work counts as `Cost` pairs, lanes 0-3 and 4-7 in one 256-bit store each: left
+            // to LLVM, the pairs were interleaved and stored in 512 bits (see `avx512` below).
+            let (lo, hi) = (_mm256_unpacklo_epi32(st.n_nodes, st.n_tris), _mm256_unpackhi_epi32(st.n_nodes, st.n_tris));
+            let cost = out.cost.as_mut_ptr().cast::<__m256i>();
+            // SAFETY: `Cost` is two `u32`s in that order (`repr(C)`), so `out.cost` is 16 of them,
+            // room for two unaligned 256-bit stores.
+            unsafe {
+                _mm256_storeu_si256(cost, _mm256_permute2x128_si256::<0x20>(lo, hi));
+                _mm256_storeu_si256(cost.add(1), _mm256_permute2x128_si256::<0x31>(lo, hi));
             }
             out
         }
@@ -1224,7 +1231,11 @@ packet_walk_compiled_for!(
 packet_walk_compiled_for!(
     /// [`avx2`] compiled for AVX-512 (F, VL, DQ, BW) as well: the same 256-bit operations in the
     /// same order, so the same hits, with 32 vector registers and mask-register compares (as
-    /// `bvh8::avx2::trace_evex` for single rays).
+    /// `bvh8::avx2::trace_evex` for single rays). No 512-bit register: where a function zeroes or
+    /// copies 64 bytes or more, LLVM uses one for it here (the leaf's unused normals, the state's
+    /// neighbouring zero fields, the work counts' pairs), and without those the 16-thread primary
+    /// packets ran 1-4 points faster against Embree on the Xeon (docs/cpu-benchmark-log.md, stop
+    /// 56). `.ci/run` checks the walks' disassembly for them.
     avx512,
     "avx2,popcnt,avx512f,avx512vl,avx512dq,avx512bw"
 );

@@ -167,8 +167,15 @@ fn wide_packet<T: TriangleTest>(
     let mut single = Stack::default();
     let paths = packet8::paths();
     assert!(!paths.is_empty(), "wide packets are only compared where the CPU runs them");
+    let mut costs = None;
     for &simd in &paths {
         let res = packet8::trace_on::<false, T>(simd, bvh8, &p, pstack, &mut single);
+        // Each lane's work count in its own lane: nothing where no ray is, something where one
+        // is (every walk tests the root), and the same on every path (the same operations).
+        for (i, c) in res.cost.iter().enumerate() {
+            assert_eq!(*c == Cost::default(), i >= rays.len(), "{name}: lane {i}'s work count {c:?} ({simd:?})");
+        }
+        assert_eq!(*costs.get_or_insert(res.cost), res.cost, "{name}: work counts differ between paths ({simd:?})");
         for (i, (&(o, d), a)) in rays.iter().zip(&want).enumerate() {
             assert_eq!(
                 res.get(i),
