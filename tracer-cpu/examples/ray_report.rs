@@ -23,6 +23,10 @@
 //!   --engines LIST      only these tracers, by their column names, comma-separated, e.g.
 //!                       "ours bvh4,ours bvh8 packet,Embree 8,Embree 8 robust" [default: all];
 //!                       Embree 1 always runs (the hit agreement's reference); the others read `-`
+//! EMBREE_FTZ=1          in the environment: Embree's passes run with flush-to-zero and
+//!                       denormals-are-zero set, as Embree asks of applications (ours never)
+//! EMBREE_CONFIG=STRING  in the environment: Embree's device configuration (`rtcNewDevice`'s
+//!                       string, e.g. "frequency_level=simd512" or "verbose=3")
 //! ```
 //!
 //! Built once, the binary runs anywhere with the Embree 3 shared library (libembree3-3 and its
@@ -437,6 +441,10 @@ fn markdown(
     let _ = writeln!(s, "## {} ({nproc} threads), {date}\n", rayset::cpu_model());
     let _ = writeln!(s, "- Machine: `{host}`, CPU `{}`, `nproc` = {nproc}, {}", rayset::cpu_model(), simd_flags());
     let _ = writeln!(s, "- Load average (1, 5, 15 min): {load_before} before, {} after", rayset::loadavg());
+    let ftz = if rayset::embree_ftz() { "set for Embree's passes (`EMBREE_FTZ=1`)" } else { "not set (the default)" };
+    let _ = writeln!(s, "- Flush-to-zero and denormals-are-zero (MXCSR): {ftz}; never for ours");
+    let config = embree::config().map_or("Embree's defaults".to_string(), |c| format!("`{c}` (`EMBREE_CONFIG`)"));
+    let _ = writeln!(s, "- Embree's device configuration: {config}");
     let _ = writeln!(s, "- Command: `{}` ({seconds:.0} s in all)", command.join(" "));
     let _ = writeln!(
         s,

@@ -88,6 +88,14 @@ fn write_ray(dst: *mut RTCRay, ray: &Ray, t_min: f32, t_max: f32) {
     }
 }
 
+/// The device configuration `EMBREE_CONFIG` asks for (Embree's `rtcNewDevice` syntax), if any.
+/// Embree 3 picks its instruction set by what it calls the CPU's frequency level: on CPUs it
+/// does not know it keeps to 256-bit code, so that the clock is not lowered for 512-bit
+/// instructions; `frequency_level=simd512` lets it use its AVX-512 kernels.
+pub fn config() -> Option<String> {
+    std::env::var("EMBREE_CONFIG").ok().filter(|c| !c.is_empty())
+}
+
 /// An RTCHit that says "no hit yet".
 fn no_hit() -> RTCHit {
     RTCHit { Ng_x: 0.0, Ng_y: 0.0, Ng_z: 0.0, u: 0.0, v: 0.0, primID: u32::MAX, geomID: u32::MAX, instID: [u32::MAX] }
@@ -96,12 +104,17 @@ fn no_hit() -> RTCHit {
 impl Scene {
     /// Builds Embree's BVH over `tris` (each triangle's three vertices, unshared but bit-identical
     /// where triangles meet).
+    ///
+    /// The device gets the configuration string in `EMBREE_CONFIG`, if set (for measuring
+    /// Embree's own settings, e.g. `frequency_level=simd512`; see [`config`]), else Embree's
+    /// defaults.
     pub fn new(tris: &[Triangle], flags: Flags) -> Result<Self, String> {
         let n = tris.len();
+        let config = config().map(std::ffi::CString::new).transpose().map_err(|_| "EMBREE_CONFIG holds a NUL byte")?;
         // SAFETY: every handle is checked before use; the buffers Embree allocates are written
-        // within the sizes requested.
+        // within the sizes requested; `config` outlives the call that reads it.
         unsafe {
-            let device = rtcNewDevice(ptr::null());
+            let device = rtcNewDevice(config.as_ref().map_or(ptr::null(), |c| c.as_ptr()));
             if device.is_null() {
                 return Err(format!("Embree: rtcNewDevice failed ({:?})", rtcGetDeviceError(ptr::null_mut())));
             }

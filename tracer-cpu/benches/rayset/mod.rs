@@ -229,6 +229,7 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
             }
             #[cfg(feature = "embree")]
             Engine::Embree1(scene) => {
+                let _mxcsr = FlushToZero::for_embree();
                 for (r, o) in rays.iter().zip(out.iter_mut()) {
                     let Some((ray, t_max)) = r else { continue };
                     *o = if any {
@@ -239,15 +240,64 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
                 }
             }
             #[cfg(feature = "embree")]
-            Engine::Embree8(scene) => blocks(rays, out, w, |p| {
-                if any {
-                    scene.occluded8(p).map(|b| if b { 0.0 } else { f32::INFINITY })
-                } else {
-                    scene.intersect8(p).map(|h| h.map_or(f32::INFINITY, |h| h.0))
-                }
-            }),
+            Engine::Embree8(scene) => {
+                let _mxcsr = FlushToZero::for_embree();
+                blocks(rays, out, w, |p| {
+                    if any {
+                        scene.occluded8(p).map(|b| if b { 0.0 } else { f32::INFINITY })
+                    } else {
+                        scene.intersect8(p).map(|h| h.map_or(f32::INFINITY, |h| h.0))
+                    }
+                })
+            }
         },
     );
+}
+
+/// Flush-to-zero and denormals-are-zero set in this thread's MXCSR for as long as it lives, then
+/// the old MXCSR back. Embree asks applications to set both (its device warns without them, "a
+/// severe performance impact"); ours need neither and never run with them, since they would
+/// change the results of our exact tests. Only with `EMBREE_FTZ=1` in the environment, for
+/// measuring what they change (stop 56 left that to be measured on the H200 host).
+struct FlushToZero(Option<u32>);
+
+/// Whether `EMBREE_FTZ=1` asks for [`FlushToZero`] in Embree's passes.
+pub fn embree_ftz() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| std::env::var("EMBREE_FTZ").is_ok_and(|v| v == "1"))
+}
+
+impl FlushToZero {
+    fn for_embree() -> Self {
+        if !embree_ftz() {
+            return Self(None);
+        }
+        #[cfg(target_arch = "x86_64")]
+        {
+            let mut old = 0u32;
+            // SAFETY: stmxcsr stores the 32-bit MXCSR at the address given, a local of that size;
+            // ldmxcsr loads a value that differs from the current one only in the FTZ (bit 15)
+            // and DAZ (bit 6) flags, which every SSE-capable x86-64 CPU has.
+            unsafe {
+                std::arch::asm!("stmxcsr [{}]", in(reg) &raw mut old, options(nostack));
+                let new = old | 1 << 15 | 1 << 6;
+                std::arch::asm!("ldmxcsr [{}]", in(reg) &raw const new, options(nostack));
+            }
+            Self(Some(old))
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        Self(None)
+    }
+}
+
+impl Drop for FlushToZero {
+    fn drop(&mut self) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(old) = self.0 {
+            // SAFETY: loads the MXCSR `for_embree` found in this thread.
+            unsafe { std::arch::asm!("ldmxcsr [{}]", in(reg) &raw const old, options(nostack)) };
+        }
+    }
 }
 
 /// The ray as our single-ray walks get it from an origin and a direction, its inverse direction
