@@ -89,9 +89,9 @@ fn write_ray(dst: *mut RTCRay, ray: &Ray, t_min: f32, t_max: f32) {
 }
 
 /// The device configuration `EMBREE_CONFIG` asks for (Embree's `rtcNewDevice` syntax), if any.
-/// Embree 3 picks its instruction set by what it calls the CPU's frequency level: on CPUs it
-/// does not know it keeps to 256-bit code, so that the clock is not lowered for 512-bit
-/// instructions; `frequency_level=simd512` lets it use its AVX-512 kernels.
+/// Embree 3 limits its code by what it calls the CPU's frequency level: on a CPU it does not know
+/// it sets `simd256`, no optimization that would lower the clock below that of 256-bit code
+/// (`verbose=3` prints the level and the kernels it picks; `frequency_level=simd512` lifts it).
 pub fn config() -> Option<String> {
     std::env::var("EMBREE_CONFIG").ok().filter(|c| !c.is_empty())
 }
