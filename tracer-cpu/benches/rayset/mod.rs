@@ -258,7 +258,8 @@ pub fn trace(engine: Engine<'_>, set: &RaySet, out: &mut [f32]) {
 /// the old MXCSR back. Embree asks applications to set both (its device warns without them, "a
 /// severe performance impact"); ours need neither and never run with them, since they would
 /// change the results of our exact tests. Only with `EMBREE_FTZ=1` in the environment, for
-/// measuring what they change (stop 56 left that to be measured on the H200 host).
+/// measuring what they change (nothing above the noise on a Zen 4 or on the H200 host's Xeon:
+/// docs/cpu-benchmark.md, Notes).
 struct FlushToZero(Option<u32>);
 
 /// Whether `EMBREE_FTZ=1` asks for [`FlushToZero`] in Embree's passes.
