@@ -38,6 +38,10 @@ use render_spec::Intersect;
 /// faster than 0, 4 and 6 on the bunny, the dragon and the million-triangle scene).
 pub const SPARSE: u32 = 2;
 
+// `trace` stores the lanes' work counts into `Results::cost` as two 256-bit halves: that field
+// must be exactly 64 bytes, eight `Cost`s of two `u32`s each.
+const _: () = assert!(std::mem::size_of::<[crate::geometry::Cost; crate::packet::LANES]>() == 64);
+
 /// Whether this CPU runs wide packets (AVX2, as [`crate::packet`], and the single-ray AVX2
 /// traversal's POPCNT and FMA, which finish the sparse lanes).
 pub fn available() -> bool {
@@ -1207,7 +1211,7 @@ macro_rules! packet_walk_compiled_for {
             let (lo, hi) = (_mm256_unpacklo_epi32(st.n_nodes, st.n_tris), _mm256_unpackhi_epi32(st.n_nodes, st.n_tris));
             let cost = out.cost.as_mut_ptr().cast::<__m256i>();
             // SAFETY: `Cost` is two `u32`s in that order (`repr(C)`), so `out.cost` is 16 of them,
-            // room for two unaligned 256-bit stores.
+            // room for two unaligned 256-bit stores (its size is asserted at the top of the file).
             unsafe {
                 _mm256_storeu_si256(cost, _mm256_permute2x128_si256::<0x20>(lo, hi));
                 _mm256_storeu_si256(cost.add(1), _mm256_permute2x128_si256::<0x31>(lo, hi));
